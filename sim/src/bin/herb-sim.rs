@@ -1,0 +1,326 @@
+//! `herb-sim`: the packing world's command line (evaluation, one-episode packing, catalog).
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use herb_sim::boxed::{self, Episode};
+use herb_sim::catalog::{Catalog, fit_canonical};
+use herb_sim::eval::{self, Method};
+use herb_sim::paths::{self, MeshSource};
+use herb_sim::{PackingEnv, RewardMode, SharedCatalog, WorldConfig};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::Instant;
+
+#[derive(Parser)]
+#[command(name = "herb-sim", version, about = "The HERB packing world: evaluation and tools")]
+struct Cli {
+    #[command(flatten)]
+    data: DataArgs,
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Args)]
+struct DataArgs {
+    /// BoxED root folder (default: $HERB_BOXED, else ../shared/boxed).
+    #[arg(long, global = true)]
+    boxed: Option<PathBuf>,
+    /// Mesh folder (default: $HERB_MESHES, else <boxed>/meshes if present).
+    #[arg(long, global = true)]
+    meshes: Option<PathBuf>,
+    /// Use primitive shapes even if meshes are available.
+    #[arg(long, global = true)]
+    no_meshes: bool,
+    /// Object catalog file (default: the built-in models/objects.toml).
+    #[arg(long, global = true)]
+    catalog: Option<PathBuf>,
+    /// Do not print which shape source each object used.
+    #[arg(long, global = true)]
+    quiet: bool,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum MethodArg {
+    Human,
+    HumanPose,
+    Random,
+}
+
+impl From<MethodArg> for Method {
+    fn from(m: MethodArg) -> Self {
+        match m {
+            MethodArg::Human => Method::Human,
+            MethodArg::HumanPose => Method::HumanPose,
+            MethodArg::Random => Method::Random,
+        }
+    }
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Run a method over all BoxED episodes and print the Table I metrics.
+    Eval {
+        /// Placement method.
+        #[arg(long, value_enum)]
+        method: Vec<MethodArg>,
+        /// Base seed (episode i uses seed + i).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Worker threads.
+        #[arg(long, default_value_t = 2)]
+        jobs: usize,
+        /// Only the first N episodes.
+        #[arg(long)]
+        limit: Option<usize>,
+        /// Write the final heightmap of this episode (session name) as a PNG ...
+        #[arg(long)]
+        png_episode: Option<String>,
+        /// ... to this path.
+        #[arg(long, default_value = "results/final-heightmap.png")]
+        png: PathBuf,
+        /// Write the table (Markdown) here as well.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Write per-episode results (CSV) here.
+        #[arg(long)]
+        csv: Option<PathBuf>,
+    },
+    /// Pack one BoxED episode, print each placement, and write a picture of the final pack.
+    Pack {
+        /// Session name (e.g. p1_s1).
+        #[arg(long, default_value = "p1_s1")]
+        session: String,
+        /// Placement method.
+        #[arg(long, value_enum, default_value = "human")]
+        method: MethodArg,
+        /// Seed for the random method.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Output picture.
+        #[arg(long, default_value = "results/pack.png")]
+        png: PathBuf,
+    },
+    /// Print each object's shape source; with --fit, fit canonical frames from the meshes.
+    Catalog {
+        /// Print fitted `yaw_rad`, `origin_mesh_m`, `dims_m` for objects with a mesh.
+        #[arg(long)]
+        fit: bool,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("herb-sim: error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+type AnyResult<T> = Result<T, Box<dyn std::error::Error>>;
+
+fn load_catalog(d: &DataArgs) -> AnyResult<(SharedCatalog, Option<PathBuf>)> {
+    let root = paths::boxed_root(d.boxed.as_deref());
+    let meshes = if d.no_meshes {
+        MeshSource::None("--no-meshes".into())
+    } else {
+        paths::mesh_source(d.meshes.as_deref(), root.as_deref())
+    };
+    let t = Instant::now();
+    let catalog = match &d.catalog {
+        Some(p) => Catalog::load(p, &meshes)?,
+        None => Catalog::builtin(&meshes)?,
+    };
+    if !d.quiet {
+        eprintln!("catalog: {} objects in {:.2} s", catalog.len(), t.elapsed().as_secs_f64());
+        for line in catalog.source_report() {
+            eprintln!("  {line}");
+        }
+    }
+    Ok((Arc::new(catalog), root))
+}
+
+fn need_root(root: Option<PathBuf>) -> AnyResult<PathBuf> {
+    root.ok_or_else(|| format!("BoxED data not found: pass --boxed or set {}", paths::ENV_BOXED).into())
+}
+
+fn run(cli: Cli) -> AnyResult<()> {
+    match cli.cmd {
+        Cmd::Catalog { fit } => {
+            let (catalog, root) = load_catalog(&cli.data)?;
+            if fit {
+                let meshes = paths::mesh_source(cli.data.meshes.as_deref(), root.as_deref());
+                let MeshSource::Folder(dir) = meshes else { return Err("--fit needs a mesh folder".into()) };
+                for s in catalog.specs() {
+                    let Some(file) = &s.mesh else { continue };
+                    let raw = herb_sim::mesh::load_obj_vertices(&dir.join(file))?;
+                    let scaled: Vec<_> = raw.iter().map(|&v| v * s.mesh_scale).collect();
+                    // Round objects have no resting face: keep their nominal up axis.
+                    let refine = s.primitive != herb_sim::catalog::Primitive::Ellipsoid;
+                    let f = fit_canonical(&scaled, s.up_mesh, refine);
+                    println!(
+                        "{}  up_mesh = [{:.5}, {:.5}, {:.5}]\n     yaw_rad = {:.4}\n     origin_mesh_m = [{:.5}, {:.5}, {:.5}]\n     dims_m = [{:.4}, {:.4}, {:.4}]",
+                        s.id,
+                        f.up_mesh[0],
+                        f.up_mesh[1],
+                        f.up_mesh[2],
+                        f.yaw_rad,
+                        f.origin_mesh_m[0],
+                        f.origin_mesh_m[1],
+                        f.origin_mesh_m[2],
+                        f.dims_m[0],
+                        f.dims_m[1],
+                        f.dims_m[2]
+                    );
+                }
+            }
+            Ok(())
+        }
+        Cmd::Pack { session, method, seed, png } => {
+            let (catalog, root) = load_catalog(&cli.data)?;
+            let root = need_root(root)?;
+            let s = boxed::load_session(&root, &session, &catalog)?;
+            let ep = s.episode(&catalog);
+            pack_one(&catalog, &ep, method.into(), seed, &png)
+        }
+        Cmd::Eval { method, seed, jobs, limit, png_episode, png, out, csv } => {
+            if method.is_empty() {
+                return Err("give at least one --method (human, random)".into());
+            }
+            let (catalog, root) = load_catalog(&cli.data)?;
+            let root = need_root(root)?;
+            let (sessions, bad) = boxed::load_all(&root, &catalog)?;
+            for e in &bad {
+                eprintln!("skipping bad session: {e}");
+            }
+            let mut episodes: Vec<Episode> = sessions.iter().map(|s| s.episode(&catalog)).collect();
+            if let Some(n) = limit {
+                episodes.truncate(n);
+            }
+            let target = eval::mean_std(episodes.iter().map(|e| e.objects.len() as f64));
+            let cfg = WorldConfig::default();
+            let mut rows = Vec::new();
+            let mut csv_text = String::from("method,episode,objects,packed,success,placements,stable,final_compactness,physics_steps\n");
+            for m in method {
+                let m: Method = m.into();
+                let t = Instant::now();
+                let results = eval::run_all(&catalog, &cfg, &episodes, m, seed, jobs)?;
+                let secs = t.elapsed().as_secs_f64();
+                let placements: usize = results.iter().filter_map(|r| r.as_ref().ok()).map(|r| r.placements).sum();
+                eprintln!(
+                    "{}: {} episodes, {} placements in {:.1} s ({:.0} placements/s on {} threads)",
+                    m.name(),
+                    results.len(),
+                    placements,
+                    secs,
+                    placements as f64 / secs,
+                    jobs
+                );
+                for r in &results {
+                    match r {
+                        Ok(r) => csv_text.push_str(&format!(
+                            "{},{},{},{},{},{},{},{:.4},{}\n",
+                            m.name(),
+                            r.name,
+                            r.objects,
+                            r.packed,
+                            r.success,
+                            r.placements,
+                            r.stable,
+                            r.final_compactness(),
+                            r.physics_steps
+                        )),
+                        Err(e) => eprintln!("episode failed: {e}"),
+                    }
+                }
+                rows.push(eval::summarize(m.name(), &results));
+                if let Some(name) = &png_episode {
+                    let ep = episodes.iter().find(|e| &e.name == name).ok_or_else(|| format!("no episode {name:?}"))?;
+                    let path = png.with_file_name(format!(
+                        "{}-{}-{}",
+                        png.file_stem().and_then(|s| s.to_str()).unwrap_or("final"),
+                        m.name(),
+                        name
+                    ))
+                    .with_extension("png");
+                    pack_quiet(&catalog, ep, m, seed, &path)?;
+                    eprintln!("wrote {}", path.display());
+                }
+            }
+            let table = eval::format_table(&rows, target, episodes.len());
+            println!("{table}");
+            if let Some(p) = out {
+                write_file(&p, &table)?;
+            }
+            if let Some(p) = csv {
+                write_file(&p, &csv_text)?;
+            }
+            Ok(())
+        }
+    }
+}
+
+fn write_file(p: &Path, text: &str) -> AnyResult<()> {
+    if let Some(d) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(d)?;
+    }
+    std::fs::write(p, text).map_err(|e| format!("cannot write {}: {e}", p.display()).into())
+}
+
+fn pack_quiet(catalog: &SharedCatalog, ep: &Episode, m: Method, seed: u64, png: &Path) -> AnyResult<()> {
+    let mut env = PackingEnv::new(catalog.clone(), WorldConfig::default(), RewardMode::Simple)?;
+    eval::run_episode(&mut env, ep, m, seed)?;
+    herb_sim::image::write_heightmap_png(png, env.world().heightmap(), 0.30, 3)?;
+    Ok(())
+}
+
+fn pack_one(catalog: &SharedCatalog, ep: &Episode, m: Method, seed: u64, png: &Path) -> AnyResult<()> {
+    let mut env = PackingEnv::new(catalog.clone(), WorldConfig::default(), RewardMode::cs(0.6)?)?;
+    env.reset(&ep.objects, seed)?;
+    println!("episode {} ({} objects), method {}", ep.name, ep.objects.len(), m.name());
+    let t = Instant::now();
+    for (i, &ty) in ep.objects.iter().enumerate() {
+        let step = match m {
+            Method::Human => env.step_placement(ep.human[i].x, ep.human[i].y, ep.human[i].theta)?,
+            Method::HumanPose => {
+                let h = ep.human[i];
+                env.step_pose(rapier3d::math::Pose::from_parts(rapier3d::math::Vector::new(h.x, h.y, h.z), h.rotation))?
+            }
+            Method::Random => {
+                let a = env.sample_action();
+                env.step(a)?
+            }
+        };
+        let o = step.info.outcome;
+        let (x, y, th) = step.info.placement;
+        println!(
+            "{:>3} {} {:<18} x {:+.3} y {:+.3} theta {:+6.1} deg z {:.3}  {}  tilt {:5.1} deg  C {:.3}  reward {:+.3}",
+            i + 1,
+            catalog.spec(ty).id,
+            catalog.spec(ty).name,
+            x,
+            y,
+            th.to_degrees(),
+            o.z,
+            if o.inside { "inside " } else { "OUTSIDE" },
+            o.tilt_rad.to_degrees(),
+            o.compactness,
+            step.reward
+        );
+        if step.terminated {
+            println!(
+                "{} after {} of {} objects ({:.2} s)",
+                if step.info.success { "success" } else { "failed" },
+                step.info.packed,
+                ep.objects.len(),
+                t.elapsed().as_secs_f64()
+            );
+            break;
+        }
+    }
+    herb_sim::image::write_heightmap_png(png, env.world().heightmap(), 0.30, 3)?;
+    println!("wrote {}", png.display());
+    Ok(())
+}

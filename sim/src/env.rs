@@ -1,0 +1,246 @@
+//! A Gymnasium-shaped episode API over the packing world.
+//!
+//! One step places one object. `reset(sequence, seed)` empties the box and returns the first
+//! observation; `step(action)` maps the action (see [`crate::observation`]), places the next
+//! object, and returns the observation, the reward, whether the episode ended, and details.
+//! The episode ends at the first failed placement (an object outside the success volume) or
+//! when every object is placed.
+//!
+//! Rewards, exactly as the HERB paper (section "Reward"):
+//! - `Simple`: +1 if inside, else -1;
+//! - `C`: C if inside, else -1;
+//! - `CS(alpha)`: `alpha * C + (1 - alpha) * S` if inside, else -1.
+
+use crate::catalog::{SharedCatalog, TypeIdx};
+use crate::error::{Result, SimError};
+use crate::observation::{ObsLayout, Projections, action_to_placement};
+use crate::world::{PackingWorld, PlacementOutcome, WorldConfig};
+use rand::{Rng, SeedableRng};
+use rapier3d::math::{Pose, Rotation};
+use rand_chacha::ChaCha8Rng;
+
+/// The reward function.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RewardMode {
+    /// +1 inside, -1 otherwise.
+    Simple,
+    /// C inside, -1 otherwise.
+    Compactness,
+    /// `alpha * C + (1 - alpha) * S` inside, -1 otherwise; `0 <= alpha <= 1`.
+    CompactnessStability {
+        /// Weight of compactness.
+        alpha: f32,
+    },
+}
+
+impl RewardMode {
+    /// `CS(alpha)`, checking `0 <= alpha <= 1`.
+    pub fn cs(alpha: f32) -> Result<Self> {
+        if (0.0..=1.0).contains(&alpha) {
+            Ok(Self::CompactnessStability { alpha })
+        } else {
+            Err(SimError::Config(format!("reward alpha {alpha} outside [0, 1]")))
+        }
+    }
+
+    /// Parses `simple`, `c`, or `cs<alpha>` (e.g. `cs0.6`).
+    pub fn parse(s: &str) -> Result<Self> {
+        match s.to_ascii_lowercase().as_str() {
+            "simple" => Ok(Self::Simple),
+            "c" => Ok(Self::Compactness),
+            other => match other.strip_prefix("cs").map(str::parse::<f32>) {
+                Some(Ok(a)) => Self::cs(a),
+                _ => Err(SimError::Config(format!("unknown reward mode {s:?} (expected simple, c, or cs<alpha>)"))),
+            },
+        }
+    }
+
+    /// The reward of one placement.
+    pub fn reward(&self, o: &PlacementOutcome) -> f32 {
+        if !o.inside {
+            return -1.0;
+        }
+        let s = if o.stable { 1.0 } else { 0.0 };
+        match *self {
+            Self::Simple => 1.0,
+            Self::Compactness => o.compactness,
+            Self::CompactnessStability { alpha } => alpha * o.compactness + (1.0 - alpha) * s,
+        }
+    }
+}
+
+/// Details of one step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepInfo {
+    /// The object placed.
+    pub object: TypeIdx,
+    /// The placement used `(x, y, theta)` after mapping (and clamping) the action.
+    pub placement: (f32, f32, f32),
+    /// What happened.
+    pub outcome: PlacementOutcome,
+    /// Objects successfully placed so far in this episode.
+    pub packed: usize,
+    /// The episode ended with every object placed inside.
+    pub success: bool,
+}
+
+/// The result of [`PackingEnv::step`].
+#[derive(Debug)]
+pub struct StepResult<'a> {
+    /// Observation after the step (next object in channel 1; none when terminated).
+    pub observation: &'a [f32],
+    /// Reward of this placement.
+    pub reward: f32,
+    /// The episode is over (failure or all placed).
+    pub terminated: bool,
+    /// Details.
+    pub info: StepInfo,
+}
+
+/// The packing environment.
+#[derive(Debug)]
+pub struct PackingEnv {
+    world: PackingWorld,
+    projections: Projections,
+    reward: RewardMode,
+    sequence: Vec<TypeIdx>,
+    next: usize,
+    packed: usize,
+    running: bool,
+    rng: ChaCha8Rng,
+    obs: Vec<f32>,
+}
+
+impl PackingEnv {
+    /// A new environment (call [`PackingEnv::reset`] before stepping).
+    pub fn new(catalog: SharedCatalog, cfg: WorldConfig, reward: RewardMode) -> Result<Self> {
+        let projections = Projections::new(&catalog);
+        Ok(Self {
+            world: PackingWorld::new(catalog, cfg)?,
+            projections,
+            reward,
+            sequence: Vec::new(),
+            next: 0,
+            packed: 0,
+            running: false,
+            rng: ChaCha8Rng::seed_from_u64(0),
+            obs: vec![0.0; ObsLayout::LEN],
+        })
+    }
+
+    /// Starts an episode with `sequence` (packing order). `seed` seeds the environment's random
+    /// generator ([`PackingEnv::sample_action`]); the physics itself is deterministic.
+    pub fn reset(&mut self, sequence: &[TypeIdx], seed: u64) -> Result<&[f32]> {
+        if sequence.is_empty() {
+            return Err(SimError::EmptySequence);
+        }
+        if let Some(bad) = sequence.iter().find(|t| t.0 as usize >= self.world.catalog().len()) {
+            return Err(SimError::UnknownObject(format!("type index {}", bad.0)));
+        }
+        self.world.reset();
+        self.sequence.clear();
+        self.sequence.extend_from_slice(sequence);
+        self.next = 0;
+        self.packed = 0;
+        self.running = true;
+        self.rng = ChaCha8Rng::seed_from_u64(seed);
+        self.write_obs()?;
+        Ok(&self.obs)
+    }
+
+    /// Starts an episode from catalog ids (`["003", "004"]`); unknown ids are an error.
+    pub fn reset_ids(&mut self, ids: &[&str], seed: u64) -> Result<&[f32]> {
+        let seq = ids.iter().map(|id| self.world.catalog().by_id(id)).collect::<Result<Vec<_>>>()?;
+        self.reset(&seq, seed)
+    }
+
+    /// Places the next object with `action` in `[-1, 1]^3`. A non-finite action is rejected
+    /// with an error and changes nothing.
+    pub fn step(&mut self, action: [f32; 3]) -> Result<StepResult<'_>> {
+        let (x, y, theta) = action_to_placement(action)?;
+        self.step_placement(x, y, theta)
+    }
+
+    /// Places the next object at an explicit placement `(x, y, theta)` in B (m, rad), bypassing
+    /// the action mapping (used to replay human placements). Non-finite values are rejected.
+    pub fn step_placement(&mut self, x: f32, y: f32, theta: f32) -> Result<StepResult<'_>> {
+        if !theta.is_finite() {
+            return Err(SimError::InvalidPlacement { x, y, theta });
+        }
+        self.step_rotated(x, y, Rotation::from_rotation_z(theta))
+    }
+
+    /// Places the next object at `(x, y)` with any orientation `rot` of its canonical frame
+    /// (used to replay the humans' full, possibly tilted, placements).
+    pub fn step_rotated(&mut self, x: f32, y: f32, rot: Rotation) -> Result<StepResult<'_>> {
+        self.step_with(|w, object| w.place_rotated(object, x, y, rot), (x, y, crate::frames::yaw_of(rot)))
+    }
+
+    /// Releases the next object at an explicit pose of its canonical frame (z included, no
+    /// estimate): the humans' recorded poses, or a gripper's.
+    pub fn step_pose(&mut self, pose: Pose) -> Result<StepResult<'_>> {
+        let t = pose.translation;
+        self.step_with(|w, object| w.place_pose(object, pose), (t.x, t.y, crate::frames::yaw_of(pose.rotation)))
+    }
+
+    fn step_with(
+        &mut self,
+        place: impl FnOnce(&mut PackingWorld, TypeIdx) -> Result<PlacementOutcome>,
+        (x, y, theta): (f32, f32, f32),
+    ) -> Result<StepResult<'_>> {
+        if !self.running {
+            return Err(SimError::EpisodeOver { placed: self.packed });
+        }
+        let object = self.sequence[self.next];
+        let outcome = place(&mut self.world, object)?;
+        self.next += 1;
+        if outcome.inside {
+            self.packed += 1;
+        }
+        let success = outcome.inside && self.next == self.sequence.len();
+        let terminated = !outcome.inside || success;
+        self.running = !terminated;
+        self.write_obs()?;
+        Ok(StepResult {
+            observation: &self.obs,
+            reward: self.reward.reward(&outcome),
+            terminated,
+            info: StepInfo { object, placement: (x, y, theta), outcome, packed: self.packed, success },
+        })
+    }
+
+    fn write_obs(&mut self) -> Result<()> {
+        let next = if self.running { Some(self.projections.get(self.sequence[self.next])) } else { None };
+        ObsLayout::write(self.world.heightmap(), next, &mut self.obs)
+    }
+
+    /// A uniform random action from the environment's seeded generator.
+    pub fn sample_action(&mut self) -> [f32; 3] {
+        [0; 3].map(|_| self.rng.random_range(-1.0f32..=1.0))
+    }
+
+    /// The next object to place, if the episode runs.
+    pub fn next_object(&self) -> Option<TypeIdx> {
+        self.running.then(|| self.sequence[self.next])
+    }
+
+    /// The underlying world.
+    pub fn world(&self) -> &PackingWorld {
+        &self.world
+    }
+
+    /// The underlying world, mutable (for tools and custom placements).
+    pub fn world_mut(&mut self) -> &mut PackingWorld {
+        &mut self.world
+    }
+
+    /// The reward mode.
+    pub fn reward_mode(&self) -> RewardMode {
+        self.reward
+    }
+
+    /// The current observation.
+    pub fn observation(&self) -> &[f32] {
+        &self.obs
+    }
+}

@@ -1,0 +1,212 @@
+//! Batch evaluation over BoxED episodes: runs a method on every episode and summarises the
+//! paper's metrics (Table I): success rate, objects packed, final compactness, stability.
+//!
+//! - **success**: every object of the episode placed, all inside the success volume;
+//! - **objects packed**: placements that ended inside before the episode ended;
+//! - **final compactness**: C after the last placement, averaged over successful episodes;
+//! - **stability**: share of all placements made with S = 1 (tilt <= 10 degrees).
+
+use crate::boxed::Episode;
+use crate::catalog::SharedCatalog;
+use crate::env::{PackingEnv, RewardMode};
+use crate::error::{Result, SimError};
+use crate::world::WorldConfig;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// How placements are chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// The human order with the humans' own planar placements.
+    Human,
+    /// The human order with the humans' full orientations (tilted placements included) at their
+    /// (x, y), z from the heightmap: the closest replay of what the humans did.
+    HumanPose,
+    /// The human order with uniform random actions (seeded per episode).
+    Random,
+}
+
+impl Method {
+    /// Name used on the command line and in tables.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Human => "human",
+            Self::HumanPose => "human-pose",
+            Self::Random => "random",
+        }
+    }
+}
+
+/// The result of one episode.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpisodeResult {
+    /// Session name.
+    pub name: String,
+    /// Objects in the episode.
+    pub objects: usize,
+    /// Objects placed inside before the episode ended.
+    pub packed: usize,
+    /// All objects placed inside.
+    pub success: bool,
+    /// Placements attempted.
+    pub placements: usize,
+    /// Placements with S = 1.
+    pub stable: usize,
+    /// C after each placement.
+    pub compactness_per_step: Vec<f32>,
+    /// Simulated physics steps in all.
+    pub physics_steps: u64,
+}
+
+impl EpisodeResult {
+    /// C after the last placement (0 if none).
+    pub fn final_compactness(&self) -> f32 {
+        self.compactness_per_step.last().copied().unwrap_or(0.0)
+    }
+}
+
+/// Runs one episode with `method` in `env`.
+pub fn run_episode(env: &mut PackingEnv, ep: &Episode, method: Method, seed: u64) -> Result<EpisodeResult> {
+    env.reset(&ep.objects, seed)?;
+    let mut r = EpisodeResult {
+        name: ep.name.clone(),
+        objects: ep.objects.len(),
+        packed: 0,
+        success: false,
+        placements: 0,
+        stable: 0,
+        compactness_per_step: Vec::with_capacity(ep.objects.len()),
+        physics_steps: 0,
+    };
+    for i in 0..ep.objects.len() {
+        let step = match method {
+            Method::Human => {
+                let h = ep.human[i];
+                env.step_placement(h.x, h.y, h.theta)?
+            }
+            Method::HumanPose => {
+                let h = ep.human[i];
+                env.step_pose(rapier3d::math::Pose::from_parts(rapier3d::math::Vector::new(h.x, h.y, h.z), h.rotation))?
+            }
+            Method::Random => {
+                let a = env.sample_action();
+                env.step(a)?
+            }
+        };
+        let o = step.info.outcome;
+        r.placements += 1;
+        r.stable += o.stable as usize;
+        r.physics_steps += o.settle_steps as u64;
+        r.compactness_per_step.push(o.compactness);
+        r.packed = step.info.packed;
+        r.success = step.info.success;
+        if step.terminated {
+            break;
+        }
+    }
+    Ok(r)
+}
+
+/// Runs `method` over `episodes` on `jobs` threads. Results keep the episodes' order; an
+/// episode that errors is reported with its error and the others go on.
+pub fn run_all(
+    catalog: &SharedCatalog,
+    cfg: &WorldConfig,
+    episodes: &[Episode],
+    method: Method,
+    seed: u64,
+    jobs: usize,
+) -> Result<Vec<std::result::Result<EpisodeResult, String>>> {
+    // Build one environment up front so configuration errors surface once, not per episode.
+    PackingEnv::new(catalog.clone(), cfg.clone(), RewardMode::Simple)?;
+    let next = AtomicUsize::new(0);
+    let out: Mutex<Vec<Option<std::result::Result<EpisodeResult, String>>>> = Mutex::new(vec![None; episodes.len()]);
+    std::thread::scope(|s| {
+        for _ in 0..jobs.max(1) {
+            s.spawn(|| {
+                let mut env = match PackingEnv::new(catalog.clone(), cfg.clone(), RewardMode::Simple) {
+                    Ok(e) => e,
+                    Err(_) => return,
+                };
+                loop {
+                    let i = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(ep) = episodes.get(i) else { break };
+                    let res = run_episode(&mut env, ep, method, seed.wrapping_add(i as u64))
+                        .map_err(|e: SimError| format!("episode {}: {e}", ep.name));
+                    out.lock().unwrap_or_else(|p| p.into_inner())[i] = Some(res);
+                }
+            });
+        }
+    });
+    Ok(out
+        .into_inner()
+        .unwrap_or_else(|p| p.into_inner())
+        .into_iter()
+        .map(|r| r.unwrap_or_else(|| Err("not run".into())))
+        .collect())
+}
+
+/// Mean and population standard deviation.
+pub fn mean_std(v: impl IntoIterator<Item = f64>) -> (f64, f64) {
+    let v: Vec<f64> = v.into_iter().collect();
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    (m, (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / n).sqrt())
+}
+
+/// The summary row of one method.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Summary {
+    /// Method name.
+    pub method: String,
+    /// Episodes that ran.
+    pub episodes: usize,
+    /// Episodes that errored.
+    pub errors: usize,
+    /// Success rate (%).
+    pub success_pct: f64,
+    /// Objects packed: mean and population std.
+    pub packed: (f64, f64),
+    /// Final compactness over successful episodes: mean and std.
+    pub final_compactness: (f64, f64),
+    /// Placements with S = 1 (%).
+    pub stability_pct: f64,
+}
+
+/// Summarises results (errored episodes are counted apart and excluded).
+pub fn summarize(method: &str, results: &[std::result::Result<EpisodeResult, String>]) -> Summary {
+    let ok: Vec<&EpisodeResult> = results.iter().filter_map(|r| r.as_ref().ok()).collect();
+    let n = ok.len().max(1) as f64;
+    let placements: usize = ok.iter().map(|r| r.placements).sum();
+    let stable: usize = ok.iter().map(|r| r.stable).sum();
+    Summary {
+        method: method.to_owned(),
+        episodes: ok.len(),
+        errors: results.len() - ok.len(),
+        success_pct: 100.0 * ok.iter().filter(|r| r.success).count() as f64 / n,
+        packed: mean_std(ok.iter().map(|r| r.packed as f64)),
+        final_compactness: mean_std(ok.iter().filter(|r| r.success).map(|r| r.final_compactness() as f64)),
+        stability_pct: 100.0 * stable as f64 / placements.max(1) as f64,
+    }
+}
+
+/// A Markdown table of our rows beside the paper's (HERB paper, Table I). `target` is the
+/// objects-per-episode mean and std of the evaluated episodes.
+pub fn format_table(rows: &[Summary], target: (f64, f64), episodes: usize) -> String {
+    let mut s = String::new();
+    s.push_str("| method | success % | objects packed mean (std) | final C (std) | stability % |\n");
+    s.push_str("| --- | ---: | ---: | ---: | ---: |\n");
+    s.push_str("| Target (paper) | 100 | 17.40 (3.63) | - | - |\n");
+    s.push_str(&format!("| Target (ours, {episodes} episodes) | 100 | {:.2} ({:.2}) | - | - |\n", target.0, target.1));
+    s.push_str("| Human packing (paper) | 84.41 | 15.22 (4.79) | - | - |\n");
+    for r in rows {
+        s.push_str(&format!(
+            "| {} (ours) | {:.2} | {:.2} ({:.2}) | {:.3} ({:.3}) | {:.1} |\n",
+            r.method, r.success_pct, r.packed.0, r.packed.1, r.final_compactness.0, r.final_compactness.1, r.stability_pct
+        ));
+    }
+    s
+}

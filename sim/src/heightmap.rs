@@ -1,0 +1,319 @@
+//! The top-down heightmap of the box interior and the triangle rasteriser that renders it.
+//!
+//! **Grid.** Square cells of side `cell` metres, `nx` columns along B x and `ny` rows along B y,
+//! centred on the box (so the grid may overhang the inner walls by less than one cell; every
+//! cell centre is inside). Storage is row-major, **row 0 at +y** (image top when viewed from
+//! above with x to the right), column 0 at -x. A cell's value is the height (m, B z) of the
+//! highest surface at the cell centre; the empty floor is 0. Outside the grid the box is
+//! treated as its walls: [`OUTSIDE_HEIGHT`].
+//!
+//! **Rendering** rasterises the upward-facing triangles of every hull into a max z-buffer,
+//! sampling at cell centres, instead of casting one ray per cell; tests check it against ray
+//! casting.
+
+use crate::error::{Result, SimError};
+use crate::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT};
+use rapier3d::math::Vector;
+
+/// Height reported for points outside the grid (the walls' top, m).
+pub const OUTSIDE_HEIGHT: f32 = BOX_HEIGHT;
+/// Highest value a valid heightmap may hold (m): well above anything that fits the success volume.
+pub const MAX_VALID_HEIGHT: f32 = 1.0;
+
+/// The geometry of a heightmap grid over the box interior.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GridSpec {
+    /// Columns (along B x).
+    pub nx: usize,
+    /// Rows (along B y).
+    pub ny: usize,
+    /// Cell side (m).
+    pub cell: f32,
+}
+
+impl GridSpec {
+    /// The grid over the box interior with cells of `cell` metres (0.5 mm to 2 cm).
+    pub fn for_box(cell: f32) -> Result<Self> {
+        if !(0.0005..=0.02).contains(&cell) {
+            return Err(SimError::Config(format!("heightmap cell {cell} m outside 0.0005..=0.02")));
+        }
+        // Round down to the count whose centres stay inside the walls, at least 1.
+        let n = |half: f32| ((2.0 * half / cell).ceil() as usize).max(1);
+        let (mut nx, mut ny) = (n(BOX_HALF_X), n(BOX_HALF_Y));
+        if (nx as f32 - 1.0) * 0.5 * cell > BOX_HALF_X {
+            nx -= 1;
+        }
+        if (ny as f32 - 1.0) * 0.5 * cell > BOX_HALF_Y {
+            ny -= 1;
+        }
+        Ok(Self { nx, ny, cell })
+    }
+
+    /// Number of cells.
+    pub fn len(&self) -> usize {
+        self.nx * self.ny
+    }
+
+    /// True for a grid without cells (never for [`GridSpec::for_box`]).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// B x of the grid's left edge (m).
+    pub fn x_min(&self) -> f32 {
+        -0.5 * self.nx as f32 * self.cell
+    }
+
+    /// B y of the grid's top edge (row 0 side, m).
+    pub fn y_max(&self) -> f32 {
+        0.5 * self.ny as f32 * self.cell
+    }
+
+    /// B (x, y) of the centre of cell (col, row).
+    pub fn cell_centre(&self, col: usize, row: usize) -> (f32, f32) {
+        (
+            self.x_min() + (col as f32 + 0.5) * self.cell,
+            self.y_max() - (row as f32 + 0.5) * self.cell,
+        )
+    }
+
+    /// Continuous pixel coordinates (u along columns, v along rows) of B (x, y); cell
+    /// (col, row) spans `[col, col+1) x [row, row+1)`.
+    pub fn to_pixel(&self, x: f32, y: f32) -> (f32, f32) {
+        ((x - self.x_min()) / self.cell, (self.y_max() - y) / self.cell)
+    }
+}
+
+/// A heightmap of the box interior (see the module docs for the layout).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Heightmap {
+    spec: GridSpec,
+    data: Vec<f32>,
+}
+
+impl Heightmap {
+    /// An empty box: every cell at the floor (0).
+    pub fn new(spec: GridSpec) -> Self {
+        Self { spec, data: vec![0.0; spec.len()] }
+    }
+
+    /// Wraps external data (e.g. a camera frame), validating size and values: every value must
+    /// be finite and within `[-0.05, MAX_VALID_HEIGHT]` m.
+    pub fn from_data(spec: GridSpec, data: Vec<f32>) -> Result<Self> {
+        let hm = Self { spec, data };
+        hm.validate()?;
+        Ok(hm)
+    }
+
+    /// Checks the size and every value; the error names the first bad cell.
+    pub fn validate(&self) -> Result<()> {
+        if self.data.len() != self.spec.len() {
+            return Err(SimError::Heightmap(format!(
+                "{} values for a {} x {} grid",
+                self.data.len(),
+                self.spec.nx,
+                self.spec.ny
+            )));
+        }
+        if let Some((i, v)) =
+            self.data.iter().enumerate().find(|(_, v)| !(v.is_finite() && (-0.05..=MAX_VALID_HEIGHT).contains(*v)))
+        {
+            return Err(SimError::Heightmap(format!(
+                "cell (col {}, row {}) holds {v}: values must be finite and within -0.05..={MAX_VALID_HEIGHT} m",
+                i % self.spec.nx,
+                i / self.spec.nx
+            )));
+        }
+        Ok(())
+    }
+
+    /// The grid.
+    pub fn spec(&self) -> &GridSpec {
+        &self.spec
+    }
+
+    /// Row-major values (row 0 at +y).
+    pub fn data(&self) -> &[f32] {
+        &self.data
+    }
+
+    /// Mutable values, for renderers.
+    pub fn data_mut(&mut self) -> &mut [f32] {
+        &mut self.data
+    }
+
+    /// Resets every cell to the floor.
+    pub fn clear(&mut self) {
+        self.data.fill(0.0);
+    }
+
+    /// Value of cell (col, row), or [`OUTSIDE_HEIGHT`] outside the grid.
+    #[inline]
+    pub fn get(&self, col: isize, row: isize) -> f32 {
+        if col < 0 || row < 0 || col as usize >= self.spec.nx || row as usize >= self.spec.ny {
+            OUTSIDE_HEIGHT
+        } else {
+            self.data[row as usize * self.spec.nx + col as usize]
+        }
+    }
+
+    /// Value of the cell containing B (x, y) (nearest-cell sampling).
+    pub fn sample(&self, x: f32, y: f32) -> f32 {
+        let (u, v) = self.spec.to_pixel(x, y);
+        self.get(u.floor() as isize, v.floor() as isize)
+    }
+
+    /// Highest value.
+    pub fn max(&self) -> f32 {
+        self.data.iter().copied().fold(0.0, f32::max)
+    }
+}
+
+/// Which surface a rasterisation keeps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DepthTest {
+    /// Keep the highest z (top surfaces, heightmaps); draws upward-facing triangles.
+    Max,
+    /// Keep the lowest z (bottom surfaces, footprints); draws downward-facing triangles.
+    Min,
+}
+
+/// A rectangular window of the grid's pixel lattice that a buffer covers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Window {
+    /// First column (may be negative: outside the grid).
+    pub col0: isize,
+    /// First row.
+    pub row0: isize,
+    /// Width in cells.
+    pub w: usize,
+    /// Height in cells.
+    pub h: usize,
+}
+
+/// Rasterises one triangle given in grid pixel coordinates `(u, v, z)` into `buf` (covering
+/// `win`), keeping the highest or lowest z per cell centre. Triangles facing the wrong way for
+/// `test` (or vertical) are skipped: for convex hulls they are never the visible surface.
+#[inline]
+pub fn raster_triangle(buf: &mut [f32], win: Window, p: [Vector; 3], test: DepthTest) {
+    // Signed area in (u, v); v points down (-y), so an upward-facing triangle (normal z > 0
+    // in B, counter-clockwise seen from above) has negative area here.
+    let area = (p[1].x - p[0].x) * (p[2].y - p[0].y) - (p[1].y - p[0].y) * (p[2].x - p[0].x);
+    let upward = area < 0.0;
+    match test {
+        DepthTest::Max if !upward => return,
+        DepthTest::Min if upward => return,
+        _ => {}
+    }
+    if area.abs() < 1e-12 {
+        return;
+    }
+    let inv_area = 1.0 / area;
+    let umin = p[0].x.min(p[1].x).min(p[2].x);
+    let umax = p[0].x.max(p[1].x).max(p[2].x);
+    let vmin = p[0].y.min(p[1].y).min(p[2].y);
+    let vmax = p[0].y.max(p[1].y).max(p[2].y);
+    // Cells whose centre (c + 0.5) lies in [umin, umax].
+    let c_lo = ((umin - 0.5).ceil() as isize).max(win.col0);
+    let c_hi = ((umax - 0.5).floor() as isize).min(win.col0 + win.w as isize - 1);
+    let r_lo = ((vmin - 0.5).ceil() as isize).max(win.row0);
+    let r_hi = ((vmax - 0.5).floor() as isize).min(win.row0 + win.h as isize - 1);
+    if c_lo > c_hi || r_lo > r_hi {
+        return;
+    }
+    let edge = |a: Vector, b: Vector, u: f32, v: f32| (b.x - a.x) * (v - a.y) - (b.y - a.y) * (u - a.x);
+    // Normalised barycentric weights: inside means all >= 0 whatever the winding.
+    const EPS: f32 = -1e-6;
+    for r in r_lo..=r_hi {
+        let v = r as f32 + 0.5;
+        let row_off = (r - win.row0) as usize * win.w;
+        for c in c_lo..=c_hi {
+            let u = c as f32 + 0.5;
+            let w0 = edge(p[1], p[2], u, v) * inv_area;
+            let w1 = edge(p[2], p[0], u, v) * inv_area;
+            let w2 = edge(p[0], p[1], u, v) * inv_area;
+            if w0 < EPS || w1 < EPS || w2 < EPS {
+                continue;
+            }
+            let z = w0 * p[0].z + w1 * p[1].z + w2 * p[2].z;
+            let cell = &mut buf[row_off + (c - win.col0) as usize];
+            match test {
+                DepthTest::Max => *cell = cell.max(z),
+                DepthTest::Min => *cell = cell.min(z),
+            }
+        }
+    }
+}
+
+/// Rasterises a convex hull whose vertices are already transformed to B (`world_vertices`)
+/// into `buf` covering `win` of grid `spec`.
+pub fn raster_hull(
+    spec: &GridSpec,
+    buf: &mut [f32],
+    win: Window,
+    world_vertices: &[Vector],
+    triangles: &[[u32; 3]],
+    test: DepthTest,
+) {
+    for t in triangles {
+        let p = t.map(|i| {
+            let w = world_vertices[i as usize];
+            let (u, v) = spec.to_pixel(w.x, w.y);
+            Vector::new(u, v, w.z)
+        });
+        raster_triangle(buf, win, p, test);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grid_centres_stay_inside_the_walls() {
+        for cell in [0.0015625, 0.002, 0.005, 0.0123] {
+            let g = GridSpec::for_box(cell).unwrap();
+            let (x0, y0) = g.cell_centre(0, 0);
+            let (x1, y1) = g.cell_centre(g.nx - 1, g.ny - 1);
+            assert!(x0 >= -BOX_HALF_X && x1 <= BOX_HALF_X, "{cell}: {x0} {x1}");
+            assert!(y0 <= BOX_HALF_Y && y1 >= -BOX_HALF_Y, "{cell}: {y0} {y1}");
+            assert!(g.nx as f32 * cell >= 2.0 * BOX_HALF_X - cell);
+        }
+        assert!(GridSpec::for_box(0.0).is_err());
+        assert!(GridSpec::for_box(f32::NAN).is_err());
+    }
+
+    #[test]
+    fn from_data_rejects_bad_values() {
+        let g = GridSpec::for_box(0.01).unwrap();
+        assert!(Heightmap::from_data(g, vec![0.0; g.len() - 1]).is_err());
+        let mut d = vec![0.05; g.len()];
+        d[7] = f32::NAN;
+        let e = Heightmap::from_data(g, d.clone()).unwrap_err().to_string();
+        assert!(e.contains("col 7"), "{e}");
+        d[7] = 3.0;
+        assert!(Heightmap::from_data(g, d).is_err());
+    }
+
+    #[test]
+    fn triangle_max_covers_centres() {
+        let g = GridSpec::for_box(0.01).unwrap();
+        let mut hm = Heightmap::new(g);
+        let win = Window { col0: 0, row0: 0, w: g.nx, h: g.ny };
+        // A horizontal square 4 cm x 4 cm at z = 0.1, as two upward (CCW from above) triangles.
+        let v = [
+            Vector::new(-0.02, -0.02, 0.1),
+            Vector::new(0.02, -0.02, 0.1),
+            Vector::new(0.02, 0.02, 0.1),
+            Vector::new(-0.02, 0.02, 0.1),
+        ];
+        raster_hull(&g, hm.data_mut(), win, &v, &[[0, 1, 2], [0, 2, 3]], DepthTest::Max);
+        let covered = hm.data().iter().filter(|&&z| z > 0.05).count();
+        assert!((12..=25).contains(&covered), "{covered}");
+        assert_eq!(hm.sample(0.0, 0.0), 0.1);
+        // Reversed winding faces down: not drawn by Max.
+        let mut hm2 = Heightmap::new(g);
+        raster_hull(&g, hm2.data_mut(), win, &v, &[[0, 2, 1]], DepthTest::Max);
+        assert_eq!(hm2.max(), 0.0);
+    }
+}

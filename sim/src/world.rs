@@ -1,0 +1,407 @@
+//! The packing world: the BoxED box in rapier3d, placement, settling and the paper's metrics.
+//!
+//! # Metrics (per placement, after the world settles)
+//!
+//! - **inside**: every vertex of every placed object's hull lies within the success volume,
+//!   the box interior `|x| <= BOX_HALF_X`, `|y| <= BOX_HALF_Y`, `z >= 0`, extended upwards to
+//!   `SUCCESS_TOP_Z` (rim + 13 cm), all widened by `inside_tolerance_m` for contact
+//!   penetration. An earlier object knocked out fails the placement too.
+//! - **tilt**: angle between the placed object's up axis (canonical +z) and B z: how far it
+//!   tipped from the intended upright orientation (a turn about z is not tilt).
+//! - **S** (stability): 1 if tilt <= `stability_tilt_deg` (10 degrees), else 0.
+//! - **C** (compactness, after Huang et al. 2023): `C = sum of the hull volumes of the placed
+//!   objects / volume of the minimal box encapsulating them`, where that box is the
+//!   axis-aligned bounding box, in B, of all placed objects' hull vertices at their settled
+//!   poses (B's axes are the container's, so this is the tightest container-aligned box).
+
+use crate::catalog::{SharedCatalog, TypeIdx};
+use crate::error::{Result, SimError};
+use crate::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, BOX_WALL_THICKNESS, SUCCESS_TOP_Z, tilt_of};
+use crate::heightmap::{DepthTest, GridSpec, Heightmap, Window, raster_hull};
+use crate::observation::ObsLayout;
+use crate::zestimate::{ZScratch, estimate_z_rotated};
+use rapier3d::math::{Pose, Rotation, Vector};
+use rapier3d::prelude::*;
+
+/// Settings of the packing world. Defaults are the values used for training and evaluation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WorldConfig {
+    /// Heightmap cell side (m); default: the observation scale, 0.35/224 m.
+    pub heightmap_cell_m: f32,
+    /// Gap added above the estimated resting height before release (m).
+    pub clearance_m: f32,
+    /// Physics time step (s).
+    pub dt: f32,
+    /// Longest simulated settling time per placement (s).
+    pub settle_cap_s: f32,
+    /// A body sleeps after this long below the motion threshold (s).
+    pub time_until_sleep_s: f32,
+    /// Sleep threshold on a body's farthest-point speed (m/s).
+    pub sleep_speed_mps: f32,
+    /// Friction coefficient of every surface.
+    pub friction: f32,
+    /// Widening of the success volume for contact penetration (m).
+    pub inside_tolerance_m: f32,
+    /// Tilt above which a placement is unstable (degrees).
+    pub stability_tilt_deg: f32,
+    /// Stop settling early once an object is this far outside the success volume (m).
+    pub early_out_m: f32,
+    /// Fastest speed at which the solver pushes overlapping bodies apart (m/s).
+    pub max_corrective_speed_mps: f32,
+}
+
+impl Default for WorldConfig {
+    fn default() -> Self {
+        Self {
+            heightmap_cell_m: ObsLayout::CELL_M,
+            clearance_m: 0.002,
+            dt: 1.0 / 60.0,
+            settle_cap_s: 3.0,
+            time_until_sleep_s: 0.2,
+            sleep_speed_mps: 0.01,
+            friction: 0.6,
+            inside_tolerance_m: 0.01,
+            stability_tilt_deg: 10.0,
+            early_out_m: 0.05,
+            max_corrective_speed_mps: 0.2,
+        }
+    }
+}
+
+impl WorldConfig {
+    /// Checks every value; the error names the field.
+    pub fn validate(&self) -> Result<()> {
+        let check = |name: &str, v: f32, lo: f32, hi: f32| {
+            if v.is_finite() && (lo..=hi).contains(&v) {
+                Ok(())
+            } else {
+                Err(SimError::Config(format!("'{name}' = {v} outside {lo}..={hi}")))
+            }
+        };
+        check("heightmap_cell_m", self.heightmap_cell_m, 0.0005, 0.02)?;
+        check("clearance_m", self.clearance_m, 0.0, 0.05)?;
+        check("dt", self.dt, 1e-4, 0.05)?;
+        check("settle_cap_s", self.settle_cap_s, self.dt, 60.0)?;
+        check("time_until_sleep_s", self.time_until_sleep_s, 0.0, 5.0)?;
+        check("sleep_speed_mps", self.sleep_speed_mps, 0.0, 1.0)?;
+        check("friction", self.friction, 0.0, 2.0)?;
+        check("inside_tolerance_m", self.inside_tolerance_m, 0.0, 0.05)?;
+        check("stability_tilt_deg", self.stability_tilt_deg, 0.0, 90.0)?;
+        check("early_out_m", self.early_out_m, 0.0, 10.0)?;
+        check("max_corrective_speed_mps", self.max_corrective_speed_mps, 0.01, 10.0)?;
+        Ok(())
+    }
+}
+
+/// What one placement did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlacementOutcome {
+    /// Every placed object is inside the success volume.
+    pub inside: bool,
+    /// Index (placement order) of the first object found outside, if any.
+    pub first_outside: Option<usize>,
+    /// Tilt of the placed object from upright after settling (rad).
+    pub tilt_rad: f32,
+    /// S: tilt within the stability threshold.
+    pub stable: bool,
+    /// C over all placed objects after settling.
+    pub compactness: f32,
+    /// z of the object's canonical origin at release (m): estimate plus clearance.
+    pub z: f32,
+    /// Physics steps taken to settle.
+    pub settle_steps: u32,
+    /// True if every body fell asleep before the time cap (or the early exit).
+    pub settled: bool,
+}
+
+/// One object in the world.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlacedObject {
+    /// Its type.
+    pub ty: TypeIdx,
+    /// Its rigid body.
+    pub body: RigidBodyHandle,
+}
+
+/// The packing world. Deterministic: the same calls give bit-identical states.
+pub struct PackingWorld {
+    cfg: WorldConfig,
+    catalog: SharedCatalog,
+    phys: PhysicsWorld,
+    placed: Vec<PlacedObject>,
+    heightmap: Heightmap,
+    verts: Vec<Vector>,
+    zscratch: ZScratch,
+}
+
+impl std::fmt::Debug for PackingWorld {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PackingWorld").field("cfg", &self.cfg).field("placed", &self.placed).finish()
+    }
+}
+
+impl PackingWorld {
+    /// An empty box.
+    pub fn new(catalog: SharedCatalog, cfg: WorldConfig) -> Result<Self> {
+        cfg.validate()?;
+        let spec = GridSpec::for_box(cfg.heightmap_cell_m)?;
+        let max_verts = catalog.types().map(|t| catalog.shape(t).vertices.len()).max().unwrap_or(0);
+        let max_foot = catalog
+            .types()
+            .map(|t| {
+                let e = catalog.shape(t).extents();
+                (e.x * e.x + e.y * e.y).sqrt()
+            })
+            .fold(0.0, f32::max);
+        let zscratch = ZScratch::with_capacity(max_verts, max_foot, cfg.heightmap_cell_m);
+        let mut w = Self {
+            phys: Self::empty_physics(&cfg),
+            cfg,
+            catalog,
+            placed: Vec::with_capacity(32),
+            heightmap: Heightmap::new(spec),
+            verts: Vec::with_capacity(max_verts),
+            zscratch,
+        };
+        w.render_heightmap();
+        Ok(w)
+    }
+
+    fn empty_physics(cfg: &WorldConfig) -> PhysicsWorld {
+        let mut phys = PhysicsWorld::new();
+        phys.gravity = Vector::new(0.0, 0.0, -9.81);
+        phys.integration_parameters.dt = cfg.dt;
+        // 1 mm allowed penetration (default 5 mm is coarse for objects a few cm tall).
+        phys.integration_parameters.normalized_allowed_linear_error = 0.001;
+        // Resolve overlaps gently (default 3 m/s launches objects released slightly inside others).
+        phys.integration_parameters.normalized_max_corrective_velocity = cfg.max_corrective_speed_mps;
+        let t = BOX_WALL_THICKNESS;
+        let (hx, hy, h) = (BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT);
+        let body = phys.insert_body(RigidBodyBuilder::fixed());
+        let cuboid = |half: Vector, at: Vector| {
+            ColliderBuilder::cuboid(half.x, half.y, half.z).translation(at).friction(cfg.friction).restitution(0.0)
+        };
+        let parts = [
+            // Floor, top face at z = 0.
+            cuboid(Vector::new(hx + t, hy + t, 0.5 * t), Vector::new(0.0, 0.0, -0.5 * t)),
+            // End walls (x) and side walls (y), inner faces on the interior bounds.
+            cuboid(Vector::new(0.5 * t, hy + t, 0.5 * h), Vector::new(hx + 0.5 * t, 0.0, 0.5 * h)),
+            cuboid(Vector::new(0.5 * t, hy + t, 0.5 * h), Vector::new(-hx - 0.5 * t, 0.0, 0.5 * h)),
+            cuboid(Vector::new(hx + t, 0.5 * t, 0.5 * h), Vector::new(0.0, hy + 0.5 * t, 0.5 * h)),
+            cuboid(Vector::new(hx + t, 0.5 * t, 0.5 * h), Vector::new(0.0, -hy - 0.5 * t, 0.5 * h)),
+            // The table the box stands on, so objects knocked out come to rest.
+            cuboid(Vector::new(2.0, 2.0, 0.05), Vector::new(0.0, 0.0, -t - 0.05)),
+        ];
+        for c in parts {
+            phys.insert_collider(c, Some(body));
+        }
+        phys
+    }
+
+    /// Removes every object: an empty box again, bit-identical to a new world.
+    pub fn reset(&mut self) {
+        self.phys = Self::empty_physics(&self.cfg);
+        self.placed.clear();
+        self.render_heightmap();
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &WorldConfig {
+        &self.cfg
+    }
+
+    /// The catalog.
+    pub fn catalog(&self) -> &SharedCatalog {
+        &self.catalog
+    }
+
+    /// The heightmap after the last settle.
+    pub fn heightmap(&self) -> &Heightmap {
+        &self.heightmap
+    }
+
+    /// Objects placed so far, in order.
+    pub fn placed(&self) -> &[PlacedObject] {
+        &self.placed
+    }
+
+    /// Current pose of a placed object.
+    pub fn pose_of(&self, obj: &PlacedObject) -> Pose {
+        *self.phys.bodies[obj.body].position()
+    }
+
+    /// Lowest collision-free origin height for `ty` at `(x, y, theta)` over the current
+    /// heightmap (no clearance). See [`crate::zestimate`].
+    pub fn estimate_z(&mut self, ty: TypeIdx, x: f32, y: f32, theta: f32) -> f32 {
+        self.estimate_z_rotated(ty, x, y, Rotation::from_rotation_z(theta))
+    }
+
+    /// As [`PackingWorld::estimate_z`] for any orientation of the canonical frame.
+    pub fn estimate_z_rotated(&mut self, ty: TypeIdx, x: f32, y: f32, rot: Rotation) -> f32 {
+        estimate_z_rotated(&self.heightmap, self.catalog.shape(ty), x, y, rot, &mut self.zscratch)
+    }
+
+    /// Places `ty` upright, turned by `theta` about z, with its canonical origin at `(x, y)` and
+    /// at the estimated height plus clearance, then settles the world and measures.
+    pub fn place(&mut self, ty: TypeIdx, x: f32, y: f32, theta: f32) -> Result<PlacementOutcome> {
+        if !theta.is_finite() {
+            return Err(SimError::InvalidPlacement { x, y, theta });
+        }
+        self.place_rotated(ty, x, y, Rotation::from_rotation_z(theta))
+    }
+
+    /// As [`PackingWorld::place`] with any orientation of the canonical frame (tilt is then
+    /// measured from upright all the same).
+    pub fn place_rotated(&mut self, ty: TypeIdx, x: f32, y: f32, rot: Rotation) -> Result<PlacementOutcome> {
+        if !(x.is_finite() && y.is_finite() && rot.is_finite()) || x.abs() > 10.0 || y.abs() > 10.0 {
+            return Err(SimError::InvalidPlacement { x, y, theta: crate::frames::yaw_of(rot) });
+        }
+        self.check_type(ty)?;
+        let rot = rot.normalize();
+        let z = self.estimate_z_rotated(ty, x, y, rot) + self.cfg.clearance_m;
+        self.place_pose(ty, Pose::from_parts(Vector::new(x, y, z), rot))
+    }
+
+    /// Releases `ty` at an explicit pose (e.g. the gripper's) and settles. The outcome's `z` is
+    /// the pose's z.
+    pub fn place_pose(&mut self, ty: TypeIdx, pose: Pose) -> Result<PlacementOutcome> {
+        self.check_type(ty)?;
+        if !pose.is_finite() {
+            return Err(SimError::InvalidPlacement { x: pose.translation.x, y: pose.translation.y, theta: f32::NAN });
+        }
+        let spec = self.catalog.spec(ty);
+        let shape = self.catalog.shape(ty);
+        let collider = ColliderBuilder::new(shape.collider.clone())
+            .mass(spec.mass_kg)
+            .friction(self.cfg.friction)
+            .restitution(0.0);
+        let body = RigidBodyBuilder::dynamic().pose(pose).build();
+        let (handle, _) = self.phys.insert(body, collider);
+        {
+            let act = self.phys.bodies[handle].activation_mut();
+            act.normalized_linear_threshold = self.cfg.sleep_speed_mps;
+            act.time_until_sleep = self.cfg.time_until_sleep_s;
+        }
+        self.placed.push(PlacedObject { ty, body: handle });
+        let (settle_steps, settled) = self.settle();
+        let scan = self.scan(true);
+        let rot = *self.phys.bodies[handle].rotation();
+        let tilt = tilt_of(rot);
+        Ok(PlacementOutcome {
+            inside: scan.first_outside.is_none(),
+            first_outside: scan.first_outside,
+            tilt_rad: tilt,
+            stable: tilt <= self.cfg.stability_tilt_deg.to_radians(),
+            compactness: scan.compactness,
+            z: pose.translation.z,
+            settle_steps,
+            settled,
+        })
+    }
+
+    fn check_type(&self, ty: TypeIdx) -> Result<()> {
+        if (ty.0 as usize) < self.catalog.len() {
+            Ok(())
+        } else {
+            Err(SimError::UnknownObject(format!("type index {}", ty.0)))
+        }
+    }
+
+    /// Steps until every placed body sleeps, an object is far out, or the time cap.
+    fn settle(&mut self) -> (u32, bool) {
+        let max_steps = (self.cfg.settle_cap_s / self.cfg.dt).ceil() as u32;
+        for step in 1..=max_steps {
+            self.phys.step();
+            if self.placed.iter().all(|p| self.phys.bodies[p.body].is_sleeping()) {
+                return (step, true);
+            }
+            if step % 8 == 0 && self.any_far_out() {
+                return (step, true);
+            }
+        }
+        (max_steps, false)
+    }
+
+    fn any_far_out(&self) -> bool {
+        let m = self.cfg.early_out_m;
+        self.placed.iter().any(|p| {
+            let t = self.phys.bodies[p.body].translation();
+            t.x.abs() > BOX_HALF_X + m || t.y.abs() > BOX_HALF_Y + m || t.z < -m
+        })
+    }
+
+    /// One pass over all placed bodies: inside check, compactness, and (optionally) the
+    /// heightmap render.
+    fn scan(&mut self, render: bool) -> Scan {
+        if render {
+            self.heightmap.clear();
+        }
+        let tol = self.cfg.inside_tolerance_m;
+        let (lo_ok, hi_ok) = (
+            Vector::new(-BOX_HALF_X - tol, -BOX_HALF_Y - tol, -tol),
+            Vector::new(BOX_HALF_X + tol, BOX_HALF_Y + tol, SUCCESS_TOP_Z + tol),
+        );
+        let spec = *self.heightmap.spec();
+        let win = Window { col0: 0, row0: 0, w: spec.nx, h: spec.ny };
+        let mut first_outside = None;
+        let (mut lo, mut hi) = (Vector::splat(f32::MAX), Vector::splat(f32::MIN));
+        let mut volume = 0.0f32;
+        for (i, p) in self.placed.iter().enumerate() {
+            let pose = *self.phys.bodies[p.body].position();
+            let shape = self.catalog.shape(p.ty);
+            self.verts.clear();
+            self.verts.extend(shape.vertices.iter().map(|&v| pose.transform_point(v)));
+            let (blo, bhi) =
+                self.verts.iter().fold((Vector::splat(f32::MAX), Vector::splat(f32::MIN)), |(a, b), &v| (a.min(v), b.max(v)));
+            if first_outside.is_none() && (blo.cmplt(lo_ok).any() || bhi.cmpgt(hi_ok).any()) {
+                first_outside = Some(i);
+            }
+            lo = lo.min(blo);
+            hi = hi.max(bhi);
+            volume += shape.volume;
+            if render {
+                raster_hull(&spec, self.heightmap.data_mut(), win, &self.verts, &shape.triangles, DepthTest::Max);
+            }
+        }
+        let ext = (hi - lo).max(Vector::ZERO);
+        let bbox = ext.x * ext.y * ext.z;
+        let compactness = if self.placed.is_empty() || bbox <= 0.0 { 0.0 } else { (volume / bbox).min(1.0) };
+        Scan { first_outside, compactness }
+    }
+
+    /// Renders the heightmap of the current state (done after every settle).
+    pub fn render_heightmap(&mut self) {
+        self.scan(true);
+    }
+
+    /// Compactness C of the current state.
+    pub fn compactness(&mut self) -> f32 {
+        self.scan(false).compactness
+    }
+
+    /// Raw bits of every placed body's pose and velocities plus the heightmap, for bit-exact
+    /// determinism checks.
+    pub fn state_bits(&self) -> Vec<u32> {
+        let mut out = Vec::new();
+        for p in &self.placed {
+            let b = &self.phys.bodies[p.body];
+            let pose = b.position();
+            out.extend(pose.translation.to_array().map(f32::to_bits));
+            out.extend(pose.rotation.to_array().map(f32::to_bits));
+            out.extend(b.linvel().to_array().map(f32::to_bits));
+            out.extend(b.angvel().to_array().map(f32::to_bits));
+        }
+        out.extend(self.heightmap.data().iter().map(|v| v.to_bits()));
+        out
+    }
+
+    /// The collider set and body set, for queries in tests and tools (ray casting).
+    pub fn physics(&self) -> &PhysicsWorld {
+        &self.phys
+    }
+}
+
+struct Scan {
+    first_outside: Option<usize>,
+    compactness: f32,
+}
