@@ -348,17 +348,27 @@ pub fn quad_faced_hull(
     Err("could not reduce the hull's faces to quads in 12 rounds".into())
 }
 
-/// Fan triangulation of every face of a polyhedron, outward winding.
+/// Fan triangulation of every face of a polyhedron, outward winding. Face vertices are first
+/// put in cyclic order around the face centre (parry does not promise an order).
 fn triangulate_faces(poly: &parry3d::shape::ConvexPolyhedron) -> Vec<[u32; 3]> {
     let mut out = Vec::new();
     for face in poly.faces() {
         let first = face.first_vertex_or_edge as usize;
-        let ids = &poly.vertices_adj_to_face()[first..first + face.num_vertices_or_edges as usize];
+        let mut ids = poly.vertices_adj_to_face()[first..first + face.num_vertices_or_edges as usize].to_vec();
+        let p = |i: u32| poly.points()[i as usize];
+        let centre = ids.iter().fold(Vector::ZERO, |a, &i| a + p(i)) / ids.len() as f32;
+        let n = face.normal;
+        let u = (p(ids[0]) - centre).normalize_or_zero();
+        let v = n.cross(u);
+        ids.sort_by(|&a, &b| {
+            let (da, db) = (p(a) - centre, p(b) - centre);
+            da.dot(v).atan2(da.dot(u)).total_cmp(&db.dot(v).atan2(db.dot(u)))
+        });
         for k in 1..ids.len().saturating_sub(1) {
             let tri = [ids[0], ids[k], ids[k + 1]];
-            let [a, b, c] = tri.map(|i| poly.points()[i as usize]);
-            // Keep the winding outward whatever order parry stores.
-            if (b - a).cross(c - a).dot(face.normal) >= 0.0 {
+            let [a, b, c] = tri.map(p);
+            // Keep the winding outward.
+            if (b - a).cross(c - a).dot(n) >= 0.0 {
                 out.push(tri);
             } else {
                 out.push([tri[0], tri[2], tri[1]]);

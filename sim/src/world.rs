@@ -63,7 +63,7 @@ impl Default for WorldConfig {
             inside_tolerance_m: 0.01,
             stability_tilt_deg: 10.0,
             early_out_m: 0.05,
-            max_corrective_speed_mps: 0.2,
+            max_corrective_speed_mps: 3.0,
         }
     }
 }
@@ -100,6 +100,8 @@ pub struct PlacementOutcome {
     pub inside: bool,
     /// Index (placement order) of the first object found outside, if any.
     pub first_outside: Option<usize>,
+    /// Which bound that object crosses most and by how much (m), e.g. `("floor", 0.004)`.
+    pub violation: Option<(&'static str, f32)>,
     /// Tilt of the placed object from upright after settling (rad).
     pub tilt_rad: f32,
     /// S: tilt within the stability threshold.
@@ -173,7 +175,7 @@ impl PackingWorld {
         phys.integration_parameters.dt = cfg.dt;
         // 1 mm allowed penetration (default 5 mm is coarse for objects a few cm tall).
         phys.integration_parameters.normalized_allowed_linear_error = 0.001;
-        // Resolve overlaps gently (default 3 m/s launches objects released slightly inside others).
+        // Speed at which overlaps are resolved (rapier default 3 m/s; lower values let bodies sink).
         phys.integration_parameters.normalized_max_corrective_velocity = cfg.max_corrective_speed_mps;
         let t = BOX_WALL_THICKNESS;
         let (hx, hy, h) = (BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT);
@@ -182,8 +184,9 @@ impl PackingWorld {
             ColliderBuilder::cuboid(half.x, half.y, half.z).translation(at).friction(cfg.friction).restitution(0.0)
         };
         let parts = [
-            // Floor, top face at z = 0.
-            cuboid(Vector::new(hx + t, hy + t, 0.5 * t), Vector::new(0.0, 0.0, -0.5 * t)),
+            // Floor, top face at z = 0. A 10 cm slab rather than the real 1.57 cm board, so that a
+            // body pressed into it is never pushed out through its underside.
+            cuboid(Vector::new(hx + t, hy + t, 0.05), Vector::new(0.0, 0.0, -0.05)),
             // End walls (x) and side walls (y), inner faces on the interior bounds.
             cuboid(Vector::new(0.5 * t, hy + t, 0.5 * h), Vector::new(hx + 0.5 * t, 0.0, 0.5 * h)),
             cuboid(Vector::new(0.5 * t, hy + t, 0.5 * h), Vector::new(-hx - 0.5 * t, 0.0, 0.5 * h)),
@@ -290,6 +293,7 @@ impl PackingWorld {
         Ok(PlacementOutcome {
             inside: scan.first_outside.is_none(),
             first_outside: scan.first_outside,
+            violation: scan.violation,
             tilt_rad: tilt,
             stable: tilt <= self.cfg.stability_tilt_deg.to_radians(),
             compactness: scan.compactness,
@@ -344,6 +348,7 @@ impl PackingWorld {
         let spec = *self.heightmap.spec();
         let win = Window { col0: 0, row0: 0, w: spec.nx, h: spec.ny };
         let mut first_outside = None;
+        let mut violation = None;
         let (mut lo, mut hi) = (Vector::splat(f32::MAX), Vector::splat(f32::MIN));
         let mut volume = 0.0f32;
         for (i, p) in self.placed.iter().enumerate() {
@@ -355,6 +360,15 @@ impl PackingWorld {
                 self.verts.iter().fold((Vector::splat(f32::MAX), Vector::splat(f32::MIN)), |(a, b), &v| (a.min(v), b.max(v)));
             if first_outside.is_none() && (blo.cmplt(lo_ok).any() || bhi.cmpgt(hi_ok).any()) {
                 first_outside = Some(i);
+                let over = [
+                    ("-x wall", lo_ok.x - blo.x),
+                    ("+x wall", bhi.x - hi_ok.x),
+                    ("-y wall", lo_ok.y - blo.y),
+                    ("+y wall", bhi.y - hi_ok.y),
+                    ("floor", lo_ok.z - blo.z),
+                    ("top", bhi.z - hi_ok.z),
+                ];
+                violation = over.into_iter().max_by(|a, b| a.1.total_cmp(&b.1));
             }
             lo = lo.min(blo);
             hi = hi.max(bhi);
@@ -366,7 +380,7 @@ impl PackingWorld {
         let ext = (hi - lo).max(Vector::ZERO);
         let bbox = ext.x * ext.y * ext.z;
         let compactness = if self.placed.is_empty() || bbox <= 0.0 { 0.0 } else { (volume / bbox).min(1.0) };
-        Scan { first_outside, compactness }
+        Scan { first_outside, violation, compactness }
     }
 
     /// Renders the heightmap of the current state (done after every settle).
@@ -403,5 +417,6 @@ impl PackingWorld {
 
 struct Scan {
     first_outside: Option<usize>,
+    violation: Option<(&'static str, f32)>,
     compactness: f32,
 }

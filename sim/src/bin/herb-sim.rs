@@ -296,7 +296,7 @@ fn pack_one(catalog: &SharedCatalog, ep: &Episode, m: Method, seed: u64, png: &P
         let o = step.info.outcome;
         let (x, y, th) = step.info.placement;
         println!(
-            "{:>3} {} {:<18} x {:+.3} y {:+.3} theta {:+6.1} deg z {:.3}  {}  tilt {:5.1} deg  C {:.3}  reward {:+.3}",
+            "{:>3} {} {:<18} x {:+.3} y {:+.3} theta {:+6.1} deg z {:.3}  {}  tilt {:5.1} deg  C {:.3}  reward {:+.3}{}",
             i + 1,
             catalog.spec(ty).id,
             catalog.spec(ty).name,
@@ -307,7 +307,11 @@ fn pack_one(catalog: &SharedCatalog, ep: &Episode, m: Method, seed: u64, png: &P
             if o.inside { "inside " } else { "OUTSIDE" },
             o.tilt_rad.to_degrees(),
             o.compactness,
-            step.reward
+            step.reward,
+            match (o.first_outside, o.violation) {
+                (Some(i), Some((what, by))) => format!("  (object {} crosses the {what} by {:.1} cm)", i + 1, by * 100.0),
+                _ => String::new(),
+            }
         );
         if step.terminated {
             println!(
