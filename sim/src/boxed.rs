@@ -82,7 +82,10 @@ struct RawRecord {
 /// Session folder names under `<root>/sessions`, in natural order (p2 before p10).
 pub fn list_sessions(root: &Path) -> Result<Vec<String>> {
     let dir = root.join("sessions");
-    let rd = std::fs::read_dir(&dir).map_err(|source| SimError::Io { path: dir.clone(), source })?;
+    let rd = std::fs::read_dir(&dir).map_err(|source| SimError::Io {
+        path: dir.clone(),
+        source,
+    })?;
     let mut names: Vec<String> = rd
         .filter_map(|e| e.ok())
         .filter(|e| e.path().is_dir())
@@ -118,25 +121,46 @@ fn natural_key(name: &str) -> Vec<(u64, String)> {
 
 /// Loads one session; the error names the session and what is wrong.
 pub fn load_session(root: &Path, name: &str, catalog: &Catalog) -> Result<Session> {
-    let err = |message: String| SimError::Session { session: name.to_owned(), message };
-    let path = root.join("sessions").join(name).join("PickPlace_dataset.json");
-    let text = std::fs::read_to_string(&path).map_err(|e| err(format!("cannot read {}: {e}", path.display())))?;
-    let raw: Vec<RawRecord> =
-        serde_json::from_str(&text).map_err(|e| err(format!("{} is malformed: {e}", path.display())))?;
+    let err = |message: String| SimError::Session {
+        session: name.to_owned(),
+        message,
+    };
+    let path = root
+        .join("sessions")
+        .join(name)
+        .join("PickPlace_dataset.json");
+    let text = std::fs::read_to_string(&path)
+        .map_err(|e| err(format!("cannot read {}: {e}", path.display())))?;
+    let raw: Vec<RawRecord> = serde_json::from_str(&text)
+        .map_err(|e| err(format!("{} is malformed: {e}", path.display())))?;
     if raw.is_empty() {
         return Err(err("no placement records".into()));
     }
     let mut records = Vec::with_capacity(raw.len());
     for (i, r) in raw.into_iter().enumerate() {
         let type_name = r.id.split("(Clone)").next().unwrap_or("").trim_end();
-        let ty = catalog
-            .by_dataset_type(type_name)
-            .map_err(|_| err(format!("record {i}: unknown object type {type_name:?} in id {:?}", r.id)))?;
-        let pose = unity_place_to_box(r.place_rotation, r.place_translation)
-            .ok_or_else(|| err(format!("record {i} ({}): not a finite proper rotation/translation", r.id)))?;
-        records.push(PlacementRecord { instance: r.id, ty, pose });
+        let ty = catalog.by_dataset_type(type_name).map_err(|_| {
+            err(format!(
+                "record {i}: unknown object type {type_name:?} in id {:?}",
+                r.id
+            ))
+        })?;
+        let pose = unity_place_to_box(r.place_rotation, r.place_translation).ok_or_else(|| {
+            err(format!(
+                "record {i} ({}): not a finite proper rotation/translation",
+                r.id
+            ))
+        })?;
+        records.push(PlacementRecord {
+            instance: r.id,
+            ty,
+            pose,
+        });
     }
-    Ok(Session { name: name.to_owned(), records })
+    Ok(Session {
+        name: name.to_owned(),
+        records,
+    })
 }
 
 impl Session {
@@ -153,7 +177,11 @@ impl Session {
             objects.push(r.ty);
             human.push(human_placement(catalog, r));
         }
-        Episode { name: self.name.clone(), objects, human }
+        Episode {
+            name: self.name.clone(),
+            objects,
+            human,
+        }
     }
 }
 
@@ -165,7 +193,14 @@ pub fn human_placement(catalog: &Catalog, r: &PlacementRecord) -> HumanPlacement
     let rc: Rotation = spec.canonical_rotation();
     let rot = r.pose.rotation * rc.inverse();
     let t = r.pose.translation + r.pose.rotation * Vector::from_array(spec.origin_mesh_m);
-    HumanPlacement { x: t.x, y: t.y, z: t.z, theta: yaw_of(rot), tilt_rad: tilt_of(rot), rotation: rot }
+    HumanPlacement {
+        x: t.x,
+        y: t.y,
+        z: t.z,
+        theta: yaw_of(rot),
+        tilt_rad: tilt_of(rot),
+        rotation: rot,
+    }
 }
 
 /// Loads every session under `root`: the good ones, and each bad one with its error.

@@ -125,7 +125,8 @@ impl ObjectSpec {
 
     /// Maps a mesh-file vertex to the canonical frame.
     pub fn mesh_to_canonical(&self, v_mesh: Vector) -> Vector {
-        self.canonical_rotation() * (self.mesh_scale * v_mesh - Vector::from_array(self.origin_mesh_m))
+        self.canonical_rotation()
+            * (self.mesh_scale * v_mesh - Vector::from_array(self.origin_mesh_m))
     }
 }
 
@@ -137,36 +138,58 @@ impl Catalog {
 
     /// Loads a catalog file with shapes from `meshes`.
     pub fn load(path: &Path, meshes: &MeshSource) -> Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| SimError::Io { path: path.to_owned(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| SimError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
         Self::from_toml(&text, &path.display().to_string(), meshes)
     }
 
     /// Parses and validates catalog text, then builds every shape.
     pub fn from_toml(text: &str, origin: &str, meshes: &MeshSource) -> Result<Self> {
-        let err = |message: String| SimError::Catalog { origin: origin.to_owned(), message };
+        let err = |message: String| SimError::Catalog {
+            origin: origin.to_owned(),
+            message,
+        };
         let file: CatalogFile = toml::from_str(text).map_err(|e| err(e.to_string()))?;
         if file.format != 1 {
-            return Err(err(format!("format {} is not supported (expected 1)", file.format)));
+            return Err(err(format!(
+                "format {} is not supported (expected 1)",
+                file.format
+            )));
         }
         if file.object.is_empty() || file.object.len() > u16::MAX as usize {
-            return Err(err(format!("{} objects; expected 1..=65535", file.object.len())));
+            return Err(err(format!(
+                "{} objects; expected 1..=65535",
+                file.object.len()
+            )));
         }
         for (i, s) in file.object.iter().enumerate() {
             let name = format!("object {} ({:?})", i, s.id);
             if file.object[..i].iter().any(|o| o.id == s.id) {
                 return Err(err(format!("{name}: duplicate id")));
             }
-            let finite = s.dims_m.iter().chain(&s.up_mesh).chain(&s.origin_mesh_m).all(|v| v.is_finite())
+            let finite = s
+                .dims_m
+                .iter()
+                .chain(&s.up_mesh)
+                .chain(&s.origin_mesh_m)
+                .all(|v| v.is_finite())
                 && s.yaw_rad.is_finite();
             if !finite {
                 return Err(err(format!("{name}: non-finite number")));
             }
             if s.dims_m.iter().any(|&d| !(0.001..=1.0).contains(&d)) {
-                return Err(err(format!("{name}: 'dims_m' {:?} outside 1 mm..1 m", s.dims_m)));
+                return Err(err(format!(
+                    "{name}: 'dims_m' {:?} outside 1 mm..1 m",
+                    s.dims_m
+                )));
             }
             if !(s.mass_kg > 0.0 && s.mass_kg < 50.0) {
-                return Err(err(format!("{name}: 'mass_kg' {} outside (0, 50)", s.mass_kg)));
+                return Err(err(format!(
+                    "{name}: 'mass_kg' {} outside (0, 50)",
+                    s.mass_kg
+                )));
             }
             if !(s.mesh_scale > 0.0 && s.mesh_scale.is_finite()) {
                 return Err(err(format!("{name}: 'mesh_scale' must be positive")));
@@ -180,7 +203,10 @@ impl Catalog {
             .iter()
             .map(|spec| build_shape(spec, meshes))
             .collect::<Result<Vec<_>>>()?;
-        Ok(Self { specs: file.object, shapes })
+        Ok(Self {
+            specs: file.object,
+            shapes,
+        })
     }
 
     /// Number of object types.
@@ -245,7 +271,10 @@ impl Catalog {
                     sh.vertices.len()
                 ),
                 ShapeSource::Primitive(why) => {
-                    format!("{} {:<18} primitive {:?} ({why})", s.id, s.name, s.primitive)
+                    format!(
+                        "{} {:<18} primitive {:?} ({why})",
+                        s.id, s.name, s.primitive
+                    )
                 }
             })
             .collect()
@@ -265,34 +294,53 @@ fn build_shape(spec: &ObjectSpec, meshes: &MeshSource) -> Result<ObjectShape> {
             primitive_points(spec.primitive, spec.dims_m),
             ShapeSource::Primitive("no mesh in the catalog".into()),
         ),
-        (MeshSource::None(why), _) => {
-            (primitive_points(spec.primitive, spec.dims_m), ShapeSource::Primitive(why.clone()))
-        }
+        (MeshSource::None(why), _) => (
+            primitive_points(spec.primitive, spec.dims_m),
+            ShapeSource::Primitive(why.clone()),
+        ),
     };
     let path_for_err = match &source {
         ShapeSource::Mesh(p) => p.clone(),
         ShapeSource::Primitive(_) => PathBuf::from(format!("<primitive of {}>", spec.id)),
     };
-    ObjectShape::from_points(&points, source).map_err(|message| SimError::Mesh { path: path_for_err, message })
+    ObjectShape::from_points(&points, source).map_err(|message| SimError::Mesh {
+        path: path_for_err,
+        message,
+    })
 }
 
 impl ObjectShape {
     /// Convex hull of `points` (canonical frame) as a shape, with every face reduced to at
     /// most four vertices (see [`quad_faced_hull`]).
-    pub fn from_points(points: &[Vector], source: ShapeSource) -> std::result::Result<Self, String> {
+    pub fn from_points(
+        points: &[Vector],
+        source: ShapeSource,
+    ) -> std::result::Result<Self, String> {
         if points.len() < 4 || points.iter().any(|p| !p.is_finite()) {
-            return Err(format!("{} points (need 4 or more, all finite)", points.len()));
+            return Err(format!(
+                "{} points (need 4 or more, all finite)",
+                points.len()
+            ));
         }
         let (vertices, triangles, poly) = quad_faced_hull(points)?;
         let volume = hull_volume(&vertices, &triangles);
-        if !(volume > 1e-9) {
+        if volume.is_nan() || volume <= 1e-9 {
             return Err(format!("degenerate hull (volume {volume:e} m^3)"));
         }
-        let (aabb_min, aabb_max) = vertices
-            .iter()
-            .fold((Vector::splat(f32::MAX), Vector::splat(f32::MIN)), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+        let (aabb_min, aabb_max) = vertices.iter().fold(
+            (Vector::splat(f32::MAX), Vector::splat(f32::MIN)),
+            |(lo, hi), &v| (lo.min(v), hi.max(v)),
+        );
         let collider = SharedShape::new(poly);
-        Ok(Self { vertices, triangles, volume, aabb_min, aabb_max, collider, source })
+        Ok(Self {
+            vertices,
+            triangles,
+            volume,
+            aabb_min,
+            aabb_max,
+            collider,
+            source,
+        })
     }
 
     /// Canonical extents (max - min) of the hull.
@@ -300,6 +348,9 @@ impl ObjectShape {
         self.aabb_max - self.aabb_min
     }
 }
+
+/// Vertices, outward triangles and the parry polyhedron of a hull.
+pub type QuadHull = (Vec<Vector>, Vec<[u32; 3]>, parry3d::shape::ConvexPolyhedron);
 
 /// How far face vertices beyond the kept four are moved inwards (m).
 pub const FACE_NUDGE_M: f32 = 0.0004;
@@ -312,12 +363,11 @@ pub const FACE_NUDGE_M: f32 = 0.0004;
 /// span the largest quadrilateral and move the others [`FACE_NUDGE_M`] inwards along the face
 /// normal, then rebuild the hull, until every face is a triangle or a quad. The object then
 /// rests on that quad (as parry's own cylinders rest on an inscribed square).
-pub fn quad_faced_hull(
-    points: &[Vector],
-) -> std::result::Result<(Vec<Vector>, Vec<[u32; 3]>, parry3d::shape::ConvexPolyhedron), String> {
+pub fn quad_faced_hull(points: &[Vector]) -> std::result::Result<QuadHull, String> {
     let mut pts = points.to_vec();
     for _ in 0..12 {
-        let (v, t) = parry3d::transformation::try_convex_hull(&pts).map_err(|e| format!("convex hull failed: {e:?}"))?;
+        let (v, t) = parry3d::transformation::try_convex_hull(&pts)
+            .map_err(|e| format!("convex hull failed: {e:?}"))?;
         let poly = parry3d::shape::ConvexPolyhedron::from_convex_mesh(v, &t)
             .ok_or_else(|| "parry rejected the hull as a convex mesh".to_string())?;
         let mut next = poly.points().to_vec();
@@ -354,7 +404,9 @@ fn triangulate_faces(poly: &parry3d::shape::ConvexPolyhedron) -> Vec<[u32; 3]> {
     let mut out = Vec::new();
     for face in poly.faces() {
         let first = face.first_vertex_or_edge as usize;
-        let mut ids = poly.vertices_adj_to_face()[first..first + face.num_vertices_or_edges as usize].to_vec();
+        let mut ids = poly.vertices_adj_to_face()
+            [first..first + face.num_vertices_or_edges as usize]
+            .to_vec();
         let p = |i: u32| poly.points()[i as usize];
         let centre = ids.iter().fold(Vector::ZERO, |a, &i| a + p(i)) / ids.len() as f32;
         let n = face.normal;
@@ -362,7 +414,9 @@ fn triangulate_faces(poly: &parry3d::shape::ConvexPolyhedron) -> Vec<[u32; 3]> {
         let v = n.cross(u);
         ids.sort_by(|&a, &b| {
             let (da, db) = (p(a) - centre, p(b) - centre);
-            da.dot(v).atan2(da.dot(u)).total_cmp(&db.dot(v).atan2(db.dot(u)))
+            da.dot(v)
+                .atan2(da.dot(u))
+                .total_cmp(&db.dot(v).atan2(db.dot(u)))
         });
         for k in 1..ids.len().saturating_sub(1) {
             let tri = [ids[0], ids[k], ids[k + 1]];
@@ -384,7 +438,11 @@ fn max_area_quad(ring: &[Vector]) -> [usize; 4] {
     let mut best = (f32::MIN, [0, 1, 2, 3]);
     for a in 0..ring.len() {
         let b = (0..ring.len())
-            .max_by(|&i, &j| ring[i].distance_squared(ring[a]).total_cmp(&ring[j].distance_squared(ring[a])))
+            .max_by(|&i, &j| {
+                ring[i]
+                    .distance_squared(ring[a])
+                    .total_cmp(&ring[j].distance_squared(ring[a]))
+            })
             .unwrap_or(a);
         let ab = ring[b] - ring[a];
         // Signed distance to line ab within the polygon plane via the cross product's length.
@@ -392,7 +450,10 @@ fn max_area_quad(ring: &[Vector]) -> [usize; 4] {
             let c = ab.cross(ring[i] - ring[a]);
             (c.length(), c)
         };
-        let reference = (0..ring.len()).map(|i| side(i).1).find(|c| c.length() > 1e-9).unwrap_or(Vector::Z);
+        let reference = (0..ring.len())
+            .map(|i| side(i).1)
+            .find(|c| c.length() > 1e-9)
+            .unwrap_or(Vector::Z);
         let (mut c_best, mut d_best) = ((f32::MIN, a), (f32::MIN, b));
         for i in 0..ring.len() {
             if i == a || i == b {
@@ -510,16 +571,23 @@ pub struct CanonicalFit {
 /// 90 degrees if needed so the long side is along x.
 pub fn fit_canonical(scaled: &[Vector], up_mesh: [f32; 3], refine_up: bool) -> CanonicalFit {
     let hint = Vector::from_array(up_mesh).normalize();
-    let up = if refine_up { resting_up(scaled, hint) } else { hint };
+    let up = if refine_up {
+        resting_up(scaled, hint)
+    } else {
+        hint
+    };
     let hull = crate::mesh::support_points(scaled);
     let align = Rotation::from_rotation_arc(up, Vector::Z);
     let upright: Vec<Vector> = hull.iter().map(|&p| align * p).collect();
     let footprint = |yaw: f32| {
         let r = Rotation::from_rotation_z(yaw);
-        let (lo, hi) = upright.iter().fold((Vector::splat(f32::MAX), Vector::splat(f32::MIN)), |(lo, hi), &p| {
-            let q = r * p;
-            (lo.min(q), hi.max(q))
-        });
+        let (lo, hi) = upright.iter().fold(
+            (Vector::splat(f32::MAX), Vector::splat(f32::MIN)),
+            |(lo, hi), &p| {
+                let q = r * p;
+                (lo.min(q), hi.max(q))
+            },
+        );
         hi - lo
     };
     let mut best = (f32::MAX, 0.0f32);
@@ -539,13 +607,21 @@ pub fn fit_canonical(scaled: &[Vector], up_mesh: [f32; 3], refine_up: bool) -> C
     let yaw = crate::frames::wrap_angle(yaw);
     let rot = Rotation::from_rotation_z(yaw) * align;
     // AABB of the full vertex set (not just the hull sample) in the rotated frame.
-    let (lo, hi) = scaled.iter().fold((Vector::splat(f32::MAX), Vector::splat(f32::MIN)), |(lo, hi), &p| {
-        let q = rot * p;
-        (lo.min(q), hi.max(q))
-    });
+    let (lo, hi) = scaled.iter().fold(
+        (Vector::splat(f32::MAX), Vector::splat(f32::MIN)),
+        |(lo, hi), &p| {
+            let q = rot * p;
+            (lo.min(q), hi.max(q))
+        },
+    );
     let centre_rot = (lo + hi) * 0.5;
     let origin = rot.inverse() * centre_rot;
-    CanonicalFit { up_mesh: up.to_array(), yaw_rad: yaw, origin_mesh_m: origin.to_array(), dims_m: (hi - lo).to_array() }
+    CanonicalFit {
+        up_mesh: up.to_array(),
+        yaw_rad: yaw,
+        origin_mesh_m: origin.to_array(),
+        dims_m: (hi - lo).to_array(),
+    }
 }
 
 /// Refines a nominal up axis to the normal of the face the object rests on: the area-weighted
@@ -553,7 +629,9 @@ pub fn fit_canonical(scaled: &[Vector], up_mesh: [f32; 3], refine_up: bool) -> C
 /// A box or can whose bottom is a few degrees off the mesh axis then stands straight; for round
 /// objects the mean stays near the hint.
 pub fn resting_up(scaled: &[Vector], hint: Vector) -> Vector {
-    let Ok((v, tris)) = parry3d::transformation::try_convex_hull(scaled) else { return hint };
+    let Ok((v, tris)) = parry3d::transformation::try_convex_hull(scaled) else {
+        return hint;
+    };
     let mut up = hint;
     for _ in 0..4 {
         let mut acc = Vector::ZERO;

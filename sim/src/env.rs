@@ -16,8 +16,8 @@ use crate::error::{Result, SimError};
 use crate::observation::{ObsLayout, Projections, action_to_placement};
 use crate::world::{PackingWorld, PlacementOutcome, WorldConfig};
 use rand::{Rng, SeedableRng};
-use rapier3d::math::{Pose, Rotation};
 use rand_chacha::ChaCha8Rng;
+use rapier3d::math::{Pose, Rotation};
 
 /// The reward function.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -39,7 +39,9 @@ impl RewardMode {
         if (0.0..=1.0).contains(&alpha) {
             Ok(Self::CompactnessStability { alpha })
         } else {
-            Err(SimError::Config(format!("reward alpha {alpha} outside [0, 1]")))
+            Err(SimError::Config(format!(
+                "reward alpha {alpha} outside [0, 1]"
+            )))
         }
     }
 
@@ -50,7 +52,9 @@ impl RewardMode {
             "c" => Ok(Self::Compactness),
             other => match other.strip_prefix("cs").map(str::parse::<f32>) {
                 Some(Ok(a)) => Self::cs(a),
-                _ => Err(SimError::Config(format!("unknown reward mode {s:?} (expected simple, c, or cs<alpha>)"))),
+                _ => Err(SimError::Config(format!(
+                    "unknown reward mode {s:?} (expected simple, c, or cs<alpha>)"
+                ))),
             },
         }
     }
@@ -134,7 +138,10 @@ impl PackingEnv {
         if sequence.is_empty() {
             return Err(SimError::EmptySequence);
         }
-        if let Some(bad) = sequence.iter().find(|t| t.0 as usize >= self.world.catalog().len()) {
+        if let Some(bad) = sequence
+            .iter()
+            .find(|t| t.0 as usize >= self.world.catalog().len())
+        {
             return Err(SimError::UnknownObject(format!("type index {}", bad.0)));
         }
         self.world.reset();
@@ -150,7 +157,10 @@ impl PackingEnv {
 
     /// Starts an episode from catalog ids (`["003", "004"]`); unknown ids are an error.
     pub fn reset_ids(&mut self, ids: &[&str], seed: u64) -> Result<&[f32]> {
-        let seq = ids.iter().map(|id| self.world.catalog().by_id(id)).collect::<Result<Vec<_>>>()?;
+        let seq = ids
+            .iter()
+            .map(|id| self.world.catalog().by_id(id))
+            .collect::<Result<Vec<_>>>()?;
         self.reset(&seq, seed)
     }
 
@@ -173,14 +183,20 @@ impl PackingEnv {
     /// Places the next object at `(x, y)` with any orientation `rot` of its canonical frame
     /// (used to replay the humans' full, possibly tilted, placements).
     pub fn step_rotated(&mut self, x: f32, y: f32, rot: Rotation) -> Result<StepResult<'_>> {
-        self.step_with(|w, object| w.place_rotated(object, x, y, rot), (x, y, crate::frames::yaw_of(rot)))
+        self.step_with(
+            |w, object| w.place_rotated(object, x, y, rot),
+            (x, y, crate::frames::yaw_of(rot)),
+        )
     }
 
     /// Releases the next object at an explicit pose of its canonical frame (z included, no
     /// estimate): the humans' recorded poses, or a gripper's.
     pub fn step_pose(&mut self, pose: Pose) -> Result<StepResult<'_>> {
         let t = pose.translation;
-        self.step_with(|w, object| w.place_pose(object, pose), (t.x, t.y, crate::frames::yaw_of(pose.rotation)))
+        self.step_with(
+            |w, object| w.place_pose(object, pose),
+            (t.x, t.y, crate::frames::yaw_of(pose.rotation)),
+        )
     }
 
     fn step_with(
@@ -189,7 +205,9 @@ impl PackingEnv {
         (x, y, theta): (f32, f32, f32),
     ) -> Result<StepResult<'_>> {
         if !self.running {
-            return Err(SimError::EpisodeOver { placed: self.packed });
+            return Err(SimError::EpisodeOver {
+                placed: self.packed,
+            });
         }
         let object = self.sequence[self.next];
         let outcome = place(&mut self.world, object)?;
@@ -205,12 +223,22 @@ impl PackingEnv {
             observation: &self.obs,
             reward: self.reward.reward(&outcome),
             terminated,
-            info: StepInfo { object, placement: (x, y, theta), outcome, packed: self.packed, success },
+            info: StepInfo {
+                object,
+                placement: (x, y, theta),
+                outcome,
+                packed: self.packed,
+                success,
+            },
         })
     }
 
     fn write_obs(&mut self) -> Result<()> {
-        let next = if self.running { Some(self.projections.get(self.sequence[self.next])) } else { None };
+        let next = if self.running {
+            Some(self.projections.get(self.sequence[self.next]))
+        } else {
+            None
+        };
         ObsLayout::write(self.world.heightmap(), next, &mut self.obs)
     }
 

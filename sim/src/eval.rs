@@ -66,7 +66,12 @@ impl EpisodeResult {
 }
 
 /// Runs one episode with `method` in `env`.
-pub fn run_episode(env: &mut PackingEnv, ep: &Episode, method: Method, seed: u64) -> Result<EpisodeResult> {
+pub fn run_episode(
+    env: &mut PackingEnv,
+    ep: &Episode,
+    method: Method,
+    seed: u64,
+) -> Result<EpisodeResult> {
     env.reset(&ep.objects, seed)?;
     let mut r = EpisodeResult {
         name: ep.name.clone(),
@@ -86,7 +91,10 @@ pub fn run_episode(env: &mut PackingEnv, ep: &Episode, method: Method, seed: u64
             }
             Method::HumanPose => {
                 let h = ep.human[i];
-                env.step_pose(rapier3d::math::Pose::from_parts(rapier3d::math::Vector::new(h.x, h.y, h.z), h.rotation))?
+                env.step_pose(rapier3d::math::Pose::from_parts(
+                    rapier3d::math::Vector::new(h.x, h.y, h.z),
+                    h.rotation,
+                ))?
             }
             Method::Random => {
                 let a = env.sample_action();
@@ -120,14 +128,16 @@ pub fn run_all(
     // Build one environment up front so configuration errors surface once, not per episode.
     PackingEnv::new(catalog.clone(), cfg.clone(), RewardMode::Simple)?;
     let next = AtomicUsize::new(0);
-    let out: Mutex<Vec<Option<std::result::Result<EpisodeResult, String>>>> = Mutex::new(vec![None; episodes.len()]);
+    let out: Mutex<Vec<Option<std::result::Result<EpisodeResult, String>>>> =
+        Mutex::new(vec![None; episodes.len()]);
     std::thread::scope(|s| {
         for _ in 0..jobs.max(1) {
             s.spawn(|| {
-                let mut env = match PackingEnv::new(catalog.clone(), cfg.clone(), RewardMode::Simple) {
-                    Ok(e) => e,
-                    Err(_) => return,
-                };
+                let mut env =
+                    match PackingEnv::new(catalog.clone(), cfg.clone(), RewardMode::Simple) {
+                        Ok(e) => e,
+                        Err(_) => return,
+                    };
                 loop {
                     let i = next.fetch_add(1, Ordering::Relaxed);
                     let Some(ep) = episodes.get(i) else { break };
@@ -154,7 +164,10 @@ pub fn mean_std(v: impl IntoIterator<Item = f64>) -> (f64, f64) {
     }
     let n = v.len() as f64;
     let m = v.iter().sum::<f64>() / n;
-    (m, (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / n).sqrt())
+    (
+        m,
+        (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / n).sqrt(),
+    )
 }
 
 /// The summary row of one method.
@@ -188,7 +201,11 @@ pub fn summarize(method: &str, results: &[std::result::Result<EpisodeResult, Str
         errors: results.len() - ok.len(),
         success_pct: 100.0 * ok.iter().filter(|r| r.success).count() as f64 / n,
         packed: mean_std(ok.iter().map(|r| r.packed as f64)),
-        final_compactness: mean_std(ok.iter().filter(|r| r.success).map(|r| r.final_compactness() as f64)),
+        final_compactness: mean_std(
+            ok.iter()
+                .filter(|r| r.success)
+                .map(|r| r.final_compactness() as f64),
+        ),
         stability_pct: 100.0 * stable as f64 / placements.max(1) as f64,
     }
 }
@@ -197,15 +214,26 @@ pub fn summarize(method: &str, results: &[std::result::Result<EpisodeResult, Str
 /// objects-per-episode mean and std of the evaluated episodes.
 pub fn format_table(rows: &[Summary], target: (f64, f64), episodes: usize) -> String {
     let mut s = String::new();
-    s.push_str("| method | success % | objects packed mean (std) | final C (std) | stability % |\n");
+    s.push_str(
+        "| method | success % | objects packed mean (std) | final C (std) | stability % |\n",
+    );
     s.push_str("| --- | ---: | ---: | ---: | ---: |\n");
     s.push_str("| Target (paper) | 100 | 17.40 (3.63) | - | - |\n");
-    s.push_str(&format!("| Target (ours, {episodes} episodes) | 100 | {:.2} ({:.2}) | - | - |\n", target.0, target.1));
+    s.push_str(&format!(
+        "| Target (ours, {episodes} episodes) | 100 | {:.2} ({:.2}) | - | - |\n",
+        target.0, target.1
+    ));
     s.push_str("| Human packing (paper) | 84.41 | 15.22 (4.79) | - | - |\n");
     for r in rows {
         s.push_str(&format!(
             "| {} (ours) | {:.2} | {:.2} ({:.2}) | {:.3} ({:.3}) | {:.1} |\n",
-            r.method, r.success_pct, r.packed.0, r.packed.1, r.final_compactness.0, r.final_compactness.1, r.stability_pct
+            r.method,
+            r.success_pct,
+            r.packed.0,
+            r.packed.1,
+            r.final_compactness.0,
+            r.final_compactness.1,
+            r.stability_pct
         ));
     }
     s

@@ -65,11 +65,18 @@ pub fn unity_place_to_box(
         .to_cols_array()
         .iter()
         .fold(0.0f32, |a, v| a.max(v.abs()));
-    if !translation.is_finite() || !rb.is_finite() || !ortho_err.is_finite() || ortho_err > 1e-3 || rb.determinant() < 0.0
+    if !translation.is_finite()
+        || !rb.is_finite()
+        || !ortho_err.is_finite()
+        || ortho_err > 1e-3
+        || rb.determinant() < 0.0
     {
         return None;
     }
-    Some(MeshPoseB { rotation: Rotation::from_mat3(&rb).normalize(), translation })
+    Some(MeshPoseB {
+        rotation: Rotation::from_mat3(&rb).normalize(),
+        translation,
+    })
 }
 
 /// Twist angle about B z of a rotation (swing-twist decomposition), in (-pi, pi].
@@ -100,9 +107,15 @@ mod tests {
     #[test]
     fn identity_unity_rotation_maps_to_mirrored_axes() {
         // Unity identity: R_B = M F, a proper rotation.
-        let p = unity_place_to_box([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], [1.0, 0.5, -1.0])
-            .expect("valid");
-        assert!((p.translation - Vector::new(BOX_HALF_X, -BOX_HALF_Y, 0.5 * BOX_HEIGHT)).length() < 1e-6);
+        let p = unity_place_to_box(
+            [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            [1.0, 0.5, -1.0],
+        )
+        .expect("valid");
+        assert!(
+            (p.translation - Vector::new(BOX_HALF_X, -BOX_HALF_Y, 0.5 * BOX_HEIGHT)).length()
+                < 1e-6
+        );
         // Mesh +y (Unity up) must map to B +z.
         let up = p.rotation * Vector::Y;
         assert!((up - Vector::Z).length() < 1e-6, "{up:?}");
@@ -110,8 +123,20 @@ mod tests {
 
     #[test]
     fn rejects_improper_rotation() {
-        assert!(unity_place_to_box([[-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], [0.0; 3]).is_none());
-        assert!(unity_place_to_box([[f32::NAN, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], [0.0; 3]).is_none());
+        assert!(
+            unity_place_to_box(
+                [[-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+                [0.0; 3]
+            )
+            .is_none()
+        );
+        assert!(
+            unity_place_to_box(
+                [[f32::NAN, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+                [0.0; 3]
+            )
+            .is_none()
+        );
     }
 
     #[test]

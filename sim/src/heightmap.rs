@@ -35,7 +35,9 @@ impl GridSpec {
     /// The grid over the box interior with cells of `cell` metres (0.5 mm to 2 cm).
     pub fn for_box(cell: f32) -> Result<Self> {
         if !(0.0005..=0.02).contains(&cell) {
-            return Err(SimError::Config(format!("heightmap cell {cell} m outside 0.0005..=0.02")));
+            return Err(SimError::Config(format!(
+                "heightmap cell {cell} m outside 0.0005..=0.02"
+            )));
         }
         // Round down to the count whose centres stay inside the walls, at least 1.
         let n = |half: f32| ((2.0 * half / cell).ceil() as usize).max(1);
@@ -80,7 +82,10 @@ impl GridSpec {
     /// Continuous pixel coordinates (u along columns, v along rows) of B (x, y); cell
     /// (col, row) spans `[col, col+1) x [row, row+1)`.
     pub fn to_pixel(&self, x: f32, y: f32) -> (f32, f32) {
-        ((x - self.x_min()) / self.cell, (self.y_max() - y) / self.cell)
+        (
+            (x - self.x_min()) / self.cell,
+            (self.y_max() - y) / self.cell,
+        )
     }
 }
 
@@ -94,7 +99,10 @@ pub struct Heightmap {
 impl Heightmap {
     /// An empty box: every cell at the floor (0).
     pub fn new(spec: GridSpec) -> Self {
-        Self { spec, data: vec![0.0; spec.len()] }
+        Self {
+            spec,
+            data: vec![0.0; spec.len()],
+        }
     }
 
     /// Wraps external data (e.g. a camera frame), validating size and values: every value must
@@ -115,8 +123,11 @@ impl Heightmap {
                 self.spec.ny
             )));
         }
-        if let Some((i, v)) =
-            self.data.iter().enumerate().find(|(_, v)| !(v.is_finite() && (-0.05..=MAX_VALID_HEIGHT).contains(*v)))
+        if let Some((i, v)) = self
+            .data
+            .iter()
+            .enumerate()
+            .find(|(_, v)| !(v.is_finite() && (-0.05..=MAX_VALID_HEIGHT).contains(*v)))
         {
             return Err(SimError::Heightmap(format!(
                 "cell (col {}, row {}) holds {v}: values must be finite and within -0.05..={MAX_VALID_HEIGHT} m",
@@ -221,7 +232,8 @@ pub fn raster_triangle(buf: &mut [f32], win: Window, p: [Vector; 3], test: Depth
     if c_lo > c_hi || r_lo > r_hi {
         return;
     }
-    let edge = |a: Vector, b: Vector, u: f32, v: f32| (b.x - a.x) * (v - a.y) - (b.y - a.y) * (u - a.x);
+    let edge =
+        |a: Vector, b: Vector, u: f32, v: f32| (b.x - a.x) * (v - a.y) - (b.y - a.y) * (u - a.x);
     // Normalised barycentric weights: inside means all >= 0 whatever the winding.
     const EPS: f32 = -1e-6;
     for r in r_lo..=r_hi {
@@ -299,7 +311,12 @@ mod tests {
     fn triangle_max_covers_centres() {
         let g = GridSpec::for_box(0.01).unwrap();
         let mut hm = Heightmap::new(g);
-        let win = Window { col0: 0, row0: 0, w: g.nx, h: g.ny };
+        let win = Window {
+            col0: 0,
+            row0: 0,
+            w: g.nx,
+            h: g.ny,
+        };
         // A horizontal square 4 cm x 4 cm at z = 0.1, as two upward (CCW from above) triangles.
         let v = [
             Vector::new(-0.02, -0.02, 0.1),
@@ -307,7 +324,14 @@ mod tests {
             Vector::new(0.02, 0.02, 0.1),
             Vector::new(-0.02, 0.02, 0.1),
         ];
-        raster_hull(&g, hm.data_mut(), win, &v, &[[0, 1, 2], [0, 2, 3]], DepthTest::Max);
+        raster_hull(
+            &g,
+            hm.data_mut(),
+            win,
+            &v,
+            &[[0, 1, 2], [0, 2, 3]],
+            DepthTest::Max,
+        );
         let covered = hm.data().iter().filter(|&&z| z > 0.05).count();
         assert!((12..=25).contains(&covered), "{covered}");
         assert_eq!(hm.sample(0.0, 0.0), 0.1);

@@ -7,8 +7,11 @@ use std::path::Path;
 /// Writes `hm` as a grayscale PNG, `upscale` pixels per cell, black = floor, white = `max_m`
 /// or higher. Row 0 (+y) is the image top, x runs to the right.
 pub fn write_heightmap_png(path: &Path, hm: &Heightmap, max_m: f32, upscale: usize) -> Result<()> {
-    let err = |message: String| SimError::Output { path: path.to_owned(), message };
-    if !(max_m > 0.0) || upscale == 0 || upscale > 16 {
+    let err = |message: String| SimError::Output {
+        path: path.to_owned(),
+        message,
+    };
+    if max_m.is_nan() || max_m <= 0.0 || upscale == 0 || upscale > 16 {
         return Err(err(format!("bad scale (max_m {max_m}, upscale {upscale})")));
     }
     let spec = hm.spec();
@@ -27,6 +30,8 @@ pub fn write_heightmap_png(path: &Path, hm: &Heightmap, max_m: f32, upscale: usi
     enc.set_color(png::ColorType::Grayscale);
     enc.set_depth(png::BitDepth::Eight);
     let mut writer = enc.write_header().map_err(|e| err(e.to_string()))?;
-    writer.write_image_data(&pixels).map_err(|e| err(e.to_string()))?;
+    writer
+        .write_image_data(&pixels)
+        .map_err(|e| err(e.to_string()))?;
     writer.finish().map_err(|e| err(e.to_string()))
 }

@@ -10,12 +10,20 @@ pub const SUPPORT_DIRECTIONS: usize = 160;
 
 /// All vertex positions of an OBJ file (every object and group), in file units.
 pub fn load_obj_vertices(path: &Path) -> Result<Vec<Vector>> {
-    let err = |message: String| SimError::Mesh { path: path.to_owned(), message };
+    let err = |message: String| SimError::Mesh {
+        path: path.to_owned(),
+        message,
+    };
     if !path.is_file() {
         return Err(err("file not found".into()));
     }
-    let opts = tobj::LoadOptions { single_index: false, triangulate: false, ..Default::default() };
-    let (models, _materials) = tobj::load_obj(path, &opts).map_err(|e| err(format!("does not parse: {e}")))?;
+    let opts = tobj::LoadOptions {
+        single_index: false,
+        triangulate: false,
+        ..Default::default()
+    };
+    let (models, _materials) =
+        tobj::load_obj(path, &opts).map_err(|e| err(format!("does not parse: {e}")))?;
     let mut out = Vec::new();
     for m in &models {
         for p in m.mesh.positions.chunks_exact(3) {
@@ -27,7 +35,10 @@ pub fn load_obj_vertices(path: &Path) -> Result<Vec<Vector>> {
         }
     }
     if out.len() < 4 {
-        return Err(err(format!("{} vertices; a solid needs at least 4", out.len())));
+        return Err(err(format!(
+            "{} vertices; a solid needs at least 4",
+            out.len()
+        )));
     }
     Ok(out)
 }

@@ -60,14 +60,21 @@ impl ObsLayout {
     /// B (x, y) of the centre of observation pixel (col, row).
     pub fn pixel_centre(col: usize, row: usize) -> (f32, f32) {
         let half = Self::SIZE as f32 * 0.5;
-        ((col as f32 + 0.5 - half) * Self::CELL_M, (half - (row as f32 + 0.5)) * Self::CELL_M)
+        (
+            (col as f32 + 0.5 - half) * Self::CELL_M,
+            (half - (row as f32 + 0.5)) * Self::CELL_M,
+        )
     }
 
     /// Writes the observation for heightmap `hm` and the next object's projection (`None` at
     /// the end of an episode) into `out` (length [`Self::LEN`]). Does not allocate.
     pub fn write(hm: &Heightmap, next: Option<&ObjectProjection>, out: &mut [f32]) -> Result<()> {
         if out.len() != Self::LEN {
-            return Err(SimError::Heightmap(format!("observation buffer of {} values, expected {}", out.len(), Self::LEN)));
+            return Err(SimError::Heightmap(format!(
+                "observation buffer of {} values, expected {}",
+                out.len(),
+                Self::LEN
+            )));
         }
         let (ch0, ch1) = out.split_at_mut(Self::SIZE * Self::SIZE);
         let s = 1.0 / Self::HEIGHT_SCALE_M;
@@ -110,13 +117,21 @@ pub fn action_to_placement(a: [f32; 3]) -> Result<(f32, f32, f32)> {
         return Err(SimError::InvalidAction(a));
     }
     let c = a.map(|v| v.clamp(-1.0, 1.0));
-    Ok((c[0] * BOX_HALF_X, c[1] * BOX_HALF_Y, c[2] * std::f32::consts::PI))
+    Ok((
+        c[0] * BOX_HALF_X,
+        c[1] * BOX_HALF_Y,
+        c[2] * std::f32::consts::PI,
+    ))
 }
 
 /// Inverse of [`action_to_placement`] (theta wrapped to (-pi, pi]); values may exceed 1 for
 /// placements beyond the walls.
 pub fn placement_to_action(x: f32, y: f32, theta: f32) -> [f32; 3] {
-    [x / BOX_HALF_X, y / BOX_HALF_Y, crate::frames::wrap_angle(theta) / std::f32::consts::PI]
+    [
+        x / BOX_HALF_X,
+        y / BOX_HALF_Y,
+        crate::frames::wrap_angle(theta) / std::f32::consts::PI,
+    ]
 }
 
 /// Channel 1 of the observation for one object type, rendered once.
@@ -130,11 +145,31 @@ impl ObjectProjection {
     pub fn render(shape: &ObjectShape) -> Self {
         let n = ObsLayout::SIZE;
         // A grid of exactly 224 x 224 observation pixels centred on the object's origin.
-        let spec = GridSpec { nx: n, ny: n, cell: ObsLayout::CELL_M };
+        let spec = GridSpec {
+            nx: n,
+            ny: n,
+            cell: ObsLayout::CELL_M,
+        };
         let lowest = shape.aabb_min.z;
-        let verts: Vec<Vector> = shape.vertices.iter().map(|&v| Vector::new(v.x, v.y, v.z - lowest)).collect();
+        let verts: Vec<Vector> = shape
+            .vertices
+            .iter()
+            .map(|&v| Vector::new(v.x, v.y, v.z - lowest))
+            .collect();
         let mut data = vec![0.0f32; n * n];
-        raster_hull(&spec, &mut data, Window { col0: 0, row0: 0, w: n, h: n }, &verts, &shape.triangles, DepthTest::Max);
+        raster_hull(
+            &spec,
+            &mut data,
+            Window {
+                col0: 0,
+                row0: 0,
+                w: n,
+                h: n,
+            },
+            &verts,
+            &shape.triangles,
+            DepthTest::Max,
+        );
         for d in &mut data {
             *d = (*d / ObsLayout::HEIGHT_SCALE_M).clamp(0.0, 1.0);
         }
@@ -154,7 +189,12 @@ pub struct Projections(Vec<ObjectProjection>);
 impl Projections {
     /// Renders all types of `catalog`.
     pub fn new(catalog: &Catalog) -> Self {
-        Self(catalog.types().map(|t| ObjectProjection::render(catalog.shape(t))).collect())
+        Self(
+            catalog
+                .types()
+                .map(|t| ObjectProjection::render(catalog.shape(t)))
+                .collect(),
+        )
     }
 
     /// The projection of type `t`.

@@ -34,7 +34,9 @@ pub fn boxed_root(explicit: Option<&Path>) -> Option<PathBuf> {
     if let Some(p) = std::env::var_os(ENV_BOXED) {
         return Some(PathBuf::from(p));
     }
-    [PathBuf::from("../shared/boxed"), workspace_default()].into_iter().find(|p| p.is_dir())
+    [PathBuf::from("../shared/boxed"), workspace_default()]
+        .into_iter()
+        .find(|p| p.is_dir())
 }
 
 /// The mesh source: explicit folder, else `HERB_MESHES` (`none` forces primitives), else

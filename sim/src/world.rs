@@ -16,7 +16,9 @@
 
 use crate::catalog::{SharedCatalog, TypeIdx};
 use crate::error::{Result, SimError};
-use crate::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, BOX_WALL_THICKNESS, SUCCESS_TOP_Z, tilt_of};
+use crate::frames::{
+    BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, BOX_WALL_THICKNESS, SUCCESS_TOP_Z, tilt_of,
+};
 use crate::heightmap::{DepthTest, GridSpec, Heightmap, Window, raster_hull};
 use crate::observation::ObsLayout;
 use crate::zestimate::{ZScratch, estimate_z_rotated};
@@ -75,7 +77,9 @@ impl WorldConfig {
             if v.is_finite() && (lo..=hi).contains(&v) {
                 Ok(())
             } else {
-                Err(SimError::Config(format!("'{name}' = {v} outside {lo}..={hi}")))
+                Err(SimError::Config(format!(
+                    "'{name}' = {v} outside {lo}..={hi}"
+                )))
             }
         };
         check("heightmap_cell_m", self.heightmap_cell_m, 0.0005, 0.02)?;
@@ -88,7 +92,12 @@ impl WorldConfig {
         check("inside_tolerance_m", self.inside_tolerance_m, 0.0, 0.05)?;
         check("stability_tilt_deg", self.stability_tilt_deg, 0.0, 90.0)?;
         check("early_out_m", self.early_out_m, 0.0, 10.0)?;
-        check("max_corrective_speed_mps", self.max_corrective_speed_mps, 0.01, 10.0)?;
+        check(
+            "max_corrective_speed_mps",
+            self.max_corrective_speed_mps,
+            0.01,
+            10.0,
+        )?;
         Ok(())
     }
 }
@@ -138,7 +147,10 @@ pub struct PackingWorld {
 
 impl std::fmt::Debug for PackingWorld {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("PackingWorld").field("cfg", &self.cfg).field("placed", &self.placed).finish()
+        f.debug_struct("PackingWorld")
+            .field("cfg", &self.cfg)
+            .field("placed", &self.placed)
+            .finish()
     }
 }
 
@@ -147,7 +159,11 @@ impl PackingWorld {
     pub fn new(catalog: SharedCatalog, cfg: WorldConfig) -> Result<Self> {
         cfg.validate()?;
         let spec = GridSpec::for_box(cfg.heightmap_cell_m)?;
-        let max_verts = catalog.types().map(|t| catalog.shape(t).vertices.len()).max().unwrap_or(0);
+        let max_verts = catalog
+            .types()
+            .map(|t| catalog.shape(t).vertices.len())
+            .max()
+            .unwrap_or(0);
         let max_foot = catalog
             .types()
             .map(|t| {
@@ -176,24 +192,46 @@ impl PackingWorld {
         // 1 mm allowed penetration (default 5 mm is coarse for objects a few cm tall).
         phys.integration_parameters.normalized_allowed_linear_error = 0.001;
         // Speed at which overlaps are resolved (rapier default 3 m/s; lower values let bodies sink).
-        phys.integration_parameters.normalized_max_corrective_velocity = cfg.max_corrective_speed_mps;
+        phys.integration_parameters
+            .normalized_max_corrective_velocity = cfg.max_corrective_speed_mps;
         let t = BOX_WALL_THICKNESS;
         let (hx, hy, h) = (BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT);
         let body = phys.insert_body(RigidBodyBuilder::fixed());
         let cuboid = |half: Vector, at: Vector| {
-            ColliderBuilder::cuboid(half.x, half.y, half.z).translation(at).friction(cfg.friction).restitution(0.0)
+            ColliderBuilder::cuboid(half.x, half.y, half.z)
+                .translation(at)
+                .friction(cfg.friction)
+                .restitution(0.0)
         };
         let parts = [
-            // Floor, top face at z = 0. A 10 cm slab rather than the real 1.57 cm board, so that a
-            // body pressed into it is never pushed out through its underside.
-            cuboid(Vector::new(hx + t, hy + t, 0.05), Vector::new(0.0, 0.0, -0.05)),
+            // Floor, top face at z = 0, the real 1.57 cm board. (A 10 cm slab was tried against
+            // bodies sinking through it; it made some hull-vs-cuboid contacts fail outright.)
+            cuboid(
+                Vector::new(hx + t, hy + t, 0.5 * t),
+                Vector::new(0.0, 0.0, -0.5 * t),
+            ),
             // End walls (x) and side walls (y), inner faces on the interior bounds.
-            cuboid(Vector::new(0.5 * t, hy + t, 0.5 * h), Vector::new(hx + 0.5 * t, 0.0, 0.5 * h)),
-            cuboid(Vector::new(0.5 * t, hy + t, 0.5 * h), Vector::new(-hx - 0.5 * t, 0.0, 0.5 * h)),
-            cuboid(Vector::new(hx + t, 0.5 * t, 0.5 * h), Vector::new(0.0, hy + 0.5 * t, 0.5 * h)),
-            cuboid(Vector::new(hx + t, 0.5 * t, 0.5 * h), Vector::new(0.0, -hy - 0.5 * t, 0.5 * h)),
+            cuboid(
+                Vector::new(0.5 * t, hy + t, 0.5 * h),
+                Vector::new(hx + 0.5 * t, 0.0, 0.5 * h),
+            ),
+            cuboid(
+                Vector::new(0.5 * t, hy + t, 0.5 * h),
+                Vector::new(-hx - 0.5 * t, 0.0, 0.5 * h),
+            ),
+            cuboid(
+                Vector::new(hx + t, 0.5 * t, 0.5 * h),
+                Vector::new(0.0, hy + 0.5 * t, 0.5 * h),
+            ),
+            cuboid(
+                Vector::new(hx + t, 0.5 * t, 0.5 * h),
+                Vector::new(0.0, -hy - 0.5 * t, 0.5 * h),
+            ),
             // The table the box stands on, so objects knocked out come to rest.
-            cuboid(Vector::new(2.0, 2.0, 0.05), Vector::new(0.0, 0.0, -t - 0.05)),
+            cuboid(
+                Vector::new(2.0, 2.0, 0.05),
+                Vector::new(0.0, 0.0, -t - 0.05),
+            ),
         ];
         for c in parts {
             phys.insert_collider(c, Some(body));
@@ -241,7 +279,14 @@ impl PackingWorld {
 
     /// As [`PackingWorld::estimate_z`] for any orientation of the canonical frame.
     pub fn estimate_z_rotated(&mut self, ty: TypeIdx, x: f32, y: f32, rot: Rotation) -> f32 {
-        estimate_z_rotated(&self.heightmap, self.catalog.shape(ty), x, y, rot, &mut self.zscratch)
+        estimate_z_rotated(
+            &self.heightmap,
+            self.catalog.shape(ty),
+            x,
+            y,
+            rot,
+            &mut self.zscratch,
+        )
     }
 
     /// Places `ty` upright, turned by `theta` about z, with its canonical origin at `(x, y)` and
@@ -255,9 +300,20 @@ impl PackingWorld {
 
     /// As [`PackingWorld::place`] with any orientation of the canonical frame (tilt is then
     /// measured from upright all the same).
-    pub fn place_rotated(&mut self, ty: TypeIdx, x: f32, y: f32, rot: Rotation) -> Result<PlacementOutcome> {
-        if !(x.is_finite() && y.is_finite() && rot.is_finite()) || x.abs() > 10.0 || y.abs() > 10.0 {
-            return Err(SimError::InvalidPlacement { x, y, theta: crate::frames::yaw_of(rot) });
+    pub fn place_rotated(
+        &mut self,
+        ty: TypeIdx,
+        x: f32,
+        y: f32,
+        rot: Rotation,
+    ) -> Result<PlacementOutcome> {
+        if !(x.is_finite() && y.is_finite() && rot.is_finite()) || x.abs() > 10.0 || y.abs() > 10.0
+        {
+            return Err(SimError::InvalidPlacement {
+                x,
+                y,
+                theta: crate::frames::yaw_of(rot),
+            });
         }
         self.check_type(ty)?;
         let rot = rot.normalize();
@@ -270,7 +326,11 @@ impl PackingWorld {
     pub fn place_pose(&mut self, ty: TypeIdx, pose: Pose) -> Result<PlacementOutcome> {
         self.check_type(ty)?;
         if !pose.is_finite() {
-            return Err(SimError::InvalidPlacement { x: pose.translation.x, y: pose.translation.y, theta: f32::NAN });
+            return Err(SimError::InvalidPlacement {
+                x: pose.translation.x,
+                y: pose.translation.y,
+                theta: f32::NAN,
+            });
         }
         let spec = self.catalog.spec(ty);
         let shape = self.catalog.shape(ty);
@@ -316,7 +376,11 @@ impl PackingWorld {
         let max_steps = (self.cfg.settle_cap_s / self.cfg.dt).ceil() as u32;
         for step in 1..=max_steps {
             self.phys.step();
-            if self.placed.iter().all(|p| self.phys.bodies[p.body].is_sleeping()) {
+            if self
+                .placed
+                .iter()
+                .all(|p| self.phys.bodies[p.body].is_sleeping())
+            {
                 return (step, true);
             }
             if step % 8 == 0 && self.any_far_out() {
@@ -346,7 +410,12 @@ impl PackingWorld {
             Vector::new(BOX_HALF_X + tol, BOX_HALF_Y + tol, SUCCESS_TOP_Z + tol),
         );
         let spec = *self.heightmap.spec();
-        let win = Window { col0: 0, row0: 0, w: spec.nx, h: spec.ny };
+        let win = Window {
+            col0: 0,
+            row0: 0,
+            w: spec.nx,
+            h: spec.ny,
+        };
         let mut first_outside = None;
         let mut violation = None;
         let (mut lo, mut hi) = (Vector::splat(f32::MAX), Vector::splat(f32::MIN));
@@ -355,9 +424,12 @@ impl PackingWorld {
             let pose = *self.phys.bodies[p.body].position();
             let shape = self.catalog.shape(p.ty);
             self.verts.clear();
-            self.verts.extend(shape.vertices.iter().map(|&v| pose.transform_point(v)));
-            let (blo, bhi) =
-                self.verts.iter().fold((Vector::splat(f32::MAX), Vector::splat(f32::MIN)), |(a, b), &v| (a.min(v), b.max(v)));
+            self.verts
+                .extend(shape.vertices.iter().map(|&v| pose.transform_point(v)));
+            let (blo, bhi) = self.verts.iter().fold(
+                (Vector::splat(f32::MAX), Vector::splat(f32::MIN)),
+                |(a, b), &v| (a.min(v), b.max(v)),
+            );
             if first_outside.is_none() && (blo.cmplt(lo_ok).any() || bhi.cmpgt(hi_ok).any()) {
                 first_outside = Some(i);
                 let over = [
@@ -374,13 +446,28 @@ impl PackingWorld {
             hi = hi.max(bhi);
             volume += shape.volume;
             if render {
-                raster_hull(&spec, self.heightmap.data_mut(), win, &self.verts, &shape.triangles, DepthTest::Max);
+                raster_hull(
+                    &spec,
+                    self.heightmap.data_mut(),
+                    win,
+                    &self.verts,
+                    &shape.triangles,
+                    DepthTest::Max,
+                );
             }
         }
         let ext = (hi - lo).max(Vector::ZERO);
         let bbox = ext.x * ext.y * ext.z;
-        let compactness = if self.placed.is_empty() || bbox <= 0.0 { 0.0 } else { (volume / bbox).min(1.0) };
-        Scan { first_outside, violation, compactness }
+        let compactness = if self.placed.is_empty() || bbox <= 0.0 {
+            0.0
+        } else {
+            (volume / bbox).min(1.0)
+        };
+        Scan {
+            first_outside,
+            violation,
+            compactness,
+        }
     }
 
     /// Renders the heightmap of the current state (done after every settle).

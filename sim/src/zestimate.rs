@@ -23,13 +23,23 @@ impl ZScratch {
     /// no larger do not allocate.
     pub fn with_capacity(max_vertices: usize, max_footprint_m: f32, cell: f32) -> Self {
         let side = (max_footprint_m / cell).ceil() as usize + 3;
-        Self { verts: Vec::with_capacity(max_vertices), buf: Vec::with_capacity(side * side) }
+        Self {
+            verts: Vec::with_capacity(max_vertices),
+            buf: Vec::with_capacity(side * side),
+        }
     }
 }
 
 /// Origin height (B z, m) at which `shape`, turned by `theta` and centred at `(x, y)`, rests on
 /// `hm` without penetrating it. Inputs must be finite (checked by callers at their boundary).
-pub fn estimate_z(hm: &Heightmap, shape: &ObjectShape, x: f32, y: f32, theta: f32, scratch: &mut ZScratch) -> f32 {
+pub fn estimate_z(
+    hm: &Heightmap,
+    shape: &ObjectShape,
+    x: f32,
+    y: f32,
+    theta: f32,
+    scratch: &mut ZScratch,
+) -> f32 {
     estimate_z_rotated(hm, shape, x, y, Rotation::from_rotation_z(theta), scratch)
 }
 
@@ -72,7 +82,14 @@ pub fn estimate_z_rotated(
     }
     scratch.buf.clear();
     scratch.buf.resize(w * h, f32::INFINITY);
-    raster_hull(&spec, &mut scratch.buf, win, &scratch.verts, &shape.triangles, DepthTest::Min);
+    raster_hull(
+        &spec,
+        &mut scratch.buf,
+        win,
+        &scratch.verts,
+        &shape.triangles,
+        DepthTest::Min,
+    );
     let mut z = f32::MIN;
     for r in 0..h {
         for c in 0..w {
@@ -83,5 +100,9 @@ pub fn estimate_z_rotated(
             }
         }
     }
-    if z == f32::MIN { hm.sample(x, y) - lowest } else { z }
+    if z == f32::MIN {
+        hm.sample(x, y) - lowest
+    } else {
+        z
+    }
 }

@@ -25,12 +25,21 @@ fn reward_formulas_match_the_paper() {
     let cs06 = RewardMode::cs(0.6).unwrap();
     assert_eq!(RewardMode::Simple.reward(&outcome(true, false, 0.4)), 1.0);
     assert_eq!(RewardMode::Simple.reward(&outcome(false, true, 0.4)), -1.0);
-    assert_eq!(RewardMode::Compactness.reward(&outcome(true, true, 0.4)), 0.4);
-    assert_eq!(RewardMode::Compactness.reward(&outcome(false, true, 0.4)), -1.0);
+    assert_eq!(
+        RewardMode::Compactness.reward(&outcome(true, true, 0.4)),
+        0.4
+    );
+    assert_eq!(
+        RewardMode::Compactness.reward(&outcome(false, true, 0.4)),
+        -1.0
+    );
     assert!((cs06.reward(&outcome(true, true, 0.5)) - (0.6 * 0.5 + 0.4)).abs() < 1e-6);
     assert!((cs06.reward(&outcome(true, false, 0.5)) - 0.3).abs() < 1e-6);
     assert_eq!(cs06.reward(&outcome(false, true, 0.5)), -1.0);
-    assert_eq!(RewardMode::parse("cs0.9").unwrap(), RewardMode::CompactnessStability { alpha: 0.9 });
+    assert_eq!(
+        RewardMode::parse("cs0.9").unwrap(),
+        RewardMode::CompactnessStability { alpha: 0.9 }
+    );
     assert_eq!(RewardMode::parse("C").unwrap(), RewardMode::Compactness);
     assert!(RewardMode::parse("cs1.5").is_err());
     assert!(RewardMode::parse("stability").is_err());
@@ -39,7 +48,8 @@ fn reward_formulas_match_the_paper() {
 fn run(seed: u64) -> (Vec<u32>, Vec<f32>) {
     let c = common::primitives();
     let mut env = PackingEnv::new(c, WorldConfig::default(), RewardMode::cs(0.6).unwrap()).unwrap();
-    env.reset_ids(&["003", "005", "013", "007", "011", "004", "057"], seed).unwrap();
+    env.reset_ids(&["003", "005", "013", "007", "011", "004", "057"], seed)
+        .unwrap();
     let mut rewards = Vec::new();
     loop {
         let a = env.sample_action();
@@ -59,7 +69,10 @@ fn same_inputs_and_seed_give_bit_identical_worlds() {
     let (b, rb) = run(7);
     assert!(a.len() > 100);
     assert_eq!(a, b, "world state bits differ between identical runs");
-    assert_eq!(ra.iter().map(|r| r.to_bits()).collect::<Vec<_>>(), rb.iter().map(|r| r.to_bits()).collect::<Vec<_>>());
+    assert_eq!(
+        ra.iter().map(|r| r.to_bits()).collect::<Vec<_>>(),
+        rb.iter().map(|r| r.to_bits()).collect::<Vec<_>>()
+    );
     // A different seed gives different actions, so a different world.
     let (c, _) = run(8);
     assert_ne!(a, c);
@@ -87,9 +100,16 @@ fn bad_inputs_are_errors_not_panics() {
     assert!(matches!(env.reset(&[], 0), Err(SimError::EmptySequence)));
     let e = env.reset_ids(&["003", "999"], 0).unwrap_err();
     assert!(e.to_string().contains("999"), "{e}");
-    assert!(matches!(env.step([0.0; 3]), Err(SimError::EpisodeOver { .. })), "step before reset");
+    assert!(
+        matches!(env.step([0.0; 3]), Err(SimError::EpisodeOver { .. })),
+        "step before reset"
+    );
     env.reset_ids(&["003", "004"], 0).unwrap();
-    for bad in [[f32::NAN, 0.0, 0.0], [0.0, f32::INFINITY, 0.0], [0.0, 0.0, f32::NEG_INFINITY]] {
+    for bad in [
+        [f32::NAN, 0.0, 0.0],
+        [0.0, f32::INFINITY, 0.0],
+        [0.0, 0.0, f32::NEG_INFINITY],
+    ] {
         assert!(matches!(env.step(bad), Err(SimError::InvalidAction(_))));
     }
     // The rejected actions changed nothing: the episode goes on with the first object.
@@ -97,16 +117,37 @@ fn bad_inputs_are_errors_not_panics() {
     let r = env.step([5.0, -5.0, 0.0]).unwrap(); // clamped to the corner
     assert_eq!(r.info.placement.0, herb_sim::frames::BOX_HALF_X);
     assert_eq!(r.observation.len(), ObsLayout::LEN);
-    assert!(r.observation.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)));
+    assert!(
+        r.observation
+            .iter()
+            .all(|v| v.is_finite() && (0.0..=1.0).contains(v))
+    );
     // Bad configs name the field.
-    let e = PackingEnv::new(c.clone(), WorldConfig { dt: f32::NAN, ..Default::default() }, RewardMode::Simple).unwrap_err();
+    let e = PackingEnv::new(
+        c.clone(),
+        WorldConfig {
+            dt: f32::NAN,
+            ..Default::default()
+        },
+        RewardMode::Simple,
+    )
+    .unwrap_err();
     assert!(e.to_string().contains("'dt'"), "{e}");
     assert!(RewardMode::cs(-0.1).is_err());
     // A bad catalog names what is wrong.
-    let e = herb_sim::Catalog::from_toml("format = 1\n[[object]]\nid = \"1\"\n", "test", &herb_sim::paths::MeshSource::None("t".into()))
-        .unwrap_err();
+    let e = herb_sim::Catalog::from_toml(
+        "format = 1\n[[object]]\nid = \"1\"\n",
+        "test",
+        &herb_sim::paths::MeshSource::None("t".into()),
+    )
+    .unwrap_err();
     assert!(e.to_string().contains("test"), "{e}");
-    let e = herb_sim::Catalog::from_toml("format = 2\nobject = []", "test", &herb_sim::paths::MeshSource::None("t".into())).unwrap_err();
+    let e = herb_sim::Catalog::from_toml(
+        "format = 2\nobject = []",
+        "test",
+        &herb_sim::paths::MeshSource::None("t".into()),
+    )
+    .unwrap_err();
     assert!(e.to_string().contains("format 2"), "{e}");
 }
 
@@ -114,13 +155,24 @@ fn bad_inputs_are_errors_not_panics() {
 fn a_mesh_that_does_not_parse_is_a_clear_error() {
     let dir = std::env::temp_dir().join(format!("herb-bad-mesh-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    std::fs::write(dir.join("002_master_chef_can.obj"), "v 1 2\nv nonsense\nf 1 2 3\n").unwrap();
-    let e = herb_sim::Catalog::builtin(&herb_sim::paths::MeshSource::Folder(dir.clone())).unwrap_err().to_string();
+    std::fs::write(
+        dir.join("002_master_chef_can.obj"),
+        "v 1 2\nv nonsense\nf 1 2 3\n",
+    )
+    .unwrap();
+    let e = herb_sim::Catalog::builtin(&herb_sim::paths::MeshSource::Folder(dir.clone()))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("002_master_chef_can.obj"), "{e}");
     // A missing file is named too.
     std::fs::remove_file(dir.join("002_master_chef_can.obj")).unwrap();
-    let e = herb_sim::Catalog::builtin(&herb_sim::paths::MeshSource::Folder(dir.clone())).unwrap_err().to_string();
-    assert!(e.contains("002_master_chef_can.obj") && e.contains("not found"), "{e}");
+    let e = herb_sim::Catalog::builtin(&herb_sim::paths::MeshSource::Folder(dir.clone()))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("002_master_chef_can.obj") && e.contains("not found"),
+        "{e}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -134,14 +186,23 @@ fn observation_channels_hold_box_and_next_object() {
     assert_eq!(obs[112 * ObsLayout::SIZE + 112], 0.0);
     assert_eq!(obs[0], ObsLayout::PAD_VALUE);
     let top = obs[n..].iter().copied().fold(0.0, f32::max);
-    assert!((top - 0.2146 / ObsLayout::HEIGHT_SCALE_M).abs() < 0.01, "{top}");
+    assert!(
+        (top - 0.2146 / ObsLayout::HEIGHT_SCALE_M).abs() < 0.01,
+        "{top}"
+    );
     let r = env.step([0.0, 0.0, 0.0]).unwrap();
     assert!(!r.terminated);
     // The box channel now shows the cracker box at the centre; the object channel the tuna can.
     assert!(r.observation[112 * ObsLayout::SIZE + 112] > 0.6);
     let top = r.observation[n..].iter().copied().fold(0.0, f32::max);
-    assert!((top - 0.0335 / ObsLayout::HEIGHT_SCALE_M).abs() < 0.01, "{top}");
+    assert!(
+        (top - 0.0335 / ObsLayout::HEIGHT_SCALE_M).abs() < 0.01,
+        "{top}"
+    );
     let r = env.step([0.6, 0.5, 0.0]).unwrap();
     assert!(r.terminated && r.info.success, "{:?}", r.info);
-    assert!(r.observation[n..].iter().all(|&v| v == 0.0), "no next object at the end");
+    assert!(
+        r.observation[n..].iter().all(|&v| v == 0.0),
+        "no next object at the end"
+    );
 }

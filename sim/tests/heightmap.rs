@@ -15,7 +15,10 @@ fn ray_cast_heightmap(w: &herb_sim::PackingWorld, c: &SharedCatalog) -> Heightma
     let mut hm = Heightmap::new(spec);
     let meshes: Vec<TriMesh> = c
         .types()
-        .map(|t| TriMesh::new(c.shape(t).vertices.clone(), c.shape(t).triangles.clone()).expect("trimesh"))
+        .map(|t| {
+            TriMesh::new(c.shape(t).vertices.clone(), c.shape(t).triangles.clone())
+                .expect("trimesh")
+        })
         .collect();
     for row in 0..spec.ny {
         for col in 0..spec.nx {
@@ -36,7 +39,13 @@ fn ray_cast_heightmap(w: &herb_sim::PackingWorld, c: &SharedCatalog) -> Heightma
 
 fn scene(c: &SharedCatalog) -> herb_sim::PackingWorld {
     let mut w = common::world(c);
-    let picks = [("003", -0.08, 0.05, 0.3), ("013", 0.1, -0.05, 0.0), ("005", 0.05, 0.06, 1.0), ("011", 0.0, -0.06, 2.0), ("007", -0.1, -0.06, 0.5)];
+    let picks = [
+        ("003", -0.08, 0.05, 0.3),
+        ("013", 0.1, -0.05, 0.0),
+        ("005", 0.05, 0.06, 1.0),
+        ("011", 0.0, -0.06, 2.0),
+        ("007", -0.1, -0.06, 0.5),
+    ];
     for (id, x, y, th) in picks {
         w.place(c.by_id(id).unwrap(), x, y, th).unwrap();
     }
@@ -57,7 +66,10 @@ fn compare(c: &SharedCatalog) {
             off += 1;
         }
     }
-    eprintln!("{} cells, {off} differ by more than 0.1 mm, worst {worst:.5} m", n);
+    eprintln!(
+        "{} cells, {off} differ by more than 0.1 mm, worst {worst:.5} m",
+        n
+    );
     // Differences can only come from cells whose centre falls exactly on a silhouette edge.
     assert!(off * 1000 < n * 2, "{off} of {n} cells differ");
     assert!(worst < 5e-4, "worst difference {worst} m");
@@ -88,7 +100,10 @@ fn z_estimate_clears_the_scene_and_touches_it() {
         assert!(z + shape.aabb_min.z >= -1e-6, "never below the floor");
         let hm = w.heightmap();
         let under = hm.sample(x, y);
-        assert!(z + shape.aabb_min.z >= under - 1e-4, "clears the cell under its origin");
+        assert!(
+            z + shape.aabb_min.z >= under - 1e-4,
+            "clears the cell under its origin"
+        );
     }
     // On the empty floor the estimate is exact.
     let mut empty = common::world(&c);

@@ -12,7 +12,11 @@ use std::sync::Arc;
 use std::time::Instant;
 
 #[derive(Parser)]
-#[command(name = "herb-sim", version, about = "The HERB packing world: evaluation and tools")]
+#[command(
+    name = "herb-sim",
+    version,
+    about = "The HERB packing world: evaluation and tools"
+)]
 struct Cli {
     #[command(flatten)]
     data: DataArgs,
@@ -134,7 +138,11 @@ fn load_catalog(d: &DataArgs) -> AnyResult<(SharedCatalog, Option<PathBuf>)> {
         None => Catalog::builtin(&meshes)?,
     };
     if !d.quiet {
-        eprintln!("catalog: {} objects in {:.2} s", catalog.len(), t.elapsed().as_secs_f64());
+        eprintln!(
+            "catalog: {} objects in {:.2} s",
+            catalog.len(),
+            t.elapsed().as_secs_f64()
+        );
         for line in catalog.source_report() {
             eprintln!("  {line}");
         }
@@ -143,7 +151,13 @@ fn load_catalog(d: &DataArgs) -> AnyResult<(SharedCatalog, Option<PathBuf>)> {
 }
 
 fn need_root(root: Option<PathBuf>) -> AnyResult<PathBuf> {
-    root.ok_or_else(|| format!("BoxED data not found: pass --boxed or set {}", paths::ENV_BOXED).into())
+    root.ok_or_else(|| {
+        format!(
+            "BoxED data not found: pass --boxed or set {}",
+            paths::ENV_BOXED
+        )
+        .into()
+    })
 }
 
 fn run(cli: Cli) -> AnyResult<()> {
@@ -152,7 +166,9 @@ fn run(cli: Cli) -> AnyResult<()> {
             let (catalog, root) = load_catalog(&cli.data)?;
             if fit {
                 let meshes = paths::mesh_source(cli.data.meshes.as_deref(), root.as_deref());
-                let MeshSource::Folder(dir) = meshes else { return Err("--fit needs a mesh folder".into()) };
+                let MeshSource::Folder(dir) = meshes else {
+                    return Err("--fit needs a mesh folder".into());
+                };
                 for s in catalog.specs() {
                     let Some(file) = &s.mesh else { continue };
                     let raw = herb_sim::mesh::load_obj_vertices(&dir.join(file))?;
@@ -178,14 +194,28 @@ fn run(cli: Cli) -> AnyResult<()> {
             }
             Ok(())
         }
-        Cmd::Pack { session, method, seed, png } => {
+        Cmd::Pack {
+            session,
+            method,
+            seed,
+            png,
+        } => {
             let (catalog, root) = load_catalog(&cli.data)?;
             let root = need_root(root)?;
             let s = boxed::load_session(&root, &session, &catalog)?;
             let ep = s.episode(&catalog);
             pack_one(&catalog, &ep, method.into(), seed, &png)
         }
-        Cmd::Eval { method, seed, jobs, limit, png_episode, png, out, csv } => {
+        Cmd::Eval {
+            method,
+            seed,
+            jobs,
+            limit,
+            png_episode,
+            png,
+            out,
+            csv,
+        } => {
             if method.is_empty() {
                 return Err("give at least one --method (human, random)".into());
             }
@@ -202,13 +232,19 @@ fn run(cli: Cli) -> AnyResult<()> {
             let target = eval::mean_std(episodes.iter().map(|e| e.objects.len() as f64));
             let cfg = WorldConfig::default();
             let mut rows = Vec::new();
-            let mut csv_text = String::from("method,episode,objects,packed,success,placements,stable,final_compactness,physics_steps\n");
+            let mut csv_text = String::from(
+                "method,episode,objects,packed,success,placements,stable,final_compactness,physics_steps\n",
+            );
             for m in method {
                 let m: Method = m.into();
                 let t = Instant::now();
                 let results = eval::run_all(&catalog, &cfg, &episodes, m, seed, jobs)?;
                 let secs = t.elapsed().as_secs_f64();
-                let placements: usize = results.iter().filter_map(|r| r.as_ref().ok()).map(|r| r.placements).sum();
+                let placements: usize = results
+                    .iter()
+                    .filter_map(|r| r.as_ref().ok())
+                    .map(|r| r.placements)
+                    .sum();
                 eprintln!(
                     "{}: {} episodes, {} placements in {:.1} s ({:.0} placements/s on {} threads)",
                     m.name(),
@@ -237,14 +273,18 @@ fn run(cli: Cli) -> AnyResult<()> {
                 }
                 rows.push(eval::summarize(m.name(), &results));
                 if let Some(name) = &png_episode {
-                    let ep = episodes.iter().find(|e| &e.name == name).ok_or_else(|| format!("no episode {name:?}"))?;
-                    let path = png.with_file_name(format!(
-                        "{}-{}-{}",
-                        png.file_stem().and_then(|s| s.to_str()).unwrap_or("final"),
-                        m.name(),
-                        name
-                    ))
-                    .with_extension("png");
+                    let ep = episodes
+                        .iter()
+                        .find(|e| &e.name == name)
+                        .ok_or_else(|| format!("no episode {name:?}"))?;
+                    let path = png
+                        .with_file_name(format!(
+                            "{}-{}-{}",
+                            png.file_stem().and_then(|s| s.to_str()).unwrap_or("final"),
+                            m.name(),
+                            name
+                        ))
+                        .with_extension("png");
                     pack_quiet(&catalog, ep, m, seed, &path)?;
                     eprintln!("wrote {}", path.display());
                 }
@@ -269,24 +309,48 @@ fn write_file(p: &Path, text: &str) -> AnyResult<()> {
     std::fs::write(p, text).map_err(|e| format!("cannot write {}: {e}", p.display()).into())
 }
 
-fn pack_quiet(catalog: &SharedCatalog, ep: &Episode, m: Method, seed: u64, png: &Path) -> AnyResult<()> {
+fn pack_quiet(
+    catalog: &SharedCatalog,
+    ep: &Episode,
+    m: Method,
+    seed: u64,
+    png: &Path,
+) -> AnyResult<()> {
     let mut env = PackingEnv::new(catalog.clone(), WorldConfig::default(), RewardMode::Simple)?;
     eval::run_episode(&mut env, ep, m, seed)?;
     herb_sim::image::write_heightmap_png(png, env.world().heightmap(), 0.30, 3)?;
     Ok(())
 }
 
-fn pack_one(catalog: &SharedCatalog, ep: &Episode, m: Method, seed: u64, png: &Path) -> AnyResult<()> {
-    let mut env = PackingEnv::new(catalog.clone(), WorldConfig::default(), RewardMode::cs(0.6)?)?;
+fn pack_one(
+    catalog: &SharedCatalog,
+    ep: &Episode,
+    m: Method,
+    seed: u64,
+    png: &Path,
+) -> AnyResult<()> {
+    let mut env = PackingEnv::new(
+        catalog.clone(),
+        WorldConfig::default(),
+        RewardMode::cs(0.6)?,
+    )?;
     env.reset(&ep.objects, seed)?;
-    println!("episode {} ({} objects), method {}", ep.name, ep.objects.len(), m.name());
+    println!(
+        "episode {} ({} objects), method {}",
+        ep.name,
+        ep.objects.len(),
+        m.name()
+    );
     let t = Instant::now();
     for (i, &ty) in ep.objects.iter().enumerate() {
         let step = match m {
             Method::Human => env.step_placement(ep.human[i].x, ep.human[i].y, ep.human[i].theta)?,
             Method::HumanPose => {
                 let h = ep.human[i];
-                env.step_pose(rapier3d::math::Pose::from_parts(rapier3d::math::Vector::new(h.x, h.y, h.z), h.rotation))?
+                env.step_pose(rapier3d::math::Pose::from_parts(
+                    rapier3d::math::Vector::new(h.x, h.y, h.z),
+                    h.rotation,
+                ))?
             }
             Method::Random => {
                 let a = env.sample_action();
@@ -309,14 +373,22 @@ fn pack_one(catalog: &SharedCatalog, ep: &Episode, m: Method, seed: u64, png: &P
             o.compactness,
             step.reward,
             match (o.first_outside, o.violation) {
-                (Some(i), Some((what, by))) => format!("  (object {} crosses the {what} by {:.1} cm)", i + 1, by * 100.0),
+                (Some(i), Some((what, by))) => format!(
+                    "  (object {} crosses the {what} by {:.1} cm)",
+                    i + 1,
+                    by * 100.0
+                ),
                 _ => String::new(),
             }
         );
         if step.terminated {
             println!(
                 "{} after {} of {} objects ({:.2} s)",
-                if step.info.success { "success" } else { "failed" },
+                if step.info.success {
+                    "success"
+                } else {
+                    "failed"
+                },
                 step.info.packed,
                 ep.objects.len(),
                 t.elapsed().as_secs_f64()

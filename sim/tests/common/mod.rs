@@ -8,7 +8,10 @@ use std::sync::{Arc, OnceLock};
 /// The catalog with primitive shapes (no data needed).
 pub fn primitives() -> SharedCatalog {
     static C: OnceLock<SharedCatalog> = OnceLock::new();
-    C.get_or_init(|| Arc::new(Catalog::builtin(&MeshSource::None("test".into())).expect("built-in catalog"))).clone()
+    C.get_or_init(|| {
+        Arc::new(Catalog::builtin(&MeshSource::None("test".into())).expect("built-in catalog"))
+    })
+    .clone()
 }
 
 /// The catalog with mesh hulls, if the BoxED meshes are present (a loud failure under CI=true).
