@@ -8,9 +8,10 @@
 
 use crate::boxed::Episode;
 use crate::catalog::SharedCatalog;
-use crate::env::{PackingEnv, RewardMode};
+use crate::env::{PackingEnv, RewardMode, StepResult};
 use crate::error::{Result, SimError};
 use crate::world::WorldConfig;
+use rapier3d::math::{Pose, Vector};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -65,6 +66,31 @@ impl EpisodeResult {
     }
 }
 
+/// Places object `i` of `ep` as `method` decides: the one dispatch from methods to the
+/// environment, shared by batch evaluation and single-episode tools.
+pub fn method_step<'a>(
+    env: &'a mut PackingEnv,
+    ep: &Episode,
+    i: usize,
+    method: Method,
+) -> Result<StepResult<'a>> {
+    let h = ep.human.get(i).copied();
+    match (method, h) {
+        (Method::Human, Some(h)) => env.step_placement(h.x, h.y, h.theta),
+        (Method::HumanPose, Some(h)) => {
+            env.step_pose(Pose::from_parts(Vector::new(h.x, h.y, h.z), h.rotation))
+        }
+        (Method::Human | Method::HumanPose, None) => Err(SimError::Config(format!(
+            "episode {} has no human placement {i}",
+            ep.name
+        ))),
+        (Method::Random, _) => {
+            let a = env.sample_action();
+            env.step(a)
+        }
+    }
+}
+
 /// Runs one episode with `method` in `env`.
 pub fn run_episode(
     env: &mut PackingEnv,
@@ -84,23 +110,7 @@ pub fn run_episode(
         physics_steps: 0,
     };
     for i in 0..ep.objects.len() {
-        let step = match method {
-            Method::Human => {
-                let h = ep.human[i];
-                env.step_placement(h.x, h.y, h.theta)?
-            }
-            Method::HumanPose => {
-                let h = ep.human[i];
-                env.step_pose(rapier3d::math::Pose::from_parts(
-                    rapier3d::math::Vector::new(h.x, h.y, h.z),
-                    h.rotation,
-                ))?
-            }
-            Method::Random => {
-                let a = env.sample_action();
-                env.step(a)?
-            }
-        };
+        let step = method_step(env, ep, i, method)?;
         let o = step.info.outcome;
         r.placements += 1;
         r.stable += o.stable as usize;

@@ -343,20 +343,7 @@ fn pack_one(
     );
     let t = Instant::now();
     for (i, &ty) in ep.objects.iter().enumerate() {
-        let step = match m {
-            Method::Human => env.step_placement(ep.human[i].x, ep.human[i].y, ep.human[i].theta)?,
-            Method::HumanPose => {
-                let h = ep.human[i];
-                env.step_pose(rapier3d::math::Pose::from_parts(
-                    rapier3d::math::Vector::new(h.x, h.y, h.z),
-                    h.rotation,
-                ))?
-            }
-            Method::Random => {
-                let a = env.sample_action();
-                env.step(a)?
-            }
-        };
+        let step = eval::method_step(&mut env, ep, i, m)?;
         let o = step.info.outcome;
         let (x, y, th) = step.info.placement;
         println!(
