@@ -6,12 +6,12 @@
 //! - **final compactness**: C after the last placement, averaged over successful episodes;
 //! - **stability**: share of all placements made with S = 1 (tilt <= 10 degrees).
 
-use crate::boxed::Episode;
+use crate::boxed::{Episode, HumanPlacement};
 use crate::catalog::SharedCatalog;
 use crate::env::{PackingEnv, RewardMode, StepResult};
 use crate::error::{Result, SimError};
 use crate::world::WorldConfig;
-use rapier3d::math::{Pose, Vector};
+use rapier3d::math::Rotation;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -57,6 +57,35 @@ pub struct EpisodeResult {
     pub compactness_per_step: Vec<f32>,
     /// Simulated physics steps in all.
     pub physics_steps: u64,
+    /// Why the episode failed: the bound crossed (`"floor"`, `"+x wall"`, `"top"`...), and
+    /// whether the object outside was the one just placed or an earlier one knocked out.
+    pub failure: Option<Failure>,
+}
+
+/// The cause of a failed episode.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Failure {
+    /// The bound of the success volume crossed most (see `PlacementOutcome::violation`).
+    pub bound: &'static str,
+    /// By how much (m).
+    pub by_m: f32,
+    /// The object outside was placed before the last placement (knocked out or pushed).
+    pub earlier_object: bool,
+}
+
+impl Failure {
+    /// A short label such as `floor (placed)` or `+x wall (earlier)`.
+    pub fn label(&self) -> String {
+        format!(
+            "{} ({})",
+            self.bound,
+            if self.earlier_object {
+                "earlier object"
+            } else {
+                "placed object"
+            }
+        )
+    }
 }
 
 impl EpisodeResult {
@@ -65,6 +94,11 @@ impl EpisodeResult {
         self.compactness_per_step.last().copied().unwrap_or(0.0)
     }
 }
+
+/// How far (m, per axis) a replayed human placement whose footprint crosses a wall is slid
+/// back inside: humans push objects against the walls, and our hulls and the recorded poses
+/// are a few millimetres off the real objects.
+pub const REPLAY_WALL_SLIDE_M: f32 = 0.015;
 
 /// Places object `i` of `ep` as `method` decides: the one dispatch from methods to the
 /// environment, shared by batch evaluation and single-episode tools.
@@ -75,10 +109,22 @@ pub fn method_step<'a>(
     method: Method,
 ) -> Result<StepResult<'a>> {
     let h = ep.human.get(i).copied();
+    // The human replays release at the recorded (x, y), slid inside the walls by up to
+    // REPLAY_WALL_SLIDE_M, at z from the heightmap (the recorded z is not used: our pile differs
+    // from the human's by millimetres, and a body released into another is pushed out hard).
+    let slide = |env: &PackingEnv, h: &HumanPlacement, rot: Rotation| {
+        let ty = ep.objects[i];
+        env.world()
+            .slide_inside(ty, h.x, h.y, rot, REPLAY_WALL_SLIDE_M)
+    };
     match (method, h) {
-        (Method::Human, Some(h)) => env.step_placement(h.x, h.y, h.theta),
+        (Method::Human, Some(h)) => {
+            let (x, y) = slide(env, &h, Rotation::from_rotation_z(h.theta));
+            env.step_placement(x, y, h.theta)
+        }
         (Method::HumanPose, Some(h)) => {
-            env.step_pose(Pose::from_parts(Vector::new(h.x, h.y, h.z), h.rotation))
+            let (x, y) = slide(env, &h, h.rotation);
+            env.step_rotated(x, y, h.rotation)
         }
         (Method::Human | Method::HumanPose, None) => Err(SimError::Config(format!(
             "episode {} has no human placement {i}",
@@ -108,6 +154,7 @@ pub fn run_episode(
         stable: 0,
         compactness_per_step: Vec::with_capacity(ep.objects.len()),
         physics_steps: 0,
+        failure: None,
     };
     for i in 0..ep.objects.len() {
         let step = method_step(env, ep, i, method)?;
@@ -118,6 +165,13 @@ pub fn run_episode(
         r.compactness_per_step.push(o.compactness);
         r.packed = step.info.packed;
         r.success = step.info.success;
+        if let (Some(first), Some((bound, by_m))) = (o.first_outside, o.violation) {
+            r.failure = Some(Failure {
+                bound,
+                by_m,
+                earlier_object: first + 1 < r.placements,
+            });
+        }
         if step.terminated {
             break;
         }
@@ -197,6 +251,8 @@ pub struct Summary {
     pub final_compactness: (f64, f64),
     /// Placements with S = 1 (%).
     pub stability_pct: f64,
+    /// Failed episodes per cause ([`Failure::label`]), most frequent first.
+    pub failures: Vec<(String, usize)>,
 }
 
 /// Summarises results (errored episodes are counted apart and excluded).
@@ -217,7 +273,18 @@ pub fn summarize(method: &str, results: &[std::result::Result<EpisodeResult, Str
                 .map(|r| r.final_compactness() as f64),
         ),
         stability_pct: 100.0 * stable as f64 / placements.max(1) as f64,
+        failures: count_failures(&ok),
     }
+}
+
+fn count_failures(ok: &[&EpisodeResult]) -> Vec<(String, usize)> {
+    let mut counts = std::collections::BTreeMap::<String, usize>::new();
+    for f in ok.iter().filter_map(|r| r.failure) {
+        *counts.entry(f.label()).or_default() += 1;
+    }
+    let mut v: Vec<(String, usize)> = counts.into_iter().collect();
+    v.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
+    v
 }
 
 /// A Markdown table of our rows beside the paper's (HERB paper, Table I). `target` is the

@@ -194,6 +194,8 @@ impl PackingWorld {
         // Speed at which overlaps are resolved (rapier default 3 m/s; lower values let bodies sink).
         phys.integration_parameters
             .normalized_max_corrective_velocity = cfg.max_corrective_speed_mps;
+        phys.integration_parameters.contact_recycling = false;
+        phys.integration_parameters.num_solver_iterations = 8;
         let t = BOX_WALL_THICKNESS;
         let (hx, hy, h) = (BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT);
         let body = phys.insert_body(RigidBodyBuilder::fixed());
@@ -286,6 +288,45 @@ impl PackingWorld {
             y,
             rot,
             &mut self.zscratch,
+        )
+    }
+
+    /// `(x, y)` moved by the least amount (at most `max_shift_m` per axis) that brings the
+    /// footprint of `ty` in orientation `rot` inside the walls, with the clearance to spare.
+    /// Footprints that cross a wall by more, or do not fit between the walls, are returned
+    /// unchanged. Used by the human replays: humans push objects against the walls, and our
+    /// hulls differ from the real objects by millimetres.
+    pub fn slide_inside(
+        &self,
+        ty: TypeIdx,
+        x: f32,
+        y: f32,
+        rot: Rotation,
+        max_shift_m: f32,
+    ) -> (f32, f32) {
+        if self.check_type(ty).is_err() || !(x.is_finite() && y.is_finite()) {
+            return (x, y);
+        }
+        let shape = self.catalog.shape(ty);
+        let (lo, hi) = shape.vertices.iter().fold(
+            (Vector::splat(f32::MAX), Vector::splat(f32::MIN)),
+            |(lo, hi), &v| {
+                let r = rot * v;
+                (lo.min(r), hi.max(r))
+            },
+        );
+        let c = self.cfg.clearance_m;
+        let axis = |p: f32, lo: f32, hi: f32, half: f32| {
+            let (min_p, max_p) = (-half + c - lo, half - c - hi);
+            if min_p > max_p {
+                return p;
+            }
+            let q = p.clamp(min_p, max_p);
+            if (q - p).abs() <= max_shift_m { q } else { p }
+        };
+        (
+            axis(x, lo.x, hi.x, BOX_HALF_X),
+            axis(y, lo.y, hi.y, BOX_HALF_Y),
         )
     }
 

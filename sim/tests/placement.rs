@@ -30,15 +30,9 @@ fn floor_drop_all(c: &SharedCatalog, label: &str) {
             o.settled
         );
         assert!(o.inside, "{label} {id}: not inside");
-        // KNOWN DEFECT (open in issue 2): the banana's scanned hull sinks about 6 mm into the
-        // floor board; hull-vs-cuboid contacts of some mesh hulls are unreliable.
-        let sink_tol = if label == "mesh" && id == "011" {
-            0.01
-        } else {
-            0.003
-        };
+        // Resting contact, not penetration: within 1 mm of the floor board.
         assert!(
-            lowest.abs() < sink_tol,
+            lowest.abs() < 0.001,
             "{label} {id}: lowest point at {lowest} m, not on the floor"
         );
         // Round objects (fruit, balls) may roll onto another side; everything else must stand
@@ -46,9 +40,7 @@ fn floor_drop_all(c: &SharedCatalog, label: &str) {
         // Scanned bases are not flat (the YCB scans' bottoms bulge, the bread is low-poly): a
         // mesh hull may settle a few degrees off its fitted up axis, well within S's 10 degrees.
         let max_tilt = if label == "mesh" { 6.0 } else { 0.5 };
-        // The toothpaste tube's hull (crimped end, rounded body) rolls onto a side like fruit.
-        let rolls = spec.primitive == Primitive::Ellipsoid
-            || (label == "mesh" && (spec.id == "103" || spec.id == "011"));
+        let rolls = spec.primitive == Primitive::Ellipsoid;
         if !rolls {
             assert!(o.settled, "{label} {id}: still moving after the time cap");
             assert!(
@@ -157,4 +149,196 @@ fn theta_turns_the_footprint() {
     // Turned 90 degrees, the 16.4 cm side runs along y: occupied at y = 7 cm, free at x = 6 cm.
     assert!(hm.sample(0.0, 0.07) > 0.2);
     assert!(hm.sample(0.06, 0.0) < 0.01);
+}
+
+/// A hull in the world: its vertices and outward face normals.
+struct WorldHull {
+    verts: Vec<rapier3d::math::Vector>,
+    normals: Vec<rapier3d::math::Vector>,
+    edges: Vec<rapier3d::math::Vector>,
+    lo: rapier3d::math::Vector,
+    hi: rapier3d::math::Vector,
+}
+
+fn world_hull(w: &herb_sim::PackingWorld, p: &herb_sim::world::PlacedObject) -> WorldHull {
+    let pose = w.pose_of(p);
+    let shape = w.catalog().shape(p.ty);
+    let verts: Vec<_> = shape
+        .vertices
+        .iter()
+        .map(|&v| pose.transform_point(v))
+        .collect();
+    let normals = shape
+        .triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| verts[i as usize]);
+            (b - a).cross(c - a).normalize_or_zero()
+        })
+        .filter(|n| n.length_squared() > 0.5)
+        .collect();
+    let mut pairs: Vec<(u32, u32)> = shape
+        .triangles
+        .iter()
+        .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+        .map(|(a, b)| (a.min(b), a.max(b)))
+        .collect();
+    pairs.sort_unstable();
+    pairs.dedup();
+    let edges = pairs
+        .iter()
+        .map(|&(a, b)| (verts[b as usize] - verts[a as usize]).normalize_or_zero())
+        .collect();
+    let lo = verts.iter().fold(verts[0], |a, &v| a.min(v));
+    let hi = verts.iter().fold(verts[0], |a, &v| a.max(v));
+    WorldHull {
+        verts,
+        normals,
+        edges,
+        lo,
+        hi,
+    }
+}
+
+/// Overlap of two hulls' projections on axis `n` (negative: separated along it).
+fn projected_overlap(a: &WorldHull, b: &WorldHull, n: rapier3d::math::Vector) -> f32 {
+    let span = |h: &WorldHull| {
+        h.verts.iter().fold((f32::MAX, f32::MIN), |(lo, hi), v| {
+            let d = v.dot(n);
+            (lo.min(d), hi.max(d))
+        })
+    };
+    let ((alo, ahi), (blo, bhi)) = (span(a), span(b));
+    ahi.min(bhi) - alo.max(blo)
+}
+
+/// Penetration depth of two convex hulls by the separating axis theorem: 0 if separated, else
+/// the smallest overlap of their projections over both hulls' face normals and, where those
+/// leave more than 2 mm, the cross products of their edges (which makes it exact). parry's
+/// `query::contact` is not used as the oracle: on these polyhedra its EPA now and then
+/// reports 10 cm for a 0.1 mm contact.
+fn sat_overlap(a: &WorldHull, b: &WorldHull) -> f32 {
+    if a.lo.cmpgt(b.hi).any() || b.lo.cmpgt(a.hi).any() {
+        return 0.0;
+    }
+    let mut depth = f32::MAX;
+    for &n in a.normals.iter().chain(&b.normals) {
+        depth = depth.min(projected_overlap(a, b, n));
+        if depth <= 0.0 {
+            return 0.0;
+        }
+    }
+    if depth > 0.002 {
+        for &ea in &a.edges {
+            for &eb in &b.edges {
+                let n = ea.cross(eb);
+                if n.length_squared() < 1e-8 {
+                    continue;
+                }
+                depth = depth.min(projected_overlap(a, b, n.normalize()));
+                if depth <= 0.0 {
+                    return 0.0;
+                }
+            }
+        }
+    }
+    depth
+}
+
+/// Deepest overlap (m) among the placed objects' hulls and between any hull and the floor.
+fn deepest_overlap(w: &herb_sim::PackingWorld) -> (f32, String) {
+    let hulls: Vec<WorldHull> = w.placed().iter().map(|p| world_hull(w, p)).collect();
+    let mut worst = (0.0f32, String::from("none"));
+    for (i, a) in hulls.iter().enumerate() {
+        if -a.lo.z > worst.0 {
+            worst = (-a.lo.z, format!("object {} into the floor", i + 1));
+        }
+        for (j, b) in hulls.iter().enumerate().skip(i + 1) {
+            let d = sat_overlap(a, b);
+            if d > worst.0 {
+                worst = (d, format!("objects {} and {}", i + 1, j + 1));
+            }
+        }
+    }
+    worst
+}
+
+/// Regression test of the sinking defect (bodies sank 1-3 cm into the floor and each other
+/// while rapier recycled contact points): replaying the humans' 6-DoF placements of the first
+/// 40 sessions, as long as everything is inside the box, the deepest overlap after settling
+/// (exact SAT depth over all pairs and the floor) is under 1.5 mm at the median and 3 mm at
+/// p90, and over 5 mm in at most 2 % of placements.
+///
+/// KNOWN DEFECT, measured 2026-11-22 over all 263 sessions (3057 placements): p50 0.97,
+/// p90 2.63, p99 4.77 mm, 22 placements over 5 mm, worst 24.7 mm (a tuna can pressed into
+/// the edge of a pudding box standing on its side, p43_s2); with contact recycling on, the
+/// worst was 31.5 mm in the first 6 sessions alone.
+#[test]
+fn stacked_human_replays_do_not_interpenetrate() {
+    let (Some(c), Some(root)) = (common::meshes(), herb_sim::paths::boxed_root_for_tests()) else {
+        return;
+    };
+    let mut worst = (0.0f32, String::new());
+    let mut all = Vec::new();
+    let names = herb_sim::boxed::list_sessions(&root).expect("sessions");
+    for name in names.iter().take(40) {
+        let ep = herb_sim::boxed::load_session(&root, name, &c)
+            .expect("session")
+            .episode(&c);
+        let mut w = common::world(&c);
+        for (k, (&ty, h)) in ep.objects.iter().zip(&ep.human).enumerate() {
+            let o = w.place_rotated(ty, h.x, h.y, h.rotation).expect("place");
+            if !o.inside {
+                // Out of the box (some human records are): the episode ends, as in the env.
+                break;
+            }
+            let (d, what) = deepest_overlap(&w);
+            all.push(d);
+            if d > 0.005 {
+                eprintln!(
+                    "{name} after placement {}: {what} overlap {:.1} mm",
+                    k + 1,
+                    d * 1e3
+                );
+            }
+            if d > worst.0 {
+                worst = (d, format!("{name} after placement {}: {what}", k + 1));
+            }
+        }
+    }
+    all.sort_by(f32::total_cmp);
+    let q = |p: f64| all[((all.len() - 1) as f64 * p) as usize];
+    let over = all.iter().filter(|&&d| d > 0.005).count();
+    let summary = format!(
+        "{} placements: overlap p50 {:.2} p90 {:.2} p99 {:.2} mm; {over} over 5 mm; deepest {:.1} mm ({})",
+        all.len(),
+        q(0.5) * 1e3,
+        q(0.9) * 1e3,
+        q(0.99) * 1e3,
+        worst.0 * 1e3,
+        worst.1
+    );
+    eprintln!("{summary}");
+    assert!(all.len() > 300, "{summary}");
+    assert!(q(0.5) < 0.0015 && q(0.9) < 0.003, "{summary}");
+    assert!(over as f64 <= 0.02 * all.len() as f64, "{summary}");
+}
+
+#[test]
+fn replays_slide_footprints_just_over_a_wall_back_inside() {
+    let c = common::primitives();
+    let w = common::world(&c);
+    let t = c.by_id("004").unwrap(); // sugar box, 9.2 cm along x when theta = 0
+    let half = 0.5 * c.shape(t).extents().x;
+    let rot = rapier3d::math::Rotation::IDENTITY;
+    // 1 cm into the +x wall: slid back to the clearance.
+    let (x, y) = w.slide_inside(t, BOX_HALF_X - half + 0.01, 0.0, rot, 0.015);
+    let clear = w.config().clearance_m;
+    assert!((x - (BOX_HALF_X - half - clear)).abs() < 1e-5, "x {x}");
+    assert_eq!(y, 0.0);
+    // 5 cm over: beyond the slide, unchanged.
+    let far = BOX_HALF_X - half + 0.05;
+    assert_eq!(w.slide_inside(t, far, 0.0, rot, 0.015), (far, 0.0));
+    // Inside already: unchanged.
+    assert_eq!(w.slide_inside(t, 0.01, -0.02, rot, 0.015), (0.01, -0.02));
 }

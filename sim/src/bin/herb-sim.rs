@@ -289,7 +289,20 @@ fn run(cli: Cli) -> AnyResult<()> {
                     eprintln!("wrote {}", path.display());
                 }
             }
-            let table = eval::format_table(&rows, target, episodes.len());
+            let mut table = eval::format_table(&rows, target, episodes.len());
+            table.push('\n');
+            for r in &rows {
+                let causes: Vec<String> = r
+                    .failures
+                    .iter()
+                    .map(|(k, n)| format!("{k}: {n}"))
+                    .collect();
+                table.push_str(&format!(
+                    "- {} failures by cause: {}\n",
+                    r.method,
+                    causes.join(", ")
+                ));
+            }
             println!("{table}");
             if let Some(p) = out {
                 write_file(&p, &table)?;
