@@ -225,56 +225,111 @@ pub fn raster_triangle(buf: &mut [f32], win: Window, p: [Vector; 3], test: Depth
     let vmin = p[0].y.min(p[1].y).min(p[2].y);
     let vmax = p[0].y.max(p[1].y).max(p[2].y);
     // Cells whose centre (c + 0.5) lies in [umin, umax].
-    let c_lo = ((umin - 0.5).ceil() as isize).max(win.col0);
-    let c_hi = ((umax - 0.5).floor() as isize).min(win.col0 + win.w as isize - 1);
-    let r_lo = ((vmin - 0.5).ceil() as isize).max(win.row0);
-    let r_hi = ((vmax - 0.5).floor() as isize).min(win.row0 + win.h as isize - 1);
+    let c_lo = ceil_i(umin - 0.5).max(win.col0);
+    let c_hi = floor_i(umax - 0.5).min(win.col0 + win.w as isize - 1);
+    let r_lo = ceil_i(vmin - 0.5).max(win.row0);
+    let r_hi = floor_i(vmax - 0.5).min(win.row0 + win.h as isize - 1);
     if c_lo > c_hi || r_lo > r_hi {
         return;
     }
-    let edge =
-        |a: Vector, b: Vector, u: f32, v: f32| (b.x - a.x) * (v - a.y) - (b.y - a.y) * (u - a.x);
-    // Normalised barycentric weights: inside means all >= 0 whatever the winding.
+    // Normalised barycentric weight of vertex k, affine in (u, v): w_k = a_k u + b_k v + c_k,
+    // from the edge opposite k. Inside means all w_k >= EPS whatever the winding.
     const EPS: f32 = -1e-6;
+    let weight = |a: Vector, b: Vector| {
+        // (b.x - a.x) (v - a.y) - (b.y - a.y) (u - a.x), divided by the area.
+        let du = -(b.y - a.y) * inv_area;
+        let dv = (b.x - a.x) * inv_area;
+        let c0 = ((b.y - a.y) * a.x - (b.x - a.x) * a.y) * inv_area;
+        (du, dv, c0)
+    };
+    let w = [weight(p[1], p[2]), weight(p[2], p[0]), weight(p[0], p[1])];
+    let inv_du = w.map(|(du, _, _)| if du != 0.0 { 1.0 / du } else { 0.0 });
+    // z is affine too: z = dzdu u + dzdv v + z0.
+    let dzdu = w[0].0 * p[0].z + w[1].0 * p[1].z + w[2].0 * p[2].z;
+    let dzdv = w[0].1 * p[0].z + w[1].1 * p[1].z + w[2].1 * p[2].z;
+    let z0 = w[0].2 * p[0].z + w[1].2 * p[1].z + w[2].2 * p[2].z;
+    let (u_min_win, u_max_win) = (c_lo as f32 + 0.5, c_hi as f32 + 0.5);
     for r in r_lo..=r_hi {
         let v = r as f32 + 0.5;
-        let row_off = (r - win.row0) as usize * win.w;
-        for c in c_lo..=c_hi {
-            let u = c as f32 + 0.5;
-            let w0 = edge(p[1], p[2], u, v) * inv_area;
-            let w1 = edge(p[2], p[0], u, v) * inv_area;
-            let w2 = edge(p[0], p[1], u, v) * inv_area;
-            if w0 < EPS || w1 < EPS || w2 < EPS {
-                continue;
+        // The row's exact span: intersect the three half-lines a_k u + (b_k v + c_k) >= EPS.
+        let (mut lo, mut hi) = (u_min_win, u_max_win);
+        for (&(du, dv, c0), &inv_du) in w.iter().zip(&inv_du) {
+            let rest = dv * v + c0;
+            if du > 0.0 {
+                lo = lo.max((EPS - rest) * inv_du);
+            } else if du < 0.0 {
+                hi = hi.min((EPS - rest) * inv_du);
+            } else if rest < EPS {
+                hi = f32::MIN;
             }
-            let z = w0 * p[0].z + w1 * p[1].z + w2 * p[2].z;
-            let cell = &mut buf[row_off + (c - win.col0) as usize];
-            match test {
-                DepthTest::Max => *cell = cell.max(z),
-                DepthTest::Min => *cell = cell.min(z),
+        }
+        if lo > hi {
+            continue;
+        }
+        let c0 = ceil_i(lo - 0.5).max(c_lo);
+        let c1 = floor_i(hi - 0.5).min(c_hi);
+        if c0 > c1 {
+            continue;
+        }
+        let row_off = (r - win.row0) as usize * win.w;
+        let z_row = dzdv * v + z0;
+        let cells =
+            &mut buf[row_off + (c0 - win.col0) as usize..=row_off + (c1 - win.col0) as usize];
+        let u0 = c0 as f32 + 0.5;
+        match test {
+            DepthTest::Max => {
+                for (k, cell) in cells.iter_mut().enumerate() {
+                    let z = z_row + dzdu * (u0 + k as f32);
+                    *cell = if z > *cell { z } else { *cell };
+                }
+            }
+            DepthTest::Min => {
+                for (k, cell) in cells.iter_mut().enumerate() {
+                    let z = z_row + dzdu * (u0 + k as f32);
+                    *cell = if z < *cell { z } else { *cell };
+                }
             }
         }
     }
 }
 
-/// Rasterises a convex hull whose vertices are already transformed to B (`world_vertices`)
-/// into `buf` covering `win` of grid `spec`.
+/// Rasterises a convex hull whose vertices are already transformed to B (`vertices`) into
+/// `buf` covering `win` of grid `spec`. The vertices are converted to grid pixel coordinates
+/// `(u, v, z)` in place (once per vertex, not once per triangle): pass a scratch copy.
 pub fn raster_hull(
     spec: &GridSpec,
     buf: &mut [f32],
     win: Window,
-    world_vertices: &[Vector],
+    vertices: &mut [Vector],
     triangles: &[[u32; 3]],
     test: DepthTest,
 ) {
+    for w in vertices.iter_mut() {
+        let (u, v) = spec.to_pixel(w.x, w.y);
+        *w = Vector::new(u, v, w.z);
+    }
     for t in triangles {
-        let p = t.map(|i| {
-            let w = world_vertices[i as usize];
-            let (u, v) = spec.to_pixel(w.x, w.y);
-            Vector::new(u, v, w.z)
-        });
+        let p = [
+            vertices[t[0] as usize],
+            vertices[t[1] as usize],
+            vertices[t[2] as usize],
+        ];
         raster_triangle(buf, win, p, test);
     }
+}
+
+/// `x.ceil() as isize` without a libm call (finite `x` within the isize range).
+#[inline]
+fn ceil_i(x: f32) -> isize {
+    let i = x as isize;
+    if (i as f32) < x { i + 1 } else { i }
+}
+
+/// `x.floor() as isize` without a libm call (finite `x` within the isize range).
+#[inline]
+fn floor_i(x: f32) -> isize {
+    let i = x as isize;
+    if (i as f32) > x { i - 1 } else { i }
 }
 
 #[cfg(test)]
@@ -328,16 +383,23 @@ mod tests {
             &g,
             hm.data_mut(),
             win,
-            &v,
+            &mut v.clone(),
             &[[0, 1, 2], [0, 2, 3]],
             DepthTest::Max,
         );
         let covered = hm.data().iter().filter(|&&z| z > 0.05).count();
         assert!((12..=25).contains(&covered), "{covered}");
-        assert_eq!(hm.sample(0.0, 0.0), 0.1);
+        assert!((hm.sample(0.0, 0.0) - 0.1).abs() < 1e-6);
         // Reversed winding faces down: not drawn by Max.
         let mut hm2 = Heightmap::new(g);
-        raster_hull(&g, hm2.data_mut(), win, &v, &[[0, 2, 1]], DepthTest::Max);
+        raster_hull(
+            &g,
+            hm2.data_mut(),
+            win,
+            &mut v.clone(),
+            &[[0, 2, 1]],
+            DepthTest::Max,
+        );
         assert_eq!(hm2.max(), 0.0);
     }
 }

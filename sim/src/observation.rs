@@ -151,7 +151,7 @@ impl ObjectProjection {
             cell: ObsLayout::CELL_M,
         };
         let lowest = shape.aabb_min.z;
-        let verts: Vec<Vector> = shape
+        let mut verts: Vec<Vector> = shape
             .vertices
             .iter()
             .map(|&v| Vector::new(v.x, v.y, v.z - lowest))
@@ -166,7 +166,7 @@ impl ObjectProjection {
                 w: n,
                 h: n,
             },
-            &verts,
+            &mut verts,
             &shape.triangles,
             DepthTest::Max,
         );

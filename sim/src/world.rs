@@ -491,7 +491,7 @@ impl PackingWorld {
                     &spec,
                     self.heightmap.data_mut(),
                     win,
-                    &self.verts,
+                    &mut self.verts,
                     &shape.triangles,
                     DepthTest::Max,
                 );

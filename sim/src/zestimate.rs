@@ -86,7 +86,7 @@ pub fn estimate_z_rotated(
         &spec,
         &mut scratch.buf,
         win,
-        &scratch.verts,
+        &mut scratch.verts,
         &shape.triangles,
         DepthTest::Min,
     );

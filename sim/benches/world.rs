@@ -1,0 +1,254 @@
+//! Packing-world benchmarks (issue 2): placements per second on one core (z estimate,
+//! release, settle, inside and compactness scan, heightmap render), heightmap render time, and
+//! memory per world.
+//!
+//! `cargo bench -p herb-sim --bench world`. Besides criterion's mean, every timed call is
+//! recorded in a histogram and p50/p99 are printed. Uses the BoxED meshes when present (mesh
+//! hulls), and the primitives in any case; the scenes are the humans' planar placements of the
+//! first sessions (or, without the data, a fixed pseudo-random sequence).
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use hdrhistogram::Histogram;
+use herb_sim::boxed::{Episode, load_session};
+use herb_sim::paths::{self, MeshSource};
+use herb_sim::{Catalog, PackingWorld, SharedCatalog, TypeIdx, WorldConfig};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicIsize, Ordering};
+use std::time::{Duration, Instant};
+
+/// Counts live heap bytes, to measure memory per world.
+struct Counting;
+static LIVE: AtomicIsize = AtomicIsize::new(0);
+
+// SAFETY: forwards to the system allocator and only counts sizes.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        LIVE.fetch_add(l.size() as isize, Ordering::Relaxed);
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        LIVE.fetch_sub(l.size() as isize, Ordering::Relaxed);
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(p, l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, new: usize) -> *mut u8 {
+        LIVE.fetch_add(new as isize - l.size() as isize, Ordering::Relaxed);
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(p, l, new) }
+    }
+}
+
+#[global_allocator]
+static ALLOC: Counting = Counting;
+
+/// A placement to replay: type and planar pose.
+type Step = (TypeIdx, f32, f32, f32);
+
+struct Setup {
+    label: &'static str,
+    catalog: SharedCatalog,
+    episodes: Vec<Vec<Step>>,
+}
+
+fn setups() -> Vec<Setup> {
+    let root = paths::boxed_root(None).filter(|r| r.join("sessions").is_dir());
+    let mut out = Vec::new();
+    let sources = [
+        (
+            "mesh",
+            root.as_ref().map(|r| MeshSource::Folder(r.join("meshes"))),
+        ),
+        ("primitive", Some(MeshSource::None("bench".into()))),
+    ];
+    for (label, src) in sources {
+        let Some(src) = src else {
+            eprintln!("no BoxED data: the mesh-hull benchmarks are skipped");
+            continue;
+        };
+        let catalog = Arc::new(Catalog::builtin(&src).expect("built-in catalog"));
+        let episodes = match &root {
+            Some(r) => paths_episodes(r, &catalog),
+            None => synthetic_episodes(&catalog),
+        };
+        out.push(Setup {
+            label,
+            catalog,
+            episodes,
+        });
+    }
+    out
+}
+
+fn paths_episodes(root: &std::path::Path, c: &Catalog) -> Vec<Vec<Step>> {
+    let names = herb_sim::boxed::list_sessions(root).expect("sessions");
+    names
+        .iter()
+        .take(20)
+        .map(|n| {
+            let ep: Episode = load_session(root, n, c).expect("session").episode(c);
+            ep.objects
+                .iter()
+                .zip(&ep.human)
+                .map(|(&t, h)| (t, h.x, h.y, h.theta))
+                .collect()
+        })
+        .collect()
+}
+
+fn synthetic_episodes(c: &Catalog) -> Vec<Vec<Step>> {
+    let types: Vec<TypeIdx> = c.types().collect();
+    (0..20u32)
+        .map(|e| {
+            (0..16u32)
+                .map(|i| {
+                    let k = (e * 31 + i * 17) as usize;
+                    let f = |m: u32| ((k as u32 * m) % 1000) as f32 / 1000.0 - 0.5;
+                    (
+                        types[k % types.len()],
+                        0.25 * f(7),
+                        0.16 * f(13),
+                        6.0 * f(3),
+                    )
+                })
+                .collect()
+        })
+        .collect()
+}
+
+fn hist() -> Histogram<u64> {
+    Histogram::new_with_bounds(1, 60_000_000_000, 3).expect("histogram bounds")
+}
+
+fn report(what: &str, h: &Histogram<u64>) {
+    eprintln!(
+        "{what}: n {} p50 {:.3} ms p99 {:.3} ms max {:.3} ms mean {:.3} ms",
+        h.len(),
+        h.value_at_quantile(0.5) as f64 / 1e6,
+        h.value_at_quantile(0.99) as f64 / 1e6,
+        h.max() as f64 / 1e6,
+        h.mean() / 1e6
+    );
+}
+
+/// One placement per iteration, walking through the episodes; a world is reset (untimed) when
+/// an episode ends or an object leaves the box.
+fn bench_placements(c: &mut Criterion, s: &Setup) {
+    let mut world = PackingWorld::new(s.catalog.clone(), WorldConfig::default()).expect("world");
+    let mut h = hist();
+    let (mut e, mut i) = (0usize, 0usize);
+    c.bench_function(&format!("placement/{}", s.label), |b| {
+        b.iter_custom(|iters| {
+            let mut total = Duration::ZERO;
+            for _ in 0..iters {
+                if i >= s.episodes[e].len() {
+                    (e, i) = ((e + 1) % s.episodes.len(), 0);
+                    world.reset();
+                }
+                let (t, x, y, th) = s.episodes[e][i];
+                let t0 = Instant::now();
+                let o = world.place(t, x, y, th).expect("place");
+                let dt = t0.elapsed();
+                total += dt;
+                h.record(dt.as_nanos() as u64).ok();
+                i += 1;
+                if !o.inside {
+                    i = usize::MAX;
+                }
+            }
+            total
+        })
+    });
+    report(&format!("placement/{} (one core)", s.label), &h);
+    eprintln!(
+        "placement/{}: {:.0} placements/s per core (1 / mean)",
+        s.label,
+        1e9 / h.mean()
+    );
+}
+
+/// Heightmap render of full scenes: each episode replayed, then timed renders.
+fn bench_heightmap(c: &mut Criterion, s: &Setup) {
+    let mut worlds = Vec::new();
+    for ep in s.episodes.iter().take(5) {
+        let mut w = PackingWorld::new(s.catalog.clone(), WorldConfig::default()).expect("world");
+        for &(t, x, y, th) in ep {
+            if !w.place(t, x, y, th).expect("place").inside {
+                break;
+            }
+        }
+        worlds.push(w);
+    }
+    let objects: usize = worlds.iter().map(|w| w.placed().len()).sum();
+    let mut h = hist();
+    let mut k = 0usize;
+    let n_worlds = worlds.len();
+    let spec = *worlds[0].heightmap().spec();
+    c.bench_function(&format!("heightmap/{}", s.label), |b| {
+        b.iter_custom(|iters| {
+            let mut total = Duration::ZERO;
+            for _ in 0..iters {
+                let w = &mut worlds[k % n_worlds];
+                k += 1;
+                let t0 = Instant::now();
+                w.render_heightmap();
+                let dt = t0.elapsed();
+                total += dt;
+                h.record(dt.as_nanos() as u64).ok();
+            }
+            total
+        })
+    });
+    report(
+        &format!(
+            "heightmap/{} ({} x {} cells, {:.1} objects per scene)",
+            s.label,
+            spec.nx,
+            spec.ny,
+            objects as f64 / worlds.len() as f64
+        ),
+        &h,
+    );
+}
+
+/// Live heap bytes of a new world and of a world holding a full episode (the catalog, shared
+/// between worlds, is excluded).
+fn memory(s: &Setup) {
+    let before = LIVE.load(Ordering::Relaxed);
+    let mut w = PackingWorld::new(s.catalog.clone(), WorldConfig::default()).expect("world");
+    let empty = LIVE.load(Ordering::Relaxed) - before;
+    let ep = s
+        .episodes
+        .iter()
+        .max_by_key(|e| e.len())
+        .expect("an episode");
+    let mut n = 0;
+    for &(t, x, y, th) in ep {
+        w.place(t, x, y, th).expect("place");
+        n += 1;
+    }
+    let full = LIVE.load(Ordering::Relaxed) - before;
+    eprintln!(
+        "memory/{}: {:.2} MiB per empty world, {:.2} MiB with {n} objects (catalog shared, not counted)",
+        s.label,
+        empty as f64 / (1 << 20) as f64,
+        full as f64 / (1 << 20) as f64
+    );
+    drop(w);
+}
+
+fn benches(c: &mut Criterion) {
+    for s in setups() {
+        memory(&s);
+        bench_heightmap(c, &s);
+        bench_placements(c, &s);
+    }
+}
+
+criterion_group! {
+    name = world;
+    config = Criterion::default().sample_size(20).measurement_time(Duration::from_secs(8));
+    targets = benches
+}
+criterion_main!(world);
