@@ -9,11 +9,15 @@
 //! and are kept in the session but not replayed), plus its tilt from upright.
 //!
 //! Counts: 263 sessions, 4660 records, 4576 placed instances (tested). The HERB and BoxED
-//! papers state 4644 placements; the difference (16) is not explained by the data's structure:
-//! no record is malformed, none repeats a pose, re-grasps add 84 (not 16), consecutive
-//! repeats of one id add 61, and records whose pivot lies outside the normalised box number
-//! 131. Most likely the published figure was counted on a slightly different snapshot of the
-//! recordings; we use all 4660 records as stored.
+//! papers state 4644 placements. The difference is the 16 re-grasps that move an already placed
+//! object by less than 2 cm: of the 84 re-grasps, those 16 move its pivot 5.3 to 14.2 mm, and
+//! the next smallest moves it 20.6 mm, so a count that takes short re-grasps as adjustments of the
+//! same placement, not new placements, gives exactly 4660 - 16 = 4644
+//! ([`Session::regrasp_moves`], [`ADJUSTMENT_MAX_M`]; tested). The papers do not state this
+//! rule; it is the one we found that reproduces their figure from the data's structure (no
+//! record is malformed or repeats a pose; consecutive repeats of one id number 61 and
+//! records whose pivot lies outside the normalised box 131, neither giving 16). We replay
+//! first placements only and keep all 4660 records.
 
 use crate::catalog::{Catalog, TypeIdx};
 use crate::error::{Result, SimError};
@@ -57,6 +61,39 @@ pub struct Session {
     pub name: String,
     /// Every record, in the stored order.
     pub records: Vec<PlacementRecord>,
+}
+
+/// Re-grasps that move an object by less than this (m) are adjustments of its placement: with
+/// this threshold the data gives the papers' 4644 placements (see the module docs).
+pub const ADJUSTMENT_MAX_M: f32 = 0.02;
+
+impl Session {
+    /// For each re-grasp (a record of an instance placed before), the index of the record and
+    /// how far it moved the object's pivot from its previous placement (m).
+    pub fn regrasp_moves(&self) -> Vec<(usize, f32)> {
+        let mut out = Vec::new();
+        for (k, r) in self.records.iter().enumerate() {
+            if let Some(prev) = self.records[..k]
+                .iter()
+                .rev()
+                .find(|p| p.instance == r.instance)
+            {
+                out.push((k, prev.pose.translation.distance(r.pose.translation)));
+            }
+        }
+        out
+    }
+
+    /// Placements counted as the papers count them: records minus the re-grasps that move the
+    /// object by less than [`ADJUSTMENT_MAX_M`].
+    pub fn paper_placement_count(&self) -> usize {
+        self.records.len()
+            - self
+                .regrasp_moves()
+                .iter()
+                .filter(|(_, d)| *d < ADJUSTMENT_MAX_M)
+                .count()
+    }
 }
 
 /// An evaluation episode derived from a session.
