@@ -104,6 +104,13 @@ enum Cmd {
         #[arg(long, default_value = "results/pack.png")]
         png: PathBuf,
     },
+    /// Count the human object-type transitions of all BoxED episodes and write the sequence
+    /// model (`models/sequence.json`, used by Beam-3).
+    Sequence {
+        /// Output file.
+        #[arg(long, default_value = "models/sequence.json")]
+        out: PathBuf,
+    },
     /// Print each object's shape source; with --fit, fit canonical frames from the meshes.
     Catalog {
         /// Print fitted `yaw_rad`, `origin_mesh_m`, `dims_m` for objects with a mesh.
@@ -162,6 +169,30 @@ fn need_root(root: Option<PathBuf>) -> AnyResult<PathBuf> {
 
 fn run(cli: Cli) -> AnyResult<()> {
     match cli.cmd {
+        Cmd::Sequence { out } => {
+            let (catalog, root) = load_catalog(&cli.data)?;
+            let root = need_root(root)?;
+            let (sessions, bad) = boxed::load_all(&root, &catalog)?;
+            if !bad.is_empty() {
+                let list: Vec<String> = bad.iter().map(|e| e.to_string()).collect();
+                return Err(format!("bad sessions: {}", list.join("; ")).into());
+            }
+            let episodes: Vec<Episode> = sessions.iter().map(|s| s.episode(&catalog)).collect();
+            let model = herb_daemon::SequenceModel::fit(
+                &catalog,
+                &episodes,
+                "BoxED sessions/*/PickPlace_dataset.json: each instance at its first placement, \
+                 in the human order (herb_sim::boxed::Session::episode)",
+            );
+            write_file(&out, &model.to_json())?;
+            eprintln!(
+                "wrote {} ({} episodes, {} transitions)",
+                out.display(),
+                model.provenance().episodes,
+                model.provenance().transitions
+            );
+            Ok(())
+        }
         Cmd::Catalog { fit } => {
             let (catalog, root) = load_catalog(&cli.data)?;
             if fit {

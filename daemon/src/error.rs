@@ -1,0 +1,36 @@
+//! Errors of the decision core.
+
+use std::path::PathBuf;
+
+/// Result with [`DecideError`].
+pub type Result<T, E = DecideError> = std::result::Result<T, E>;
+
+/// What went wrong, naming the input at fault.
+#[derive(Debug, thiserror::Error)]
+pub enum DecideError {
+    /// A file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// A sequence model that does not parse or does not fit the catalog.
+    #[error("sequence model {origin}: {message}")]
+    SequenceModel {
+        /// Where it came from (a path or a description).
+        origin: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// An empty object list was given to the planner.
+    #[error("no objects to order")]
+    EmptyObjectList,
+    /// An object type index outside the catalog.
+    #[error("unknown object type index {0}")]
+    UnknownType(u16),
+    /// An error from the packing world.
+    #[error(transparent)]
+    Sim(#[from] herb_sim::SimError),
+}

@@ -1,0 +1,15 @@
+//! HERB's decision core: in which order to pack (the human-like sequence planner, Beam-3 over
+//! a Markov chain of object-type transitions) and where to put each object (placement
+//! policies behind one trait). Used by `herbd`, by the evaluation (`herb-sim eval`) and by
+//! training.
+//!
+//! The observation layout, the z estimate and the object catalog are `herb-sim`'s (one
+//! implementation each); this crate only decides.
+
+#![warn(missing_docs)]
+
+pub mod error;
+pub mod sequence;
+
+pub use error::{DecideError, Result};
+pub use sequence::{SequenceModel, beam3};
