@@ -30,6 +30,14 @@ pub enum DecideError {
     /// An object type index outside the catalog.
     #[error("unknown object type index {0}")]
     UnknownType(u16),
+    /// A decision refused, with the reason (bad input or a bad action).
+    #[error("{policy} rejected the decision: {reason}")]
+    Rejected {
+        /// The policy.
+        policy: String,
+        /// Why.
+        reason: String,
+    },
     /// An error from the packing world.
     #[error(transparent)]
     Sim(#[from] herb_sim::SimError),

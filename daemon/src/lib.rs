@@ -9,7 +9,10 @@
 #![warn(missing_docs)]
 
 pub mod error;
+pub mod evaluate;
+pub mod policy;
 pub mod sequence;
 
 pub use error::{DecideError, Result};
+pub use policy::{Blbf, DecisionInput, Policy};
 pub use sequence::{SequenceModel, beam3};

@@ -57,6 +57,8 @@ pub struct EpisodeResult {
     pub compactness_per_step: Vec<f32>,
     /// Simulated physics steps in all.
     pub physics_steps: u64,
+    /// Decision latency of each placement (ns): policy plus z estimate; empty for replays.
+    pub decision_ns: Vec<u64>,
     /// Why the episode failed: the bound crossed (`"floor"`, `"+x wall"`, `"top"`...), and
     /// whether the object outside was the one just placed or an earlier one knocked out.
     pub failure: Option<Failure>,
@@ -145,38 +147,51 @@ pub fn run_episode(
     seed: u64,
 ) -> Result<EpisodeResult> {
     env.reset(&ep.objects, seed)?;
-    let mut r = EpisodeResult {
-        name: ep.name.clone(),
-        objects: ep.objects.len(),
-        packed: 0,
-        success: false,
-        placements: 0,
-        stable: 0,
-        compactness_per_step: Vec::with_capacity(ep.objects.len()),
-        physics_steps: 0,
-        failure: None,
-    };
+    let mut r = EpisodeResult::new(&ep.name, ep.objects.len());
     for i in 0..ep.objects.len() {
         let step = method_step(env, ep, i, method)?;
-        let o = step.info.outcome;
-        r.placements += 1;
-        r.stable += o.stable as usize;
-        r.physics_steps += o.settle_steps as u64;
-        r.compactness_per_step.push(o.compactness);
-        r.packed = step.info.packed;
-        r.success = step.info.success;
-        if let (Some(first), Some((bound, by_m))) = (o.first_outside, o.violation) {
-            r.failure = Some(Failure {
-                bound,
-                by_m,
-                earlier_object: first + 1 < r.placements,
-            });
-        }
-        if step.terminated {
+        if r.record(&step) {
             break;
         }
     }
     Ok(r)
+}
+
+impl EpisodeResult {
+    /// An empty result for an episode of `objects` objects.
+    pub fn new(name: &str, objects: usize) -> Self {
+        Self {
+            name: name.to_owned(),
+            objects,
+            packed: 0,
+            success: false,
+            placements: 0,
+            stable: 0,
+            compactness_per_step: Vec::with_capacity(objects),
+            physics_steps: 0,
+            decision_ns: Vec::with_capacity(objects),
+            failure: None,
+        }
+    }
+
+    /// Records one step's outcome; true when the episode has ended.
+    pub fn record(&mut self, step: &StepResult) -> bool {
+        let o = &step.info.outcome;
+        self.placements += 1;
+        self.stable += o.stable as usize;
+        self.physics_steps += o.settle_steps as u64;
+        self.compactness_per_step.push(o.compactness);
+        self.packed = step.info.packed;
+        self.success = step.info.success;
+        if let (Some(first), Some((bound, by_m))) = (o.first_outside, o.violation) {
+            self.failure = Some(Failure {
+                bound,
+                by_m,
+                earlier_object: first + 1 < self.placements,
+            });
+        }
+        step.terminated
+    }
 }
 
 /// Runs `method` over `episodes` on `jobs` threads. Results keep the episodes' order; an
@@ -189,6 +204,28 @@ pub fn run_all(
     seed: u64,
     jobs: usize,
 ) -> Result<Vec<std::result::Result<EpisodeResult, String>>> {
+    run_all_with(catalog, cfg, episodes, jobs, || {
+        Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
+            run_episode(env, ep, method, seed.wrapping_add(i as u64)).map_err(|e| e.to_string())
+        })
+    })
+}
+
+/// Runs episodes on `jobs` threads, each with its own environment and its own worker made by
+/// `make_worker` (e.g. a policy per thread). The worker runs episode `i`. Results keep the
+/// episodes' order; an episode that errors is reported and the others go on; a worker that
+/// cannot be made is an error for its episodes.
+pub fn run_all_with<W, F>(
+    catalog: &SharedCatalog,
+    cfg: &WorldConfig,
+    episodes: &[Episode],
+    jobs: usize,
+    make_worker: F,
+) -> Result<Vec<std::result::Result<EpisodeResult, String>>>
+where
+    F: Fn() -> std::result::Result<W, String> + Sync,
+    W: FnMut(&mut PackingEnv, &Episode, usize) -> std::result::Result<EpisodeResult, String>,
+{
     // Build one environment up front so configuration errors surface once, not per episode.
     PackingEnv::new(catalog.clone(), cfg.clone(), RewardMode::Simple)?;
     let next = AtomicUsize::new(0);
@@ -197,16 +234,17 @@ pub fn run_all(
     std::thread::scope(|s| {
         for _ in 0..jobs.max(1) {
             s.spawn(|| {
-                let mut env =
-                    match PackingEnv::new(catalog.clone(), cfg.clone(), RewardMode::Simple) {
-                        Ok(e) => e,
-                        Err(_) => return,
-                    };
+                let env = PackingEnv::new(catalog.clone(), cfg.clone(), RewardMode::Simple);
+                let (mut env, mut worker) = match (env, make_worker()) {
+                    (Ok(e), Ok(w)) => (e, w),
+                    (Err(e), _) => return fail_rest(&next, episodes, &out, e.to_string()),
+                    (_, Err(e)) => return fail_rest(&next, episodes, &out, e),
+                };
                 loop {
                     let i = next.fetch_add(1, Ordering::Relaxed);
                     let Some(ep) = episodes.get(i) else { break };
-                    let res = run_episode(&mut env, ep, method, seed.wrapping_add(i as u64))
-                        .map_err(|e: SimError| format!("episode {}: {e}", ep.name));
+                    let res =
+                        worker(&mut env, ep, i).map_err(|e| format!("episode {}: {e}", ep.name));
                     out.lock().unwrap_or_else(|p| p.into_inner())[i] = Some(res);
                 }
             });
@@ -218,6 +256,17 @@ pub fn run_all(
         .into_iter()
         .map(|r| r.unwrap_or_else(|| Err("not run".into())))
         .collect())
+}
+
+type Slots = Mutex<Vec<Option<std::result::Result<EpisodeResult, String>>>>;
+
+fn fail_rest(next: &AtomicUsize, episodes: &[Episode], out: &Slots, why: String) {
+    loop {
+        let i = next.fetch_add(1, Ordering::Relaxed);
+        let Some(ep) = episodes.get(i) else { break };
+        out.lock().unwrap_or_else(|p| p.into_inner())[i] =
+            Some(Err(format!("episode {}: {why}", ep.name)));
+    }
 }
 
 /// Mean and population standard deviation.
@@ -253,6 +302,9 @@ pub struct Summary {
     pub stability_pct: f64,
     /// Failed episodes per cause ([`Failure::label`]), most frequent first.
     pub failures: Vec<(String, usize)>,
+    /// Decision latency over all placements (ms): mean, population std, p99; `None` for
+    /// replays that make no decision.
+    pub latency_ms: Option<(f64, f64, f64)>,
 }
 
 /// Summarises results (errored episodes are counted apart and excluded).
@@ -274,7 +326,22 @@ pub fn summarize(method: &str, results: &[std::result::Result<EpisodeResult, Str
         ),
         stability_pct: 100.0 * stable as f64 / placements.max(1) as f64,
         failures: count_failures(&ok),
+        latency_ms: latency(&ok),
     }
+}
+
+fn latency(ok: &[&EpisodeResult]) -> Option<(f64, f64, f64)> {
+    let mut all: Vec<u64> = ok
+        .iter()
+        .flat_map(|r| r.decision_ns.iter().copied())
+        .collect();
+    if all.is_empty() {
+        return None;
+    }
+    all.sort_unstable();
+    let (m, sd) = mean_std(all.iter().map(|&n| n as f64 / 1e6));
+    let p99 = all[((all.len() - 1) as f64 * 0.99).round() as usize] as f64 / 1e6;
+    Some((m, sd, p99))
 }
 
 fn count_failures(ok: &[&EpisodeResult]) -> Vec<(String, usize)> {
@@ -287,30 +354,56 @@ fn count_failures(ok: &[&EpisodeResult]) -> Vec<(String, usize)> {
     v
 }
 
+/// A row of the paper's Table I: name, success %, objects packed mean and std, and decision
+/// latency mean and std (ms) where reported.
+pub type PaperRow = (&'static str, f64, f64, f64, Option<(f64, f64)>);
+
+/// The HERB paper's Table I rows.
+pub const PAPER_ROWS: [PaperRow; 7] = [
+    ("Human packing", 84.41, 15.22, 4.79, None),
+    ("PackIt SO(2)", 82.50, 16.33, 4.46, Some((1.59, 0.28))),
+    ("PackIt SO(3)", 55.89, 13.92, 5.07, Some((2.51, 0.52))),
+    ("BC-MSE", 7.22, 6.69, 5.16, Some((0.86, 0.25))),
+    ("BC-MDN", 13.69, 6.42, 6.05, Some((0.85, 0.31))),
+    ("HERB CS0.9", 87.83, 16.76, 3.79, Some((0.83, 0.26))),
+    ("HERB CS0.6", 86.31, 16.43, 4.26, Some((0.77, 0.24))),
+];
+
 /// A Markdown table of our rows beside the paper's (HERB paper, Table I). `target` is the
 /// objects-per-episode mean and std of the evaluated episodes.
 pub fn format_table(rows: &[Summary], target: (f64, f64), episodes: usize) -> String {
     let mut s = String::new();
     s.push_str(
-        "| method | success % | objects packed mean (std) | final C (std) | stability % |\n",
+        "| method | success % | objects packed mean (std) | latency ms mean (std) | latency p99 ms | final C (std) | stability % |\n",
     );
-    s.push_str("| --- | ---: | ---: | ---: | ---: |\n");
-    s.push_str("| Target (paper) | 100 | 17.40 (3.63) | - | - |\n");
+    s.push_str("| --- | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+    s.push_str("| Target (paper) | 100 | 17.40 (3.63) | - | - | - | - |\n");
     s.push_str(&format!(
-        "| Target (ours, {episodes} episodes) | 100 | {:.2} ({:.2}) | - | - |\n",
+        "| Target (ours, {episodes} episodes) | 100 | {:.2} ({:.2}) | - | - | - | - |\n",
         target.0, target.1
     ));
-    s.push_str("| Human packing (paper) | 84.41 | 15.22 (4.79) | - | - |\n");
-    for r in rows {
+    for (name, success, mean, std, lat) in PAPER_ROWS {
+        let lat = lat.map_or("-".to_string(), |(m, sd)| format!("{m:.2} ({sd:.2})"));
         s.push_str(&format!(
-            "| {} (ours) | {:.2} | {:.2} ({:.2}) | {:.3} ({:.3}) | {:.1} |\n",
-            r.method,
-            r.success_pct,
-            r.packed.0,
-            r.packed.1,
-            r.final_compactness.0,
-            r.final_compactness.1,
-            r.stability_pct
+            "| {name} (paper) | {success:.2} | {mean:.2} ({std:.2}) | {lat} | - | - | - |\n"
+        ));
+    }
+    for r in rows {
+        let (lat, p99) = match r.latency_ms {
+            Some((m, sd, p99)) => (format!("{m:.3} ({sd:.3})"), format!("{p99:.3}")),
+            None => ("-".into(), "-".into()),
+        };
+        let c = if r.final_compactness.0.is_nan() {
+            "-".to_string()
+        } else {
+            format!(
+                "{:.3} ({:.3})",
+                r.final_compactness.0, r.final_compactness.1
+            )
+        };
+        s.push_str(&format!(
+            "| {} (ours) | {:.2} | {:.2} ({:.2}) | {lat} | {p99} | {c} | {:.1} |\n",
+            r.method, r.success_pct, r.packed.0, r.packed.1, r.stability_pct
         ));
     }
     s

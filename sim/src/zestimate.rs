@@ -8,14 +8,18 @@
 //! grid count as the walls' top ([`crate::heightmap::OUTSIDE_HEIGHT`]). No clearance is added.
 
 use crate::catalog::ObjectShape;
-use crate::heightmap::{DepthTest, Heightmap, Window, raster_hull};
+use crate::heightmap::{DepthTest, GridSpec, Heightmap, Window, raster_hull};
 use rapier3d::math::{Rotation, Vector};
 
-/// Reusable buffers, so repeated estimates do not allocate once warmed up.
+/// Reusable buffers, so repeated estimates do not allocate once warmed up. After
+/// [`bottom_footprint`] it holds the object's bottom surface under its footprint.
 #[derive(Debug, Default, Clone)]
 pub struct ZScratch {
     verts: Vec<Vector>,
     buf: Vec<f32>,
+    win: Option<Window>,
+    lowest: f32,
+    top: f32,
 }
 
 impl ZScratch {
@@ -26,7 +30,21 @@ impl ZScratch {
         Self {
             verts: Vec::with_capacity(max_vertices),
             buf: Vec::with_capacity(side * side),
+            win: None,
+            lowest: 0.0,
+            top: 0.0,
         }
+    }
+
+    /// Lowest vertex z relative to the origin, of the last footprint (m, <= 0 for a centred
+    /// origin).
+    pub fn lowest(&self) -> f32 {
+        self.lowest
+    }
+
+    /// Highest vertex z relative to the origin, of the last footprint (m).
+    pub fn top(&self) -> f32 {
+        self.top
     }
 }
 
@@ -53,10 +71,25 @@ pub fn estimate_z_rotated(
     rot: Rotation,
     scratch: &mut ZScratch,
 ) -> f32 {
-    let spec = *hm.spec();
+    bottom_footprint(hm.spec(), shape, x, y, rot, scratch);
+    rest_height(hm, scratch, 0, 0).unwrap_or_else(|| hm.sample(x, y) - scratch.lowest)
+}
+
+/// Rasterises the bottom surface of `shape` in orientation `rot` with its origin at `(x, y)`
+/// on grid `spec` into `scratch` (min z-buffer at the cell centres under the footprint,
+/// relative to the origin).
+pub fn bottom_footprint(
+    spec: &GridSpec,
+    shape: &ObjectShape,
+    x: f32,
+    y: f32,
+    rot: Rotation,
+    scratch: &mut ZScratch,
+) {
     let offset = Vector::new(x, y, 0.0);
     scratch.verts.clear();
     let (mut umin, mut umax, mut vmin, mut vmax) = (f32::MAX, f32::MIN, f32::MAX, f32::MIN);
+    let (mut lowest, mut top) = (f32::MAX, f32::MIN);
     for &v in &shape.vertices {
         let w = rot * v + offset;
         let (u, vv) = spec.to_pixel(w.x, w.y);
@@ -64,45 +97,51 @@ pub fn estimate_z_rotated(
         umax = umax.max(u);
         vmin = vmin.min(vv);
         vmax = vmax.max(vv);
+        lowest = lowest.min(w.z);
+        top = top.max(w.z);
         scratch.verts.push(w);
     }
-    let win = Window {
-        col0: (umin - 0.5).ceil() as isize,
-        row0: (vmin - 0.5).ceil() as isize,
-        w: 0,
-        h: 0,
-    };
-    let w = ((umax - 0.5).floor() as isize - win.col0 + 1).max(0) as usize;
-    let h = ((vmax - 0.5).floor() as isize - win.row0 + 1).max(0) as usize;
-    let win = Window { w, h, ..win };
-    let lowest = scratch.verts.iter().map(|v| v.z).fold(f32::MAX, f32::min);
+    scratch.lowest = lowest;
+    scratch.top = top;
+    let col0 = (umin - 0.5).ceil() as isize;
+    let row0 = (vmin - 0.5).ceil() as isize;
+    let w = ((umax - 0.5).floor() as isize - col0 + 1).max(0) as usize;
+    let h = ((vmax - 0.5).floor() as isize - row0 + 1).max(0) as usize;
     if w == 0 || h == 0 {
-        // Footprint smaller than a cell between centres: use the cell under the origin.
-        return hm.sample(x, y) - lowest;
+        // Footprint smaller than a cell between centres: no cell centre under it.
+        scratch.win = None;
+        return;
     }
+    let win = Window { col0, row0, w, h };
     scratch.buf.clear();
     scratch.buf.resize(w * h, f32::INFINITY);
     raster_hull(
-        &spec,
+        spec,
         &mut scratch.buf,
         win,
         &mut scratch.verts,
         &shape.triangles,
         DepthTest::Min,
     );
+    scratch.win = Some(win);
+}
+
+/// The origin height at which the footprint last rasterised into `scratch`, moved by `dcol`
+/// columns (+x) and `drow` rows (-y), rests on `hm`: `max over cells (H - bottom)`. Equal to
+/// the estimate at the moved position when `hm` has the grid the footprint was rasterised on.
+/// `None` when no cell centre lies under the footprint.
+pub fn rest_height(hm: &Heightmap, scratch: &ZScratch, dcol: isize, drow: isize) -> Option<f32> {
+    let win = scratch.win?;
     let mut z = f32::MIN;
-    for r in 0..h {
-        for c in 0..w {
-            let bottom = scratch.buf[r * w + c];
+    for r in 0..win.h {
+        let row = &scratch.buf[r * win.w..(r + 1) * win.w];
+        let gr = win.row0 + drow + r as isize;
+        for (c, &bottom) in row.iter().enumerate() {
             if bottom.is_finite() {
-                let ground = hm.get(win.col0 + c as isize, win.row0 + r as isize);
+                let ground = hm.get(win.col0 + dcol + c as isize, gr);
                 z = z.max(ground - bottom);
             }
         }
     }
-    if z == f32::MIN {
-        hm.sample(x, y) - lowest
-    } else {
-        z
-    }
+    (z != f32::MIN).then_some(z)
 }

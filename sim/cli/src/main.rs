@@ -11,6 +11,11 @@ use std::process::ExitCode;
 use std::sync::Arc;
 use std::time::Instant;
 
+mod plot;
+
+use herb_daemon::evaluate::{SequenceMode, run_policy_episode};
+use herb_daemon::{Blbf, Policy, SequenceModel};
+
 #[derive(Parser)]
 #[command(
     name = "herb-sim",
@@ -60,13 +65,79 @@ impl From<MethodArg> for Method {
     }
 }
 
+/// Evaluation methods: the packing world's replays and random actions, and the decision
+/// core's policies.
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum EvalMethod {
+    /// Beam-3 order (default) and the ONNX policy given by --policy.
+    Herb,
+    /// The PackIt SO(2) heuristic, largest first (default order).
+    Blbf,
+    /// Human order, the humans' planar placements.
+    Human,
+    /// Human order, the humans' full orientations.
+    HumanPose,
+    /// Human order, uniform random actions.
+    Random,
+}
+
+impl EvalMethod {
+    fn name(&self) -> &'static str {
+        match self {
+            Self::Herb => "herb",
+            Self::Blbf => "blbf",
+            Self::Human => "human",
+            Self::HumanPose => "human-pose",
+            Self::Random => "random",
+        }
+    }
+
+    fn sim_method(&self) -> Option<Method> {
+        match self {
+            Self::Human => Some(Method::Human),
+            Self::HumanPose => Some(Method::HumanPose),
+            Self::Random => Some(Method::Random),
+            Self::Herb | Self::Blbf => None,
+        }
+    }
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum SequenceArg {
+    Beam3,
+    Human,
+    Largest,
+    Random,
+}
+
+impl From<SequenceArg> for SequenceMode {
+    fn from(s: SequenceArg) -> Self {
+        match s {
+            SequenceArg::Beam3 => SequenceMode::Beam3,
+            SequenceArg::Human => SequenceMode::Human,
+            SequenceArg::Largest => SequenceMode::Largest,
+            SequenceArg::Random => SequenceMode::Random,
+        }
+    }
+}
+
 #[derive(Subcommand)]
 enum Cmd {
-    /// Run a method over all BoxED episodes and print the Table I metrics.
+    /// Run methods over all BoxED episodes and write the Table I metrics (Markdown, CSV, plots).
     Eval {
-        /// Placement method.
+        /// Method (repeat for several rows).
         #[arg(long, value_enum)]
-        method: Vec<MethodArg>,
+        method: Vec<EvalMethod>,
+        /// Object order for herb and blbf (defaults: beam3 for herb, largest for blbf); the
+        /// replays and random use the human order.
+        #[arg(long, value_enum)]
+        sequence: Option<SequenceArg>,
+        /// The ONNX placement policy for herb.
+        #[arg(long)]
+        policy: Option<PathBuf>,
+        /// The sequence model for Beam-3.
+        #[arg(long, default_value = "models/sequence.json")]
+        sequence_model: PathBuf,
         /// Base seed (episode i uses seed + i).
         #[arg(long, default_value_t = 0)]
         seed: u64,
@@ -82,12 +153,15 @@ enum Cmd {
         /// ... to this path.
         #[arg(long, default_value = "results/final-heightmap.png")]
         png: PathBuf,
-        /// Write the table (Markdown) here as well.
-        #[arg(long)]
-        out: Option<PathBuf>,
+        /// Write the table (Markdown) here.
+        #[arg(long, default_value = "results/table1.md")]
+        out: PathBuf,
         /// Write per-episode results (CSV) here.
-        #[arg(long)]
-        csv: Option<PathBuf>,
+        #[arg(long, default_value = "results/table1.csv")]
+        csv: PathBuf,
+        /// Write the plots (compactness per step, objects packed) into this folder.
+        #[arg(long, default_value = "results")]
+        plots: PathBuf,
     },
     /// Pack one BoxED episode, print each placement, and write a picture of the final pack.
     Pack {
@@ -239,6 +313,9 @@ fn run(cli: Cli) -> AnyResult<()> {
         }
         Cmd::Eval {
             method,
+            sequence,
+            policy,
+            sequence_model,
             seed,
             jobs,
             limit,
@@ -246,9 +323,15 @@ fn run(cli: Cli) -> AnyResult<()> {
             png,
             out,
             csv,
+            plots,
         } => {
             if method.is_empty() {
-                return Err("give at least one --method (human, random)".into());
+                return Err(
+                    "give at least one --method (herb, blbf, human, human-pose, random)".into(),
+                );
+            }
+            if sequence.is_some() && method.iter().any(|m| m.sim_method().is_some()) {
+                return Err("--sequence applies to herb and blbf only (replays and random use the human order)".into());
             }
             let (catalog, root) = load_catalog(&cli.data)?;
             let root = need_root(root)?;
@@ -260,16 +343,52 @@ fn run(cli: Cli) -> AnyResult<()> {
             if let Some(n) = limit {
                 episodes.truncate(n);
             }
+            let model = if method.contains(&EvalMethod::Herb)
+                || matches!(sequence, Some(SequenceArg::Beam3))
+            {
+                Some(SequenceModel::load(&sequence_model, &catalog)?)
+            } else {
+                None
+            };
             let target = eval::mean_std(episodes.iter().map(|e| e.objects.len() as f64));
             let cfg = WorldConfig::default();
             let mut rows = Vec::new();
+            let mut all_results = Vec::new();
             let mut csv_text = String::from(
-                "method,episode,objects,packed,success,placements,stable,final_compactness,physics_steps\n",
+                "method,sequence,episode,objects,packed,success,placements,stable,final_compactness,physics_steps,latency_mean_ms\n",
             );
             for m in method {
-                let m: Method = m.into();
                 let t = Instant::now();
-                let results = eval::run_all(&catalog, &cfg, &episodes, m, seed, jobs)?;
+                let (label, seq_name, results) = match m.sim_method() {
+                    Some(sm) => (
+                        m.name().to_string(),
+                        "human",
+                        eval::run_all(&catalog, &cfg, &episodes, sm, seed, jobs)?,
+                    ),
+                    None => {
+                        let mode: SequenceMode = match (sequence, m) {
+                            (Some(s), _) => s.into(),
+                            (None, EvalMethod::Blbf) => SequenceMode::Largest,
+                            (None, _) => SequenceMode::Beam3,
+                        };
+                        let results = run_policy_method(
+                            &catalog,
+                            &cfg,
+                            &episodes,
+                            m,
+                            mode,
+                            model.as_ref(),
+                            policy.as_deref(),
+                            seed,
+                            jobs,
+                        )?;
+                        (
+                            format!("{} ({})", m.name(), mode.name()),
+                            mode.name(),
+                            results,
+                        )
+                    }
+                };
                 let secs = t.elapsed().as_secs_f64();
                 let placements: usize = results
                     .iter()
@@ -277,8 +396,7 @@ fn run(cli: Cli) -> AnyResult<()> {
                     .map(|r| r.placements)
                     .sum();
                 eprintln!(
-                    "{}: {} episodes, {} placements in {:.1} s ({:.0} placements/s on {} threads)",
-                    m.name(),
+                    "{label}: {} episodes, {} placements in {:.1} s ({:.0} placements/s on {} threads)",
                     results.len(),
                     placements,
                     secs,
@@ -287,23 +405,34 @@ fn run(cli: Cli) -> AnyResult<()> {
                 );
                 for r in &results {
                     match r {
-                        Ok(r) => csv_text.push_str(&format!(
-                            "{},{},{},{},{},{},{},{:.4},{}\n",
-                            m.name(),
-                            r.name,
-                            r.objects,
-                            r.packed,
-                            r.success,
-                            r.placements,
-                            r.stable,
-                            r.final_compactness(),
-                            r.physics_steps
-                        )),
+                        Ok(r) => {
+                            let lat =
+                                eval::mean_std(r.decision_ns.iter().map(|&n| n as f64 / 1e6)).0;
+                            csv_text.push_str(&format!(
+                                "{},{},{},{},{},{},{},{},{:.4},{},{}\n",
+                                m.name(),
+                                seq_name,
+                                r.name,
+                                r.objects,
+                                r.packed,
+                                r.success,
+                                r.placements,
+                                r.stable,
+                                r.final_compactness(),
+                                r.physics_steps,
+                                if lat.is_nan() {
+                                    String::new()
+                                } else {
+                                    format!("{lat:.4}")
+                                }
+                            ));
+                        }
                         Err(e) => eprintln!("episode failed: {e}"),
                     }
                 }
-                rows.push(eval::summarize(m.name(), &results));
-                if let Some(name) = &png_episode {
+                rows.push(eval::summarize(&label, &results));
+                all_results.push((label.clone(), results));
+                if let (Some(name), Some(sm)) = (&png_episode, m.sim_method()) {
                     let ep = episodes
                         .iter()
                         .find(|e| &e.name == name)
@@ -316,7 +445,7 @@ fn run(cli: Cli) -> AnyResult<()> {
                             name
                         ))
                         .with_extension("png");
-                    pack_quiet(&catalog, ep, m, seed, &path)?;
+                    pack_quiet(&catalog, ep, sm, seed, &path)?;
                     eprintln!("wrote {}", path.display());
                 }
             }
@@ -335,15 +464,56 @@ fn run(cli: Cli) -> AnyResult<()> {
                 ));
             }
             println!("{table}");
-            if let Some(p) = out {
-                write_file(&p, &table)?;
-            }
-            if let Some(p) = csv {
-                write_file(&p, &csv_text)?;
+            write_file(&out, &table)?;
+            write_file(&csv, &csv_text)?;
+            eprintln!("wrote {} and {}", out.display(), csv.display());
+            match plot::write_plots(&plots, &all_results) {
+                Ok(files) => {
+                    for f in files {
+                        eprintln!("wrote {}", f.display());
+                    }
+                }
+                // The table and CSV are already written: report and keep them.
+                Err(e) => eprintln!("herb-sim: plots not written: {e}"),
             }
             Ok(())
         }
     }
+}
+
+/// Runs a decision-core policy over `episodes`, one policy per worker thread.
+#[allow(clippy::too_many_arguments)]
+fn run_policy_method(
+    catalog: &SharedCatalog,
+    cfg: &WorldConfig,
+    episodes: &[Episode],
+    m: EvalMethod,
+    mode: SequenceMode,
+    model: Option<&SequenceModel>,
+    policy_path: Option<&Path>,
+    seed: u64,
+    jobs: usize,
+) -> AnyResult<Vec<Result<eval::EpisodeResult, String>>> {
+    if m == EvalMethod::Herb && policy_path.is_none() {
+        return Err(
+            "herb needs --policy <model.onnx> (the trained policy comes with the training issue)"
+                .into(),
+        );
+    }
+    let make = || -> Result<_, String> {
+        let mut policy: Box<dyn Policy> = match m {
+            EvalMethod::Blbf => Box::new(Blbf::new()),
+            _ => return Err(format!("{} is not a decision-core policy", m.name())),
+        };
+        Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
+            let s = seed.wrapping_add(i as u64);
+            let order = mode
+                .order(env.world().catalog(), model, &ep.objects, s)
+                .map_err(|e| e.to_string())?;
+            run_policy_episode(env, ep, &order, policy.as_mut(), s).map_err(|e| e.to_string())
+        })
+    };
+    Ok(eval::run_all_with(catalog, cfg, episodes, jobs, make)?)
 }
 
 fn write_file(p: &Path, text: &str) -> AnyResult<()> {

@@ -1,0 +1,212 @@
+//! Placement policies behind one trait: the observation in, an action `(x, y, theta)` in
+//! `[-1, 1]^3` out (mapped to the box by `herb_sim::observation::action_to_placement`).
+//!
+//! A policy sees a [`DecisionInput`]: the observation tensor in the shared layout
+//! (`herb_sim::ObsLayout`), and, for policies that are not networks, the heightmap it was
+//! built from and the next object. Decisions are checked before they leave: a non-finite or
+//! out-of-range action is a [`DecideError::Rejected`] naming the policy, never passed on.
+
+use crate::error::{DecideError, Result};
+use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y};
+use herb_sim::observation::placement_to_action;
+use herb_sim::zestimate::{ZScratch, bottom_footprint, rest_height};
+use herb_sim::{GridSpec, Heightmap, ObjectShape, ObsLayout, TypeIdx};
+use rapier3d::math::Rotation;
+
+/// What a policy decides from.
+#[derive(Debug, Clone, Copy)]
+pub struct DecisionInput<'a> {
+    /// The observation, `ObsLayout::LEN` values in the shared layout.
+    pub observation: &'a [f32],
+    /// The box heightmap the observation was built from (m).
+    pub heightmap: &'a Heightmap,
+    /// The next object's type.
+    pub object: TypeIdx,
+    /// Its shape (canonical frame).
+    pub shape: &'a ObjectShape,
+    /// Its index in the packing sequence.
+    pub step: usize,
+}
+
+/// A placement policy.
+pub trait Policy {
+    /// Short name for tables and logs.
+    fn name(&self) -> &str;
+    /// Starts an episode (seeds stochastic policies; replays reset their cursor).
+    fn begin_episode(&mut self, seed: u64);
+    /// The action for `input`, in `[-1, 1]^3`.
+    fn decide(&mut self, input: &DecisionInput) -> Result<[f32; 3]>;
+}
+
+/// Checks an input before a policy sees it: observation length and values in `[0, 1]`, and a
+/// valid heightmap (finite, in range).
+pub fn check_input(policy: &str, input: &DecisionInput) -> Result<()> {
+    let reject = |reason: String| DecideError::Rejected {
+        policy: policy.to_owned(),
+        reason,
+    };
+    if input.observation.len() != ObsLayout::LEN {
+        return Err(reject(format!(
+            "observation has {} values, expected {}",
+            input.observation.len(),
+            ObsLayout::LEN
+        )));
+    }
+    if let Some(i) = input
+        .observation
+        .iter()
+        .position(|v| !(0.0..=1.0).contains(v))
+    {
+        return Err(reject(format!(
+            "observation value {} at index {i} outside [0, 1]",
+            input.observation[i]
+        )));
+    }
+    input
+        .heightmap
+        .validate()
+        .map_err(|e| reject(format!("heightmap: {e}")))
+}
+
+/// Checks an action before it leaves a policy: finite and within `[-1, 1]`.
+pub fn check_action(policy: &str, a: [f32; 3]) -> Result<[f32; 3]> {
+    if a.iter().all(|v| v.is_finite() && v.abs() <= 1.0) {
+        Ok(a)
+    } else {
+        Err(DecideError::Rejected {
+            policy: policy.to_owned(),
+            reason: format!("action {a:?} is not finite and within [-1, 1]"),
+        })
+    }
+}
+
+/// The grid cell of the BLBF search, as a multiple of the heightmap cell.
+pub const BLBF_CELLS_PER_STEP: usize = 4;
+
+/// The PackIt heuristic restricted to planar rotations (after princeton-vl/PackIt,
+/// `packing/packing_heuristic.py`), our stand-in for the paper's "PackIt SO(2)" row.
+///
+/// The object stays upright (canonical resting orientation) with yaw 0 or 90 degrees. Over a
+/// grid of [`BLBF_CELLS_PER_STEP`] heightmap cells (6.25 mm for the observation's 1.5625 mm
+/// cells), on a max-pooled copy of the heightmap, every position whose footprint lies inside
+/// the walls is scored by its resting height (the shared z estimate) plus the object's height:
+/// the position with the lowest resulting top wins, then the smallest x, then the smallest y
+/// (deep-bottom-left-back fill), then yaw 0 before 90 degrees. The sequence (largest volume
+/// first) is the planner's job (`--sequence largest`). Allocates only on its first decision
+/// or when the heightmap grid changes.
+#[derive(Debug, Default)]
+pub struct Blbf {
+    coarse: Option<Heightmap>,
+    scratch: ZScratch,
+}
+
+impl Blbf {
+    /// A BLBF policy.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The search grid's cell (m) for a heightmap grid.
+    pub fn search_cell(spec: &GridSpec) -> f32 {
+        spec.cell * BLBF_CELLS_PER_STEP as f32
+    }
+
+    /// The best placement `(x, y, theta)` and its top height, or `None` if no position fits
+    /// between the walls.
+    pub fn best(&mut self, hm: &Heightmap, shape: &ObjectShape) -> Option<(f32, f32, f32, f32)> {
+        let cell = Self::search_cell(hm.spec());
+        let spec = GridSpec::for_box(cell).ok()?;
+        let coarse = match &mut self.coarse {
+            Some(c) if *c.spec() == spec => c,
+            slot => slot.insert(Heightmap::new(spec)),
+        };
+        max_pool_into(hm, coarse);
+        let mut best: Option<(f32, f32, f32, f32)> = None;
+        for theta in [0.0f32, std::f32::consts::FRAC_PI_2] {
+            let rot = Rotation::from_rotation_z(theta);
+            let (x0, y0) = spec.cell_centre(0, 0);
+            bottom_footprint(&spec, shape, x0, y0, rot, &mut self.scratch);
+            // Footprint extents around the origin (for the walls).
+            let (lo, hi) =
+                shape
+                    .vertices
+                    .iter()
+                    .fold(([f32::MAX; 2], [f32::MIN; 2]), |(lo, hi), &v| {
+                        let r = rot * v;
+                        (
+                            [lo[0].min(r.x), lo[1].min(r.y)],
+                            [hi[0].max(r.x), hi[1].max(r.y)],
+                        )
+                    });
+            let height = self.scratch.top() - self.scratch.lowest();
+            const TOL: f32 = 1e-4;
+            for row in 0..spec.ny {
+                for col in 0..spec.nx {
+                    let (x, y) = spec.cell_centre(col, row);
+                    if x + lo[0] < -BOX_HALF_X - TOL
+                        || x + hi[0] > BOX_HALF_X + TOL
+                        || y + lo[1] < -BOX_HALF_Y - TOL
+                        || y + hi[1] > BOX_HALF_Y + TOL
+                    {
+                        continue;
+                    }
+                    let Some(z) = rest_height(coarse, &self.scratch, col as isize, row as isize)
+                    else {
+                        continue;
+                    };
+                    let top = z + self.scratch.lowest() + height;
+                    let better = match best {
+                        None => true,
+                        Some((bx, by, _, btop)) => (top, x, y) < (btop, bx, by),
+                    };
+                    if better {
+                        best = Some((x, y, theta, top));
+                    }
+                }
+            }
+        }
+        best
+    }
+}
+
+/// `dst` (a coarser grid over the box) gets, per cell, the highest value of the `src` cells
+/// whose centres fall inside it.
+fn max_pool_into(src: &Heightmap, dst: &mut Heightmap) {
+    let (ss, ds) = (*src.spec(), *dst.spec());
+    let data = dst.data_mut();
+    data.fill(0.0);
+    for row in 0..ss.ny {
+        for col in 0..ss.nx {
+            let (x, y) = ss.cell_centre(col, row);
+            let (u, v) = ds.to_pixel(x, y);
+            let (c, r) = (u.floor(), v.floor());
+            if c >= 0.0 && r >= 0.0 && (c as usize) < ds.nx && (r as usize) < ds.ny {
+                let d = &mut data[r as usize * ds.nx + c as usize];
+                *d = d.max(src.data()[row * ss.nx + col]);
+            }
+        }
+    }
+}
+
+impl Policy for Blbf {
+    fn name(&self) -> &str {
+        "blbf"
+    }
+    fn begin_episode(&mut self, _seed: u64) {}
+    fn decide(&mut self, input: &DecisionInput) -> Result<[f32; 3]> {
+        input
+            .heightmap
+            .validate()
+            .map_err(|e| DecideError::Rejected {
+                policy: "blbf".into(),
+                reason: format!("heightmap: {e}"),
+            })?;
+        let (x, y, theta, _) =
+            self.best(input.heightmap, input.shape)
+                .ok_or_else(|| DecideError::Rejected {
+                    policy: "blbf".into(),
+                    reason: "the object does not fit between the walls in either yaw".into(),
+                })?;
+        check_action("blbf", placement_to_action(x, y, theta))
+    }
+}
