@@ -24,6 +24,14 @@ pub enum DecideError {
         /// What is wrong.
         message: String,
     },
+    /// A policy model that cannot be used, with the reason.
+    #[error("policy model {path}: {message}")]
+    Model {
+        /// The model file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
     /// An empty object list was given to the planner.
     #[error("no objects to order")]
     EmptyObjectList,

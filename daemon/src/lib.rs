@@ -10,9 +10,11 @@
 
 pub mod error;
 pub mod evaluate;
+pub mod onnx;
 pub mod policy;
 pub mod sequence;
 
 pub use error::{DecideError, Result};
+pub use onnx::OnnxPolicy;
 pub use policy::{Blbf, DecisionInput, Policy};
 pub use sequence::{SequenceModel, beam3};

@@ -25,6 +25,20 @@
 //! `a` in `[-1, 1]^3` maps linearly: `x = a0 * BOX_HALF_X`, `y = a1 * BOX_HALF_Y` (the canonical
 //! origin of the object, over the box interior), `theta = a2 * pi` (turn about z). Finite
 //! actions outside the range are clamped; non-finite ones are rejected.
+//!
+//! # Policy model I/O contract (ONNX)
+//!
+//! A placement policy model has exactly one input and one output:
+//!
+//! - input [`ObsLayout::INPUT_NAME`] = `"obs"`, `float32`, shape [`ObsLayout::INPUT_SHAPE`] =
+//!   `[1, 2, 224, 224]`: the observation above, values in `[0, 1]`, no other normalisation;
+//! - output [`ObsLayout::OUTPUT_NAME`] = `"action"`, `float32`, shape `[1, 3]`: the
+//!   deterministic action `(x, y, theta)` in `[-1, 1]` (SAC: `tanh` of the actor's mean), mapped
+//!   as in "Action" above.
+//!
+//! Networks that work at a lower resolution downsample inside the model, so the contract stays
+//! the same. `herb-daemon` checks all of this when it loads a model and refuses one that
+//! differs, naming what differs.
 
 use crate::catalog::{Catalog, ObjectShape, TypeIdx};
 use crate::error::{Result, SimError};
@@ -51,6 +65,12 @@ impl ObsLayout {
     pub const PAD_VALUE: f32 = 1.0;
     /// ONNX input shape (batch 1).
     pub const INPUT_SHAPE: [usize; 4] = [1, Self::CHANNELS, Self::SIZE, Self::SIZE];
+    /// ONNX input name.
+    pub const INPUT_NAME: &'static str = "obs";
+    /// ONNX output name.
+    pub const OUTPUT_NAME: &'static str = "action";
+    /// ONNX output shape (batch 1, x y theta).
+    pub const OUTPUT_SHAPE: [usize; 2] = [1, 3];
 
     /// The heightmap grid at observation scale (222 x 146 cells).
     pub fn grid() -> GridSpec {

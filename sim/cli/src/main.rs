@@ -14,7 +14,7 @@ use std::time::Instant;
 mod plot;
 
 use herb_daemon::evaluate::{SequenceMode, run_policy_episode};
-use herb_daemon::{Blbf, Policy, SequenceModel};
+use herb_daemon::{Blbf, OnnxPolicy, Policy, SequenceModel};
 
 #[derive(Parser)]
 #[command(
@@ -494,15 +494,28 @@ fn run_policy_method(
     seed: u64,
     jobs: usize,
 ) -> AnyResult<Vec<Result<eval::EpisodeResult, String>>> {
-    if m == EvalMethod::Herb && policy_path.is_none() {
-        return Err(
-            "herb needs --policy <model.onnx> (the trained policy comes with the training issue)"
-                .into(),
-        );
+    match (m, policy_path) {
+        (EvalMethod::Herb, None) => {
+            return Err("herb needs --policy <model.onnx> (the trained policy comes with the training issue)".into());
+        }
+        // Load once up front: a bad model is one clear error, not one per episode.
+        (EvalMethod::Herb, Some(p)) => {
+            let probe = OnnxPolicy::load(p)?;
+            eprintln!(
+                "policy {}: {:.2} MFMA per decision, {:.2} MB",
+                p.display(),
+                probe.fma() as f64 / 1e6,
+                probe.file_bytes() as f64 / 1e6
+            );
+        }
+        _ => {}
     }
     let make = || -> Result<_, String> {
-        let mut policy: Box<dyn Policy> = match m {
-            EvalMethod::Blbf => Box::new(Blbf::new()),
+        let mut policy: Box<dyn Policy> = match (m, policy_path) {
+            (EvalMethod::Blbf, _) => Box::new(Blbf::new()),
+            (EvalMethod::Herb, Some(p)) => {
+                Box::new(OnnxPolicy::load(p).map_err(|e| e.to_string())?)
+            }
             _ => return Err(format!("{} is not a decision-core policy", m.name())),
         };
         Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
