@@ -1,0 +1,164 @@
+//! Decision latency (issue 3): observation build + policy inference + z estimate, on one core,
+//! for each ONNX network in `$HERB_BENCH_MODELS` (default `target/onnx-bench`, written by
+//! `python3 models/make_fixtures.py --bench target/onnx-bench`), plus the BLBF baseline.
+//!
+//! `cargo bench -p herb-daemon --bench decision`. Every timed decision is recorded in a
+//! histogram; p50/p99 are printed with the network's FLOPs (2 x FMA, tract's cost model) and
+//! file size. The networks have fixed random weights: latency does not depend on the values.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use hdrhistogram::Histogram;
+use herb_daemon::policy::{DecisionInput, Policy};
+use herb_daemon::{Blbf, OnnxPolicy};
+use herb_sim::observation::{Projections, action_to_placement};
+use herb_sim::paths::MeshSource;
+use herb_sim::{Catalog, ObsLayout, PackingWorld, SharedCatalog, TypeIdx, WorldConfig};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// A mid-episode scene (a fixed set of placements) and the next object.
+fn scene(c: &SharedCatalog) -> (PackingWorld, TypeIdx) {
+    let mut w = PackingWorld::new(c.clone(), WorldConfig::default()).expect("world");
+    for (id, x, y, th) in [
+        ("003", -0.08, 0.05, 0.3),
+        ("004", 0.1, -0.05, 0.0),
+        ("005", 0.05, 0.06, 1.0),
+        ("007", -0.1, -0.06, 0.5),
+        ("013", 0.0, 0.0, 0.0),
+    ] {
+        w.place(c.by_id(id).expect("id"), x, y, th).expect("place");
+    }
+    (w, c.by_id("006").expect("id"))
+}
+
+/// Checks its input like every policy and returns the centre: the cost of everything but the
+/// network (observation build, input checks, z estimate).
+struct NullPolicy;
+
+impl Policy for NullPolicy {
+    fn name(&self) -> &str {
+        "null"
+    }
+    fn begin_episode(&mut self, _seed: u64) {}
+    fn decide(&mut self, input: &DecisionInput) -> herb_daemon::Result<[f32; 3]> {
+        herb_daemon::policy::check_input("null", input)?;
+        Ok([0.0; 3])
+    }
+}
+
+fn report(name: &str, h: &Histogram<u64>, extra: &str) {
+    eprintln!(
+        "decision/{name}: n {} p50 {:.3} ms p99 {:.3} ms max {:.3} ms mean {:.3} ms{extra}",
+        h.len(),
+        h.value_at_quantile(0.5) as f64 / 1e6,
+        h.value_at_quantile(0.99) as f64 / 1e6,
+        h.max() as f64 / 1e6,
+        h.mean() / 1e6
+    );
+}
+
+fn bench_policy(
+    c: &mut Criterion,
+    name: &str,
+    policy: &mut dyn Policy,
+    catalog: &SharedCatalog,
+    extra: &str,
+) {
+    let (mut world, next) = scene(catalog);
+    let projections = Projections::new(catalog);
+    let mut obs = vec![0.0f32; ObsLayout::LEN];
+    let mut h = Histogram::<u64>::new_with_bounds(1, 10_000_000_000, 3).expect("histogram");
+    c.bench_function(&format!("decision/{name}"), |b| {
+        b.iter_custom(|iters| {
+            let mut total = Duration::ZERO;
+            for _ in 0..iters {
+                let t0 = Instant::now();
+                ObsLayout::write(world.heightmap(), Some(projections.get(next)), &mut obs)
+                    .expect("observation");
+                let a = policy
+                    .decide(&DecisionInput {
+                        observation: &obs,
+                        heightmap: world.heightmap(),
+                        object: next,
+                        shape: catalog.shape(next),
+                        step: 5,
+                    })
+                    .expect("decision");
+                let (x, y, theta) = action_to_placement(a).expect("action");
+                let z = world.estimate_z(next, x, y, theta);
+                let dt = t0.elapsed();
+                std::hint::black_box(z);
+                total += dt;
+                h.record(dt.as_nanos() as u64).ok();
+            }
+            total
+        })
+    });
+    report(name, &h, extra);
+}
+
+fn benches(c: &mut Criterion) {
+    let root = herb_sim::paths::boxed_root(None);
+    let meshes = herb_sim::paths::mesh_source(None, root.as_deref());
+    let catalog: SharedCatalog = Arc::new(Catalog::builtin(&meshes).expect("catalog"));
+    let dir = std::env::var_os("HERB_BENCH_MODELS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target/onnx-bench"));
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .map(|rd| {
+            rd.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|x| x == "onnx"))
+                .collect()
+        })
+        .unwrap_or_default();
+    files.sort();
+    if files.is_empty() {
+        eprintln!(
+            "no ONNX networks in {}: run `python3 models/make_fixtures.py --bench {}` (pip install onnx numpy)",
+            dir.display(),
+            dir.display()
+        );
+    }
+    for f in files {
+        let name = f
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or("model")
+            .to_owned();
+        let mut p = match OnnxPolicy::load(&f) {
+            Ok(p) => p,
+            Err(e) => {
+                eprintln!("skipping {}: {e}", f.display());
+                continue;
+            }
+        };
+        let extra = format!(
+            "; {:.1} MFLOP, {:.2} MB ONNX",
+            2.0 * p.fma() as f64 / 1e6,
+            p.file_bytes() as f64 / 1e6
+        );
+        bench_policy(c, &name, &mut p, &catalog, &extra);
+    }
+    bench_policy(
+        c,
+        "blbf",
+        &mut Blbf::new(),
+        &catalog,
+        "; PackIt SO(2) heuristic",
+    );
+    bench_policy(
+        c,
+        "null",
+        &mut NullPolicy,
+        &catalog,
+        "; no network: observation build, input checks, z estimate",
+    );
+}
+
+criterion_group! {
+    name = decision;
+    config = Criterion::default().sample_size(30).measurement_time(Duration::from_secs(6));
+    targets = benches
+}
+criterion_main!(decision);
