@@ -11,7 +11,6 @@ use hdrhistogram::Histogram;
 use herb_daemon::policy::{DecisionInput, Policy};
 use herb_daemon::{Blbf, OnnxPolicy};
 use herb_sim::observation::{Projections, action_to_placement};
-use herb_sim::paths::MeshSource;
 use herb_sim::{Catalog, ObsLayout, PackingWorld, SharedCatalog, TypeIdx, WorldConfig};
 use std::path::PathBuf;
 use std::sync::Arc;
