@@ -101,35 +101,35 @@ impl OnnxPolicy {
     }
 
     /// Runs the network on an observation (length `ObsLayout::LEN`), unchecked output.
+    /// Allocates nothing itself (errors aside); tract allocates its intermediate tensors.
     pub fn infer(&mut self, observation: &[f32]) -> Result<[f32; 3]> {
-        let path = self.path.clone();
-        let err = |e: TractError| model_err(&path, format!("inference failed: {e:#}"));
         if observation.len() != ObsLayout::LEN {
             return Err(model_err(
-                &path,
+                &self.path,
                 format!("observation of {} values", observation.len()),
             ));
         }
-        Arc::make_mut(&mut self.input)
+        let filled = Arc::make_mut(&mut self.input)
             .try_as_plain_ram_mut()
             .and_then(|mut v| {
                 v.as_slice_mut::<f32>()?.copy_from_slice(observation);
                 Ok(())
+            });
+        let out = filled.and_then(|()| self.state.run(tvec!(self.input.clone().into_tvalue())));
+        let action = out.and_then(|out| {
+            let first = out.first().ok_or_else(|| {
+                tract_onnx::tract_core::internal::anyhow!("the model returned no output")
+            })?;
+            let view = first.try_as_plain_ram()?;
+            let s = view.as_slice::<f32>()?;
+            <[f32; 3]>::try_from(s).map_err(|_| {
+                tract_onnx::tract_core::internal::anyhow!(
+                    "output of {} values, expected 3",
+                    s.len()
+                )
             })
-            .map_err(err)?;
-        let out = self
-            .state
-            .run(tvec!(self.input.clone().into_tvalue()))
-            .map_err(err)?;
-        let first = out
-            .first()
-            .ok_or_else(|| model_err(&path, "the model returned no output"))?;
-        let s = first
-            .try_as_plain_ram()
-            .and_then(|v| Ok(v.as_slice::<f32>()?.to_owned()))
-            .map_err(err)?;
-        <[f32; 3]>::try_from(s.as_slice())
-            .map_err(|_| model_err(&path, format!("output of {} values, expected 3", s.len())))
+        });
+        action.map_err(|e| model_err(&self.path, format!("inference failed: {e:#}")))
     }
 }
 
