@@ -10,6 +10,7 @@
 
 pub mod error;
 pub mod evaluate;
+pub mod kinematics;
 pub mod onnx;
 pub mod policy;
 pub mod sequence;
