@@ -12,6 +12,7 @@ use herb_sim::{Catalog, PackingEnv, TypeIdx};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
+use rapier3d::math::Rotation;
 use std::time::Instant;
 
 /// How the objects of an episode are ordered.
@@ -79,8 +80,7 @@ impl SequenceMode {
 }
 
 /// Runs one episode: `order` placed by `policy`. Each decision's latency (policy plus the z
-/// estimate for the chosen placement) is recorded; the placement then happens in the world
-/// (which estimates the same z again, plus clearance).
+/// estimate for the chosen placement) is recorded, and the object is released at that pose.
 pub fn run_policy_episode(
     env: &mut PackingEnv,
     ep: &Episode,
@@ -106,10 +106,12 @@ pub fn run_policy_episode(
             check_action(policy.name(), a)?
         };
         let (x, y, theta) = action_to_placement(action)?;
-        let z = env.world_mut().estimate_z(object, x, y, theta);
+        let pose = env
+            .world_mut()
+            .release_pose(object, x, y, Rotation::from_rotation_z(theta));
         r.decision_ns.push(t0.elapsed().as_nanos() as u64);
-        std::hint::black_box(z);
-        let res = env.step(action)?;
+        // Release where decided (the same pose `env.step(action)` would compute again).
+        let res = env.step_pose(pose)?;
         if r.record(&res) {
             break;
         }

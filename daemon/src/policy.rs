@@ -127,26 +127,16 @@ impl Blbf {
             let (x0, y0) = spec.cell_centre(0, 0);
             bottom_footprint(&spec, shape, x0, y0, rot, &mut self.scratch);
             // Footprint extents around the origin (for the walls).
-            let (lo, hi) =
-                shape
-                    .vertices
-                    .iter()
-                    .fold(([f32::MAX; 2], [f32::MIN; 2]), |(lo, hi), &v| {
-                        let r = rot * v;
-                        (
-                            [lo[0].min(r.x), lo[1].min(r.y)],
-                            [hi[0].max(r.x), hi[1].max(r.y)],
-                        )
-                    });
+            let (lo, hi) = shape.rotated_bounds(rot);
             let height = self.scratch.top() - self.scratch.lowest();
             const TOL: f32 = 1e-4;
             for row in 0..spec.ny {
                 for col in 0..spec.nx {
                     let (x, y) = spec.cell_centre(col, row);
-                    if x + lo[0] < -BOX_HALF_X - TOL
-                        || x + hi[0] > BOX_HALF_X + TOL
-                        || y + lo[1] < -BOX_HALF_Y - TOL
-                        || y + hi[1] > BOX_HALF_Y + TOL
+                    if x + lo.x < -BOX_HALF_X - TOL
+                        || x + hi.x > BOX_HALF_X + TOL
+                        || y + lo.y < -BOX_HALF_Y - TOL
+                        || y + hi.y > BOX_HALF_Y + TOL
                     {
                         continue;
                     }

@@ -190,21 +190,21 @@ impl SequenceModel {
         {
             return Err(bad("probabilities must lie in [0, 1]".into()));
         }
-        let mut m = Self::from_counts(
-            catalog,
-            vec![0; n],
-            vec![0; n * n],
-            Provenance {
+        Ok(Self {
+            n,
+            ids: catalog.specs().iter().map(|s| s.id.clone()).collect(),
+            start_counts: vec![0; n],
+            counts: vec![0; n * n],
+            start: start.to_vec(),
+            trans: trans.iter().flatten().copied().collect(),
+            fallback: fallback_order(catalog, start),
+            provenance: Provenance {
                 source: "hand-built".into(),
                 episodes: 0,
                 transitions: 0,
                 command: String::new(),
             },
-        );
-        m.start = start.to_vec();
-        m.trans = trans.iter().flatten().copied().collect();
-        m.fallback = fallback_order(catalog, &m.start);
-        Ok(m)
+        })
     }
 
     /// Reads `models/sequence.json`-style text; every id must be in `catalog` (catalog types

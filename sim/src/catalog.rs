@@ -347,6 +347,17 @@ impl ObjectShape {
     pub fn extents(&self) -> Vector {
         self.aabb_max - self.aabb_min
     }
+
+    /// Axis-aligned bounds (min, max) of the hull turned by `rot`, around its origin.
+    pub fn rotated_bounds(&self, rot: Rotation) -> (Vector, Vector) {
+        self.vertices.iter().fold(
+            (Vector::splat(f32::MAX), Vector::splat(f32::MIN)),
+            |(lo, hi), &v| {
+                let r = rot * v;
+                (lo.min(r), hi.max(r))
+            },
+        )
+    }
 }
 
 /// Vertices, outward triangles and the parry polyhedron of a hull.

@@ -91,6 +91,41 @@ impl Failure {
 }
 
 impl EpisodeResult {
+    /// An empty result for an episode of `objects` objects.
+    pub fn new(name: &str, objects: usize) -> Self {
+        Self {
+            name: name.to_owned(),
+            objects,
+            packed: 0,
+            success: false,
+            placements: 0,
+            stable: 0,
+            compactness_per_step: Vec::with_capacity(objects),
+            physics_steps: 0,
+            decision_ns: Vec::with_capacity(objects),
+            failure: None,
+        }
+    }
+
+    /// Records one step's outcome; true when the episode has ended.
+    pub fn record(&mut self, step: &StepResult) -> bool {
+        let o = &step.info.outcome;
+        self.placements += 1;
+        self.stable += o.stable as usize;
+        self.physics_steps += o.settle_steps as u64;
+        self.compactness_per_step.push(o.compactness);
+        self.packed = step.info.packed;
+        self.success = step.info.success;
+        if let (Some(first), Some((bound, by_m))) = (o.first_outside, o.violation) {
+            self.failure = Some(Failure {
+                bound,
+                by_m,
+                earlier_object: first + 1 < self.placements,
+            });
+        }
+        step.terminated
+    }
+
     /// C after the last placement (0 if none).
     pub fn final_compactness(&self) -> f32 {
         self.compactness_per_step.last().copied().unwrap_or(0.0)
@@ -155,43 +190,6 @@ pub fn run_episode(
         }
     }
     Ok(r)
-}
-
-impl EpisodeResult {
-    /// An empty result for an episode of `objects` objects.
-    pub fn new(name: &str, objects: usize) -> Self {
-        Self {
-            name: name.to_owned(),
-            objects,
-            packed: 0,
-            success: false,
-            placements: 0,
-            stable: 0,
-            compactness_per_step: Vec::with_capacity(objects),
-            physics_steps: 0,
-            decision_ns: Vec::with_capacity(objects),
-            failure: None,
-        }
-    }
-
-    /// Records one step's outcome; true when the episode has ended.
-    pub fn record(&mut self, step: &StepResult) -> bool {
-        let o = &step.info.outcome;
-        self.placements += 1;
-        self.stable += o.stable as usize;
-        self.physics_steps += o.settle_steps as u64;
-        self.compactness_per_step.push(o.compactness);
-        self.packed = step.info.packed;
-        self.success = step.info.success;
-        if let (Some(first), Some((bound, by_m))) = (o.first_outside, o.violation) {
-            self.failure = Some(Failure {
-                bound,
-                by_m,
-                earlier_object: first + 1 < self.placements,
-            });
-        }
-        step.terminated
-    }
 }
 
 /// Runs `method` over `episodes` on `jobs` threads. Results keep the episodes' order; an

@@ -307,14 +307,7 @@ impl PackingWorld {
         if self.check_type(ty).is_err() || !(x.is_finite() && y.is_finite()) {
             return (x, y);
         }
-        let shape = self.catalog.shape(ty);
-        let (lo, hi) = shape.vertices.iter().fold(
-            (Vector::splat(f32::MAX), Vector::splat(f32::MIN)),
-            |(lo, hi), &v| {
-                let r = rot * v;
-                (lo.min(r), hi.max(r))
-            },
-        );
+        let (lo, hi) = self.catalog.shape(ty).rotated_bounds(rot);
         let c = self.cfg.clearance_m;
         let axis = |p: f32, lo: f32, hi: f32, half: f32| {
             let (min_p, max_p) = (-half + c - lo, half - c - hi);
@@ -357,9 +350,18 @@ impl PackingWorld {
             });
         }
         self.check_type(ty)?;
+        let pose = self.release_pose(ty, x, y, rot);
+        self.place_pose(ty, pose)
+    }
+
+    /// The pose at which [`PackingWorld::place_rotated`] releases `ty`: orientation `rot`
+    /// (normalised), origin at `(x, y)` and at the estimated height plus clearance. Lets a
+    /// caller decide (and time) the release height once and then release with
+    /// [`PackingWorld::place_pose`]. `ty` must be a catalog type and the inputs finite.
+    pub fn release_pose(&mut self, ty: TypeIdx, x: f32, y: f32, rot: Rotation) -> Pose {
         let rot = rot.normalize();
         let z = self.estimate_z_rotated(ty, x, y, rot) + self.cfg.clearance_m;
-        self.place_pose(ty, Pose::from_parts(Vector::new(x, y, z), rot))
+        Pose::from_parts(Vector::new(x, y, z), rot)
     }
 
     /// Releases `ty` at an explicit pose (e.g. the gripper's) and settles. The outcome's `z` is
