@@ -186,6 +186,16 @@ impl Arm {
         }
     }
 
+    /// The same arm with narrower position limits (e.g. the configured ones), which IK then
+    /// keeps to. Each range must lie inside the URDF's (checked by the caller's config).
+    pub fn with_limits(mut self, lower: &[f64; DOF], upper: &[f64; DOF]) -> Self {
+        for (i, s) in self.specs.iter_mut().enumerate() {
+            s.lower = lower[i];
+            s.upper = upper[i];
+        }
+        self
+    }
+
     /// The joints.
     pub fn joints(&self) -> &[JointSpec; DOF] {
         &self.specs

@@ -8,9 +8,11 @@
 
 #![warn(missing_docs)]
 
+pub mod cell;
 pub mod error;
 pub mod evaluate;
 pub mod kinematics;
+pub mod motion;
 pub mod onnx;
 pub mod policy;
 pub mod sequence;

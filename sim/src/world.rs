@@ -159,19 +159,12 @@ impl PackingWorld {
     pub fn new(catalog: SharedCatalog, cfg: WorldConfig) -> Result<Self> {
         cfg.validate()?;
         let spec = GridSpec::for_box(cfg.heightmap_cell_m)?;
+        let zscratch = ZScratch::for_catalog(&catalog, cfg.heightmap_cell_m);
         let max_verts = catalog
             .types()
             .map(|t| catalog.shape(t).vertices.len())
             .max()
             .unwrap_or(0);
-        let max_foot = catalog
-            .types()
-            .map(|t| {
-                let e = catalog.shape(t).extents();
-                (e.x * e.x + e.y * e.y).sqrt()
-            })
-            .fold(0.0, f32::max);
-        let zscratch = ZScratch::with_capacity(max_verts, max_foot, cfg.heightmap_cell_m);
         let mut w = Self {
             phys: Self::empty_physics(&cfg),
             cfg,

@@ -36,6 +36,23 @@ impl ZScratch {
         }
     }
 
+    /// Buffers sized for every shape of `catalog` at the heightmap cell `cell` (m).
+    pub fn for_catalog(catalog: &crate::Catalog, cell: f32) -> Self {
+        let max_verts = catalog
+            .types()
+            .map(|t| catalog.shape(t).vertices.len())
+            .max()
+            .unwrap_or(0);
+        let max_foot = catalog
+            .types()
+            .map(|t| {
+                let e = catalog.shape(t).extents();
+                (e.x * e.x + e.y * e.y).sqrt()
+            })
+            .fold(0.0, f32::max);
+        Self::with_capacity(max_verts, max_foot, cell)
+    }
+
     /// Lowest vertex z relative to the origin, of the last footprint (m, <= 0 for a centred
     /// origin).
     pub fn lowest(&self) -> f32 {

@@ -1,0 +1,199 @@
+//! The packing cell's geometry in the robot base frame, and the gripper waypoints of one
+//! pick-and-place: shared by `herbd` (which plans them) and the loopback (which needs the same
+//! box and pick-station poses to simulate them).
+//!
+//! Frames: Baxter's `base` (z up); the box frame B (origin at the centre of the box's inner
+//! floor, x along the long side, `herb_sim::frames`) sits at `box_origin` turned by `box_yaw`.
+//! Objects wait at the pick station in their canonical resting orientation (`herb_sim`
+//! catalog), centred on `pick_origin` (a point on the station's surface), turned by
+//! `pick_yaw`. Grasps are top-down at the object's top, `grasp_depth` below it.
+
+use crate::kinematics::{Arm, DOF, IkError, IkOptions, LEFT_TOP_DOWN_NOMINAL, top_down};
+use herb_sim::frames::SUCCESS_TOP_Z;
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Box and pick-station poses in `base`, and the approach geometry.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CellConfig {
+    /// Origin of the box frame B (centre of the inner floor) in `base` (m).
+    pub box_origin: [f64; 3],
+    /// Yaw of B about `base` z (rad).
+    pub box_yaw: f64,
+    /// Centre of the pick station's surface in `base` (m).
+    pub pick_origin: [f64; 3],
+    /// Yaw of objects at the pick station (rad).
+    pub pick_yaw: f64,
+    /// How far below an object's top the gripper endpoint closes (m); at most half the
+    /// object's height is used.
+    pub grasp_depth: f64,
+    /// Clearance of a carried object's bottom over the success volume's top (rim + 13 cm)
+    /// and over the pick station during sideways moves (m).
+    pub transit_clearance: f64,
+}
+
+impl Default for CellConfig {
+    fn default() -> Self {
+        Self {
+            box_origin: [0.58, 0.28, -0.25],
+            box_yaw: 0.0,
+            pick_origin: [0.45, 0.65, -0.25],
+            pick_yaw: 0.0,
+            grasp_depth: 0.02,
+            transit_clearance: 0.03,
+        }
+    }
+}
+
+impl CellConfig {
+    /// Checks that every number is finite and the depths are in range.
+    pub fn validate(&self) -> Result<(), String> {
+        let yaws = [self.box_yaw, self.pick_yaw];
+        let mut all = self.box_origin.iter().chain(&self.pick_origin).chain(&yaws);
+        if all.any(|v| !v.is_finite()) {
+            return Err("cell: poses must be finite".into());
+        }
+        if !(0.0..=0.1).contains(&self.grasp_depth) {
+            return Err(format!(
+                "cell.grasp_depth {} outside 0..=0.1 m",
+                self.grasp_depth
+            ));
+        }
+        if !(0.0..=0.3).contains(&self.transit_clearance) {
+            return Err(format!(
+                "cell.transit_clearance {} outside 0..=0.3 m",
+                self.transit_clearance
+            ));
+        }
+        Ok(())
+    }
+
+    /// The box frame B in `base`.
+    pub fn box_pose(&self) -> Isometry3<f64> {
+        Isometry3::from_parts(
+            Translation3::new(self.box_origin[0], self.box_origin[1], self.box_origin[2]),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), self.box_yaw),
+        )
+    }
+
+    /// Pose in `base` of an object of height `h` resting at the pick station (canonical
+    /// origin = centre of its bounding box).
+    pub fn pick_object_pose(&self, h: f64) -> Isometry3<f64> {
+        let o = self.pick_origin;
+        Isometry3::from_parts(
+            Translation3::new(o[0], o[1], o[2] + 0.5 * h),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), self.pick_yaw),
+        )
+    }
+
+    /// Depth of the grasp below the top of an object of height `h`.
+    pub fn depth(&self, h: f64) -> f64 {
+        self.grasp_depth.min(0.5 * h)
+    }
+
+    /// Tool z (in `base`) for sideways moves while carrying an object of height `h`.
+    pub fn transit_z(&self, h: f64) -> f64 {
+        let floor = self.box_origin[2] + SUCCESS_TOP_Z as f64;
+        floor.max(self.pick_origin[2] + h) + self.transit_clearance + h - self.depth(h)
+    }
+}
+
+/// The six gripper poses of one pick-and-place, and the joint targets reaching them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Waypoints {
+    /// Above the pick station, at transit height.
+    pub pre_grasp: [f64; DOF],
+    /// Closing position at the pick station.
+    pub grasp: [f64; DOF],
+    /// Above the placement, at transit height.
+    pub pre_place: [f64; DOF],
+    /// Release position.
+    pub place: [f64; DOF],
+    /// Gripper yaw at the grasp (rad, in `base`).
+    pub grasp_yaw: f64,
+    /// Gripper yaw at the release.
+    pub place_yaw: f64,
+}
+
+/// Why the waypoints of a placement could not be found.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{which} out of reach: {error}")]
+pub struct Unreachable {
+    /// The waypoint.
+    pub which: &'static str,
+    /// The inverse-kinematics failure.
+    pub error: IkError,
+}
+
+/// Plans the joint targets for taking an object of height `h` from the pick station and
+/// releasing it with its canonical origin at `place` (B frame: x, y, z in m, yaw in rad),
+/// seeded from `seed`. A parallel gripper may take the object turned by a half turn; the
+/// grasp and release yaws are chosen together so that the object ends at the decided yaw.
+pub fn plan_waypoints(
+    cell: &CellConfig,
+    arm: &Arm,
+    opts: &IkOptions,
+    h: f64,
+    place: [f64; 4],
+    seed: &[f64; DOF],
+) -> Result<Waypoints, Unreachable> {
+    let depth = cell.depth(h);
+    let transit = cell.transit_z(h);
+    let pick = cell.pick_object_pose(h);
+    let grasp_xyz = pick.translation.vector + Vector3::new(0.0, 0.0, 0.5 * h - depth);
+    let b = cell.box_pose();
+    let c = b * Point3::new(place[0], place[1], place[2] + 0.5 * h - depth);
+    let object_yaw = cell.box_yaw + place[3];
+    let mut last = None;
+    for flip in [0.0, std::f64::consts::PI] {
+        let gy = cell.pick_yaw + flip;
+        let py = object_yaw + flip;
+        let r = (|| -> Result<Waypoints, Unreachable> {
+            let ik = |which, x: f64, y: f64, z: f64, yaw: f64, s: &[f64; DOF]| {
+                let target = top_down(x, y, z, yaw);
+                arm.ik(&target, s, opts)
+                    .or_else(|_| arm.ik(&target, &LEFT_TOP_DOWN_NOMINAL, opts))
+                    .map_err(|error| Unreachable { which, error })
+            };
+            let pre_grasp = ik("pre-grasp", grasp_xyz.x, grasp_xyz.y, transit, gy, seed)?;
+            let grasp = ik(
+                "grasp",
+                grasp_xyz.x,
+                grasp_xyz.y,
+                grasp_xyz.z,
+                gy,
+                &pre_grasp,
+            )?;
+            let pre_place = ik("pre-place", c.x, c.y, transit, py, &pre_grasp)?;
+            let place_q = ik("place", c.x, c.y, c.z, py, &pre_place)?;
+            Ok(Waypoints {
+                pre_grasp,
+                grasp,
+                pre_place,
+                place: place_q,
+                grasp_yaw: gy,
+                place_yaw: py,
+            })
+        })();
+        match r {
+            Ok(w) => return Ok(w),
+            Err(e) => last = Some(e),
+        }
+    }
+    Err(last.expect("two attempts were made"))
+}
+
+/// The joint target that lifts the gripper straight up from configuration `q` to tool height
+/// `z` (same x, y and yaw), if the gripper points down there and the lift is reachable.
+pub fn lift_to(arm: &Arm, opts: &IkOptions, q: &[f64; DOF], z: f64) -> Option<[f64; DOF]> {
+    let p = arm.fk(q);
+    let down = p.rotation * Vector3::z();
+    if down.z > -0.99 || p.translation.z >= z - 0.005 {
+        return None;
+    }
+    let x_axis = p.rotation * Vector3::x();
+    let yaw = x_axis.y.atan2(x_axis.x);
+    let t = p.translation.vector;
+    arm.ik(&top_down(t.x, t.y, z, yaw), q, opts).ok()
+}

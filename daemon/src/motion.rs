@@ -1,0 +1,381 @@
+//! Jerk-limited joint trajectories with Ruckig (the official `ruckig` crate, C++ through cxx).
+//!
+//! Ruckig's Rust wrapper allocates on every call (it copies vectors across the FFI), so it is
+//! never called from the control loop. The planner thread computes a trajectory with
+//! [`MotionPlanner::point_to_point`] or [`MotionPlanner::brake`] and samples it at the loop
+//! period into a preallocated [`Setpoints`] buffer; the loop streams one sample per cycle.
+//!
+//! Every sample is checked against the configured joint limits before it is accepted: a
+//! point-to-point trajectory that leaves them is an error (never clamped). A brake may clamp a
+//! sample to a limit (a joint already moving fast toward its limit cannot do better); the
+//! clamps are counted and reported.
+
+use crate::kinematics::DOF;
+use ruckig::{
+    ControlInterface, InputParameter, Result as RResult, Ruckig, Synchronization, Trajectory,
+};
+use serde::{Deserialize, Serialize};
+
+/// Joint limits: position (the configured range, usually inside the URDF's), velocity,
+/// acceleration and jerk, per joint `s0 .. w2`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointLimits {
+    /// Lower angles (rad).
+    pub lower: [f64; DOF],
+    /// Upper angles (rad).
+    pub upper: [f64; DOF],
+    /// Speed limits (rad/s).
+    pub velocity: [f64; DOF],
+    /// Acceleration limits (rad/s^2).
+    pub acceleration: [f64; DOF],
+    /// Jerk limits (rad/s^3).
+    pub jerk: [f64; DOF],
+}
+
+impl JointLimits {
+    /// Baxter's left arm: the URDF position limits shrunk by 0.05 rad, 60 % of the URDF speed
+    /// limits, and accelerations/jerks chosen for smooth motion (Rethink publishes none).
+    pub fn baxter_left() -> Self {
+        let j = crate::kinematics::LEFT_ARM;
+        Self {
+            lower: j.map(|s| s.lower + 0.05),
+            upper: j.map(|s| s.upper - 0.05),
+            velocity: j.map(|s| 0.6 * s.max_velocity),
+            acceleration: [2.0, 2.0, 2.0, 2.0, 4.0, 4.0, 4.0],
+            jerk: [10.0, 10.0, 10.0, 10.0, 20.0, 20.0, 20.0],
+        }
+    }
+
+    /// Checks that every limit is finite, positive where it must be, and that each position
+    /// range is non-empty and inside `hard` (e.g. the URDF limits).
+    pub fn validate(&self, hard_lower: &[f64; DOF], hard_upper: &[f64; DOF]) -> Result<(), String> {
+        for i in 0..DOF {
+            let (lo, hi) = (self.lower[i], self.upper[i]);
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return Err(format!(
+                    "joint {i}: position range [{lo}, {hi}] is empty or not finite"
+                ));
+            }
+            if lo < hard_lower[i] || hi > hard_upper[i] {
+                return Err(format!(
+                    "joint {i}: position range [{lo}, {hi}] leaves the arm's limits [{}, {}]",
+                    hard_lower[i], hard_upper[i]
+                ));
+            }
+            for (name, v) in [
+                ("velocity", self.velocity[i]),
+                ("acceleration", self.acceleration[i]),
+                ("jerk", self.jerk[i]),
+            ] {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(format!(
+                        "joint {i}: {name} limit {v} must be finite and > 0"
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// True when every angle of `q` is within the position limits.
+    pub fn contains(&self, q: &[f64; DOF]) -> bool {
+        (0..DOF).all(|i| q[i] >= self.lower[i] && q[i] <= self.upper[i])
+    }
+}
+
+/// One sample: position, velocity, acceleration.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Setpoint {
+    /// Angles (rad).
+    pub position: [f64; DOF],
+    /// Speeds (rad/s).
+    pub velocity: [f64; DOF],
+    /// Accelerations (rad/s^2).
+    pub acceleration: [f64; DOF],
+}
+
+impl Setpoint {
+    /// Standing still at `q`.
+    pub fn at_rest(q: [f64; DOF]) -> Self {
+        Self {
+            position: q,
+            ..Self::default()
+        }
+    }
+}
+
+/// A preallocated buffer of samples at the loop period.
+#[derive(Debug, Clone)]
+pub struct Setpoints {
+    samples: Vec<Setpoint>,
+}
+
+impl Setpoints {
+    /// Room for `capacity` samples; pushing more is an error, never a reallocation.
+    pub fn with_capacity(capacity: usize) -> Self {
+        Self {
+            samples: Vec::with_capacity(capacity),
+        }
+    }
+
+    /// Samples held.
+    pub fn len(&self) -> usize {
+        self.samples.len()
+    }
+
+    /// True when empty.
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty()
+    }
+
+    /// Sample `i`.
+    pub fn get(&self, i: usize) -> Option<&Setpoint> {
+        self.samples.get(i)
+    }
+
+    /// All samples.
+    pub fn as_slice(&self) -> &[Setpoint] {
+        &self.samples
+    }
+
+    /// Forgets the samples (keeps the memory).
+    pub fn clear(&mut self) {
+        self.samples.clear();
+    }
+
+    fn push(&mut self, s: Setpoint) -> Result<(), MotionError> {
+        if self.samples.len() == self.samples.capacity() {
+            return Err(MotionError::TooLong {
+                capacity: self.samples.capacity(),
+            });
+        }
+        self.samples.push(s);
+        Ok(())
+    }
+}
+
+/// Why a trajectory was not produced.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MotionError {
+    /// A start or target outside the position limits, or a non-finite state.
+    #[error("joint {joint}: {what} {value} outside the limits or not finite")]
+    BadState {
+        /// Which state.
+        what: &'static str,
+        /// Joint index.
+        joint: usize,
+        /// Its value.
+        value: f64,
+    },
+    /// Ruckig refused the input or failed.
+    #[error("ruckig: {0}")]
+    Ruckig(String),
+    /// A sample left the position limits (point-to-point only).
+    #[error("sample {sample}, joint {joint}: {value} rad leaves the position limits")]
+    LeavesLimits {
+        /// Sample index.
+        sample: usize,
+        /// Joint index.
+        joint: usize,
+        /// Angle.
+        value: f64,
+    },
+    /// The trajectory needs more samples than the buffer holds.
+    #[error("trajectory longer than the buffer ({capacity} samples)")]
+    TooLong {
+        /// Buffer capacity.
+        capacity: usize,
+    },
+}
+
+/// Computes and samples trajectories (planner thread only: allocates).
+pub struct MotionPlanner {
+    ruckig: Ruckig,
+    input: InputParameter,
+    traj: Trajectory,
+    limits: JointLimits,
+    dt: f64,
+}
+
+impl std::fmt::Debug for MotionPlanner {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MotionPlanner")
+            .field("limits", &self.limits)
+            .field("dt", &self.dt)
+            .finish()
+    }
+}
+
+/// Position tolerance for samples at a limit (rad): Ruckig's own numerical slack.
+const LIMIT_EPS: f64 = 1e-9;
+
+impl MotionPlanner {
+    /// A planner for `limits`, sampling every `dt` seconds (the loop period).
+    pub fn new(limits: JointLimits, dt: f64) -> Self {
+        let mut input = InputParameter::new(DOF);
+        input.max_velocity = limits.velocity.to_vec();
+        input.max_acceleration = limits.acceleration.to_vec();
+        input.max_jerk = limits.jerk.to_vec();
+        Self {
+            ruckig: Ruckig::new_direct_and_offline(DOF),
+            input,
+            traj: Trajectory::new_direct(DOF),
+            limits,
+            dt,
+        }
+    }
+
+    /// The limits.
+    pub fn limits(&self) -> &JointLimits {
+        &self.limits
+    }
+
+    fn check(&self, what: &'static str, q: &[f64; DOF]) -> Result<(), MotionError> {
+        match (0..DOF).find(|&i| {
+            !(q[i].is_finite() && q[i] >= self.limits.lower[i] && q[i] <= self.limits.upper[i])
+        }) {
+            Some(joint) => Err(MotionError::BadState {
+                what,
+                joint,
+                value: q[joint],
+            }),
+            None => Ok(()),
+        }
+    }
+
+    fn calculate(&mut self) -> Result<f64, MotionError> {
+        match self.ruckig.calculate(&mut self.input, &mut self.traj) {
+            RResult::Working | RResult::Finished => Ok(self.traj.get_duration()),
+            e => Err(MotionError::Ruckig(format!("{e:?}"))),
+        }
+    }
+
+    /// Appends the time-optimal, time-synchronised rest-to-rest trajectory from `from` to `to`
+    /// to `out`, sampled at `dt, 2 dt, ...` and ending exactly at `to` at rest. Returns its
+    /// duration (s). Both ends must be inside the position limits.
+    pub fn point_to_point(
+        &mut self,
+        from: &[f64; DOF],
+        to: &[f64; DOF],
+        out: &mut Setpoints,
+    ) -> Result<f64, MotionError> {
+        self.check("start", from)?;
+        self.check("target", to)?;
+        let z = vec![0.0; DOF];
+        self.input.control_interface = ControlInterface::Position;
+        self.input.synchronization = Synchronization::Time;
+        self.input.current_position = from.to_vec();
+        self.input.current_velocity = z.clone();
+        self.input.current_acceleration = z.clone();
+        self.input.target_position = to.to_vec();
+        self.input.target_velocity = z.clone();
+        self.input.target_acceleration = z;
+        let duration = self.calculate()?;
+        let start = out.len();
+        self.sample(duration, out, |_, _| {})?;
+        // The last sample is the target itself, at rest.
+        if let Some(last) = out.samples.last_mut() {
+            *last = Setpoint::at_rest(*to);
+        }
+        for (k, s) in out.samples[start..].iter().enumerate() {
+            for j in 0..DOF {
+                let v = s.position[j];
+                if v < self.limits.lower[j] - LIMIT_EPS || v > self.limits.upper[j] + LIMIT_EPS {
+                    return Err(MotionError::LeavesLimits {
+                        sample: k,
+                        joint: j,
+                        value: v,
+                    });
+                }
+            }
+        }
+        for s in &mut out.samples[start..] {
+            for j in 0..DOF {
+                s.position[j] = s.position[j].clamp(self.limits.lower[j], self.limits.upper[j]);
+            }
+        }
+        Ok(duration)
+    }
+
+    /// Appends a brake from `state` to standstill (every joint stops as fast as its limits
+    /// allow, unsynchronised) to `out`. Returns the duration and the number of position
+    /// values clamped to a limit.
+    pub fn brake(
+        &mut self,
+        state: &Setpoint,
+        out: &mut Setpoints,
+    ) -> Result<(f64, usize), MotionError> {
+        for (what, v) in [
+            ("position", &state.position),
+            ("velocity", &state.velocity),
+            ("acceleration", &state.acceleration),
+        ] {
+            if let Some(joint) = v.iter().position(|x| !x.is_finite()) {
+                return Err(MotionError::BadState {
+                    what,
+                    joint,
+                    value: v[joint],
+                });
+            }
+        }
+        let z = vec![0.0; DOF];
+        self.input.control_interface = ControlInterface::Velocity;
+        self.input.synchronization = Synchronization::None;
+        self.input.current_position = state.position.to_vec();
+        // Ruckig rejects a start beyond its limits: cap the state to them (a brake then
+        // starts a hair gentler than the measured state).
+        self.input.current_velocity = (0..DOF)
+            .map(|j| state.velocity[j].clamp(-self.limits.velocity[j], self.limits.velocity[j]))
+            .collect();
+        self.input.current_acceleration = (0..DOF)
+            .map(|j| {
+                state.acceleration[j]
+                    .clamp(-self.limits.acceleration[j], self.limits.acceleration[j])
+            })
+            .collect();
+        self.input.target_position = state.position.to_vec();
+        self.input.target_velocity = z.clone();
+        self.input.target_acceleration = z;
+        let result = self.calculate();
+        self.input.control_interface = ControlInterface::Position;
+        self.input.synchronization = Synchronization::Time;
+        let duration = result?;
+        let (lower, upper) = (self.limits.lower, self.limits.upper);
+        let mut clamps = 0;
+        self.sample(duration, out, |s, _| {
+            for j in 0..DOF {
+                let c = s.position[j].clamp(lower[j], upper[j]);
+                if c != s.position[j] {
+                    clamps += 1;
+                    s.position[j] = c;
+                }
+            }
+        })?;
+        if let Some(last) = out.samples.last_mut() {
+            last.velocity = [0.0; DOF];
+            last.acceleration = [0.0; DOF];
+        }
+        Ok((duration, clamps))
+    }
+
+    fn sample(
+        &self,
+        duration: f64,
+        out: &mut Setpoints,
+        mut fix: impl FnMut(&mut Setpoint, usize),
+    ) -> Result<(), MotionError> {
+        let n = (duration / self.dt).ceil().max(1.0) as usize;
+        for k in 1..=n {
+            let t = (k as f64 * self.dt).min(duration);
+            let (p, v, a) = self.traj.at_time(t);
+            let mut s = Setpoint::default();
+            s.position.copy_from_slice(&p[..DOF]);
+            s.velocity.copy_from_slice(&v[..DOF]);
+            s.acceleration.copy_from_slice(&a[..DOF]);
+            fix(&mut s, k);
+            out.push(s)?;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,1019 @@
+//! HERB's IPC contract (`../shared/DESIGN.md`, "Processes and IPC"): every payload exchanged
+//! between `herbd`, the hardware adapters and the clients, the service names, and one
+//! validation function per payload. Nothing else lives here.
+//!
+//! Every payload is `#[repr(C)]`, fixed size, without heap or pointers, derives iceoryx2's
+//! `ZeroCopySend` with an explicit, versioned type name, and starts with a [`Header`]
+//! (protocol version, sequence number, monotonic stamp). All-zero bytes are a valid value of
+//! every payload (numbers only), which lets large payloads be initialised in place in shared
+//! memory ([`zeroed_in_place`]).
+//!
+//! Units: SI (m, rad, s); stamps are `CLOCK_MONOTONIC` nanoseconds, comparable between the
+//! processes of one machine. Poses in [`Status`] are in the box frame B (z up, origin at the
+//! centre of the inner floor); joint values are Baxter left-arm joints `s0 .. w2`.
+//!
+//! A receiver calls the payload's `validate` before using any field; an invalid payload is
+//! counted and dropped, never acted on. [`Invalid`] names the field and the reason and does not
+//! allocate, so a real-time loop can validate and count without formatting.
+
+#![warn(missing_docs)]
+
+use iceoryx2::prelude::*;
+use std::mem::MaybeUninit;
+
+/// Protocol version carried in every header; a receiver rejects any other.
+pub const PROTOCOL_VERSION: u32 = 1;
+/// Arm joints carried in joint messages (Baxter left arm).
+pub const DOF: usize = 7;
+/// Most cells a [`HeightmapFrame`] can carry (the 224 x 224 observation grid).
+pub const HEIGHTMAP_MAX_CELLS: usize = 224 * 224;
+/// Most objects in one [`PackJobRequest`].
+pub const MAX_JOB_OBJECTS: usize = 64;
+/// `object_type` value meaning "none".
+pub const NO_OBJECT: u32 = u32::MAX;
+/// Lowest and highest valid heightmap value (m), as `herb_sim::Heightmap::validate`.
+pub const HEIGHT_RANGE_M: (f32, f32) = (-0.05, 1.0);
+/// Largest plausible joint angle magnitude (rad); tighter limits are the receiver's.
+pub const MAX_JOINT_ABS_RAD: f64 = 2.0 * std::f64::consts::PI;
+/// Largest plausible joint speed (rad/s).
+pub const MAX_JOINT_SPEED: f64 = 20.0;
+
+/// `CLOCK_MONOTONIC` now, in nanoseconds.
+pub fn monotonic_ns() -> u64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime writes one timespec; CLOCK_MONOTONIC always exists on Linux.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
+
+/// Initialises `slot` to all-zero bytes (a valid value of every payload here) and returns it.
+/// Used to fill loaned shared memory in place without building the value on the stack.
+pub fn zeroed_in_place<T: Payload>(slot: &mut MaybeUninit<T>) -> &mut T {
+    // SAFETY: `Payload` is implemented only for the `repr(C)` number-only types of this crate,
+    // for which all-zero bytes are a valid value.
+    unsafe {
+        slot.as_mut_ptr().write_bytes(0, 1);
+        slot.assume_init_mut()
+    }
+}
+
+/// The common first field of every payload.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::Header")]
+pub struct Header {
+    /// [`PROTOCOL_VERSION`].
+    pub version: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// Per-publisher sequence number, starting at 1.
+    pub seq: u64,
+    /// `CLOCK_MONOTONIC` ns when the content was produced (for a heightmap: captured).
+    pub stamp_ns: u64,
+}
+
+impl Header {
+    /// A header for message `seq`, stamped now.
+    pub fn now(seq: u64) -> Self {
+        Self {
+            version: PROTOCOL_VERSION,
+            reserved: 0,
+            seq,
+            stamp_ns: monotonic_ns(),
+        }
+    }
+
+    /// Checks the version and that seq and stamp are set.
+    pub fn validate(&self) -> Result<(), Invalid> {
+        if self.version != PROTOCOL_VERSION {
+            return Err(Invalid::new("header.version", Reason::WrongVersion));
+        }
+        if self.seq == 0 {
+            return Err(Invalid::new("header.seq", Reason::OutOfRange));
+        }
+        if self.stamp_ns == 0 {
+            return Err(Invalid::new("header.stamp_ns", Reason::OutOfRange));
+        }
+        Ok(())
+    }
+}
+
+/// Why a payload was rejected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reason {
+    /// A protocol version other than [`PROTOCOL_VERSION`].
+    WrongVersion,
+    /// NaN or infinite.
+    NotFinite,
+    /// A number outside its range.
+    OutOfRange,
+    /// A length or count that does not fit the payload or the grid.
+    BadLength,
+    /// An enumeration code that is not defined.
+    UnknownCode,
+}
+
+/// A rejected payload: which field, and why. Does not allocate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Invalid {
+    /// The field (dotted path).
+    pub field: &'static str,
+    /// The reason.
+    pub reason: Reason,
+    /// The offending index for array fields (0 otherwise).
+    pub index: u32,
+}
+
+impl Invalid {
+    /// A rejection of `field` for `reason`.
+    pub const fn new(field: &'static str, reason: Reason) -> Self {
+        Self {
+            field,
+            reason,
+            index: 0,
+        }
+    }
+
+    const fn at(field: &'static str, reason: Reason, index: usize) -> Self {
+        Self {
+            field,
+            reason,
+            index: index as u32,
+        }
+    }
+}
+
+impl std::fmt::Display for Invalid {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}[{}]: {:?}", self.field, self.index, self.reason)
+    }
+}
+
+impl std::error::Error for Invalid {}
+
+/// A payload of this crate: `repr(C)`, numbers only (all-zero bytes are a valid value).
+pub trait Payload: ZeroCopySend + Copy + std::fmt::Debug + 'static {
+    /// The header.
+    fn header(&self) -> &Header;
+}
+
+macro_rules! payload {
+    ($t:ty) => {
+        impl Payload for $t {
+            fn header(&self) -> &Header {
+                &self.header
+            }
+        }
+    };
+}
+
+fn finite_all<T: Copy + Into<f64>>(field: &'static str, v: &[T]) -> Result<(), Invalid> {
+    match v.iter().position(|x| !(*x).into().is_finite()) {
+        Some(i) => Err(Invalid::at(field, Reason::NotFinite, i)),
+        None => Ok(()),
+    }
+}
+
+fn within<T: Copy + Into<f64>>(
+    field: &'static str,
+    v: &[T],
+    lo: f64,
+    hi: f64,
+) -> Result<(), Invalid> {
+    finite_all(field, v)?;
+    match v.iter().position(|x| !(lo..=hi).contains(&(*x).into())) {
+        Some(i) => Err(Invalid::at(field, Reason::OutOfRange, i)),
+        None => Ok(()),
+    }
+}
+
+fn flag(field: &'static str, v: u32) -> Result<(), Invalid> {
+    if v <= 1 {
+        Ok(())
+    } else {
+        Err(Invalid::new(field, Reason::UnknownCode))
+    }
+}
+
+/// Measured arm joints, published by the hardware adapter every cycle.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::JointState")]
+pub struct JointState {
+    /// Header; the stamp is the measurement time.
+    pub header: Header,
+    /// Joint angles `s0 .. w2` (rad).
+    pub position: [f64; DOF],
+    /// Joint speeds (rad/s).
+    pub velocity: [f64; DOF],
+}
+payload!(JointState);
+
+impl JointState {
+    /// Header, finite values, angles within +-2 pi and speeds within +-20 rad/s.
+    pub fn validate(&self) -> Result<(), Invalid> {
+        self.header.validate()?;
+        within(
+            "position",
+            &self.position,
+            -MAX_JOINT_ABS_RAD,
+            MAX_JOINT_ABS_RAD,
+        )?;
+        within(
+            "velocity",
+            &self.velocity,
+            -MAX_JOINT_SPEED,
+            MAX_JOINT_SPEED,
+        )
+    }
+}
+
+/// A joint setpoint, streamed by `herbd` every cycle while it controls the arm.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::JointCommand")]
+pub struct JointCommand {
+    /// Header; the stamp is the cycle's start.
+    pub header: Header,
+    /// Joint angles (rad).
+    pub position: [f64; DOF],
+    /// Joint speeds (rad/s), feed-forward.
+    pub velocity: [f64; DOF],
+    /// Joint accelerations (rad/s^2), feed-forward.
+    pub acceleration: [f64; DOF],
+}
+payload!(JointCommand);
+
+impl JointCommand {
+    /// Header, finite values, and every angle within `[lower[i], upper[i]]` (the receiver's
+    /// configured joint limits).
+    pub fn validate(&self, lower: &[f64; DOF], upper: &[f64; DOF]) -> Result<(), Invalid> {
+        self.header.validate()?;
+        finite_all("position", &self.position)?;
+        finite_all("velocity", &self.velocity)?;
+        finite_all("acceleration", &self.acceleration)?;
+        for i in 0..DOF {
+            if !(lower[i]..=upper[i]).contains(&self.position[i]) {
+                return Err(Invalid::at("position", Reason::OutOfRange, i));
+            }
+        }
+        within(
+            "velocity",
+            &self.velocity,
+            -MAX_JOINT_SPEED,
+            MAX_JOINT_SPEED,
+        )
+    }
+}
+
+/// What the gripper should do.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum GripperAction {
+    /// Open (release).
+    Open = 0,
+    /// Close (grasp).
+    Close = 1,
+}
+
+/// A gripper command from `herbd`, published when it changes and repeated every 100 ms.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::GripperCommand")]
+pub struct GripperCommand {
+    /// Header.
+    pub header: Header,
+    /// [`GripperAction`] code.
+    pub action: u32,
+    /// The catalog type index `herbd` expects at the pick station, or [`NO_OBJECT`]. Real
+    /// grippers ignore it; a simulated pick station (the loopback) spawns this object.
+    pub object_type: u32,
+}
+payload!(GripperCommand);
+
+impl GripperCommand {
+    /// Header and action code; `object_type` below `catalog_len` or [`NO_OBJECT`].
+    pub fn validate(&self, catalog_len: usize) -> Result<GripperAction, Invalid> {
+        self.header.validate()?;
+        if self.object_type != NO_OBJECT && self.object_type as usize >= catalog_len {
+            return Err(Invalid::new("object_type", Reason::OutOfRange));
+        }
+        match self.action {
+            0 => Ok(GripperAction::Open),
+            1 => Ok(GripperAction::Close),
+            _ => Err(Invalid::new("action", Reason::UnknownCode)),
+        }
+    }
+}
+
+/// The gripper as measured, published by the adapter every cycle.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::GripperState")]
+pub struct GripperState {
+    /// Header.
+    pub header: Header,
+    /// 1 when closed, 0 when open.
+    pub closed: u32,
+    /// 1 when an object is held.
+    pub holding: u32,
+    /// Type of the held object if known, else [`NO_OBJECT`].
+    pub object_type: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+}
+payload!(GripperState);
+
+impl GripperState {
+    /// Header and flags.
+    pub fn validate(&self) -> Result<(), Invalid> {
+        self.header.validate()?;
+        flag("closed", self.closed)?;
+        flag("holding", self.holding)
+    }
+}
+
+/// A heightmap of the box interior from the camera adapter (or the loopback): row-major, row 0
+/// at +y, column 0 at -x, cells of `cell_m` centred on the box (`herb_sim::GridSpec`).
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::HeightmapFrame")]
+pub struct HeightmapFrame {
+    /// Header; the stamp is the capture time.
+    pub header: Header,
+    /// Columns (along B x).
+    pub nx: u32,
+    /// Rows (along B y).
+    pub ny: u32,
+    /// Cell side (m).
+    pub cell_m: f32,
+    /// Objects in the box when captured, if the source knows (the loopback), else 0.
+    pub objects: u32,
+    /// Heights above the inner floor (m); the first `nx * ny` values are used.
+    pub data: [f32; HEIGHTMAP_MAX_CELLS],
+}
+payload!(HeightmapFrame);
+
+impl HeightmapFrame {
+    /// The used cells.
+    pub fn cells(&self) -> &[f32] {
+        &self.data[..(self.nx as usize * self.ny as usize).min(HEIGHTMAP_MAX_CELLS)]
+    }
+
+    /// Header, grid size and cell side only (cheap; for a loop that only tracks freshness).
+    pub fn validate_meta(&self) -> Result<(), Invalid> {
+        self.header.validate()?;
+        let n = self.nx as u64 * self.ny as u64;
+        if self.nx == 0 || self.ny == 0 || n > HEIGHTMAP_MAX_CELLS as u64 {
+            return Err(Invalid::new("nx*ny", Reason::BadLength));
+        }
+        within("cell_m", &[self.cell_m], 0.0005, 0.02)
+    }
+
+    /// [`Self::validate_meta`] plus every used cell finite and within [`HEIGHT_RANGE_M`].
+    pub fn validate(&self) -> Result<(), Invalid> {
+        self.validate_meta()?;
+        let (lo, hi) = HEIGHT_RANGE_M;
+        within("data", self.cells(), lo as f64, hi as f64)
+    }
+}
+
+/// Where a job is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum JobState {
+    /// No job.
+    Idle = 0,
+    /// Packing.
+    Running = 1,
+    /// Braking to a standstill after a fault or a stop request.
+    Braking = 2,
+    /// Stopped on a fault; resumes when the fault clears.
+    Faulted = 3,
+    /// Every object placed.
+    Done = 4,
+    /// Ended early (an object could not be placed).
+    Failed = 5,
+}
+
+/// What a [`Status`] message reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum StatusEvent {
+    /// Periodic (10 Hz) state report.
+    Heartbeat = 0,
+    /// A job was accepted and ordered.
+    Accepted = 1,
+    /// An object's placement was decided (`pose`, `decision_ns`).
+    Decided = 2,
+    /// An object was released at its placement.
+    Placed = 3,
+    /// A fault (`fault`) was detected; the arm brakes.
+    Fault = 4,
+    /// The brake finished: the arm stands still.
+    Braked = 5,
+    /// The fault cleared and the job goes on.
+    Resumed = 6,
+    /// Every object was placed.
+    JobDone = 7,
+    /// The job ended early (`fault` says why).
+    JobFailed = 8,
+    /// `herbd` is stopping (signal); the last message it sends.
+    Shutdown = 9,
+}
+
+/// Why the daemon stopped or failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum Fault {
+    /// None.
+    None = 0,
+    /// Joint states stopped arriving.
+    JointStateTimeout = 1,
+    /// Gripper states stopped arriving.
+    GripperStateTimeout = 2,
+    /// Heightmaps stopped arriving.
+    HeightmapTimeout = 3,
+    /// The gripper did not reach the commanded state in time.
+    Gripper = 4,
+    /// A waypoint was out of reach (inverse kinematics).
+    Unreachable = 5,
+    /// The placement decision failed (policy, bad heightmap).
+    Decision = 6,
+    /// Trajectory generation failed.
+    Motion = 7,
+    /// A stop was requested (SIGINT/SIGTERM).
+    Stop = 8,
+    /// The object was lost from the gripper (e.g. the adapter restarted); it is picked again.
+    ObjectLost = 9,
+}
+
+impl Fault {
+    /// The fault for a wire code, if defined.
+    pub fn from_code(c: u32) -> Option<Self> {
+        use Fault::*;
+        [
+            None,
+            JointStateTimeout,
+            GripperStateTimeout,
+            HeightmapTimeout,
+            Gripper,
+            Unreachable,
+            Decision,
+            Motion,
+            Stop,
+            ObjectLost,
+        ]
+        .get(c as usize)
+        .copied()
+    }
+}
+
+impl JobState {
+    /// The state for a wire code, if defined.
+    pub fn from_code(c: u32) -> Option<Self> {
+        use JobState::*;
+        [Idle, Running, Braking, Faulted, Done, Failed]
+            .get(c as usize)
+            .copied()
+    }
+}
+
+impl StatusEvent {
+    /// The event for a wire code, if defined.
+    pub fn from_code(c: u32) -> Option<Self> {
+        use StatusEvent::*;
+        [
+            Heartbeat, Accepted, Decided, Placed, Fault, Braked, Resumed, JobDone, JobFailed,
+            Shutdown,
+        ]
+        .get(c as usize)
+        .copied()
+    }
+}
+
+/// Job progress, per-object results and faults from `herbd`, to any client.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::Status")]
+pub struct Status {
+    /// Header.
+    pub header: Header,
+    /// The job (0 when idle).
+    pub job_id: u64,
+    /// [`StatusEvent`] code.
+    pub event: u32,
+    /// [`JobState`] code.
+    pub state: u32,
+    /// [`Fault`] code (the current or last fault).
+    pub fault: u32,
+    /// Objects in the job.
+    pub objects_total: u32,
+    /// Objects released so far.
+    pub objects_done: u32,
+    /// The object this event is about (index in the packing order).
+    pub object_index: u32,
+    /// Its catalog type index, or [`NO_OBJECT`].
+    pub object_type: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// Placement in the box frame: x, y, z (m) of the object's canonical origin, yaw (rad).
+    pub pose: [f32; 4],
+    /// Decision latency of this object (observation + policy + z), ns.
+    pub decision_ns: u64,
+    /// Loop cycles run.
+    pub cycles: u64,
+    /// Deadlines missed by the loop (cycles that overran and were skipped).
+    pub deadline_misses: u64,
+    /// Invalid payloads received and dropped.
+    pub rejected_inputs: u64,
+    /// Worst cycle time since start (ns).
+    pub max_cycle_ns: u64,
+}
+payload!(Status);
+
+impl Status {
+    /// Header, codes, counts and a finite pose.
+    pub fn validate(&self) -> Result<(), Invalid> {
+        self.header.validate()?;
+        if StatusEvent::from_code(self.event).is_none() {
+            return Err(Invalid::new("event", Reason::UnknownCode));
+        }
+        if JobState::from_code(self.state).is_none() {
+            return Err(Invalid::new("state", Reason::UnknownCode));
+        }
+        if Fault::from_code(self.fault).is_none() {
+            return Err(Invalid::new("fault", Reason::UnknownCode));
+        }
+        if self.objects_total as usize > MAX_JOB_OBJECTS || self.objects_done > self.objects_total {
+            return Err(Invalid::new("objects_done", Reason::OutOfRange));
+        }
+        finite_all("pose", &self.pose)
+    }
+}
+
+/// A pack job: an unordered list of catalog type indices. Request of the `pack_job`
+/// request-response service.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::PackJobRequest")]
+pub struct PackJobRequest {
+    /// Header.
+    pub header: Header,
+    /// Chosen by the client, non-zero; echoed in the reply and every [`Status`].
+    pub job_id: u64,
+    /// Objects used in `objects`.
+    pub count: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// Catalog type indices; the first `count` are used.
+    pub objects: [u16; MAX_JOB_OBJECTS],
+}
+payload!(PackJobRequest);
+
+/// Why a job was rejected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum RejectReason {
+    /// Accepted.
+    None = 0,
+    /// A job is running; jobs are not queued.
+    Busy = 1,
+    /// No objects.
+    Empty = 2,
+    /// More than [`MAX_JOB_OBJECTS`] objects.
+    TooMany = 3,
+    /// An object index is not in the catalog (`detail`: its position).
+    UnknownObject = 4,
+    /// The request failed validation (wrong version, zero job id...).
+    Malformed = 5,
+    /// The daemon is stopping.
+    ShuttingDown = 6,
+}
+
+impl RejectReason {
+    /// The reason for a wire code, if defined.
+    pub fn from_code(c: u32) -> Option<Self> {
+        use RejectReason::*;
+        [
+            None,
+            Busy,
+            Empty,
+            TooMany,
+            UnknownObject,
+            Malformed,
+            ShuttingDown,
+        ]
+        .get(c as usize)
+        .copied()
+    }
+}
+
+impl PackJobRequest {
+    /// A request for `objects` (at most [`MAX_JOB_OBJECTS`]; more are cut, and then
+    /// [`Self::validate`] rejects the count as `TooMany` only if the caller set it so).
+    pub fn new(job_id: u64, objects: &[u16]) -> Self {
+        let mut o = [0u16; MAX_JOB_OBJECTS];
+        let n = objects.len().min(MAX_JOB_OBJECTS);
+        o[..n].copy_from_slice(&objects[..n]);
+        Self {
+            header: Header::now(1),
+            job_id,
+            count: objects.len().min(u32::MAX as usize) as u32,
+            reserved: 0,
+            objects: o,
+        }
+    }
+
+    /// The used objects (empty if `count` is out of range).
+    pub fn objects(&self) -> &[u16] {
+        self.objects.get(..self.count as usize).unwrap_or(&[])
+    }
+
+    /// Header, non-zero job id, 1..=[`MAX_JOB_OBJECTS`] objects, each below `catalog_len`.
+    /// The error is the [`RejectReason`] with its detail (the offending position).
+    pub fn validate(&self, catalog_len: usize) -> Result<(), (RejectReason, u32)> {
+        if self.header.validate().is_err() || self.job_id == 0 {
+            return Err((RejectReason::Malformed, 0));
+        }
+        if self.count == 0 {
+            return Err((RejectReason::Empty, 0));
+        }
+        if self.count as usize > MAX_JOB_OBJECTS {
+            return Err((RejectReason::TooMany, self.count));
+        }
+        match self
+            .objects()
+            .iter()
+            .position(|&t| t as usize >= catalog_len)
+        {
+            Some(i) => Err((RejectReason::UnknownObject, i as u32)),
+            None => Ok(()),
+        }
+    }
+}
+
+/// The reply to a [`PackJobRequest`].
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::PackJobReply")]
+pub struct PackJobReply {
+    /// Header.
+    pub header: Header,
+    /// The request's job id.
+    pub job_id: u64,
+    /// 1 when accepted.
+    pub accepted: u32,
+    /// [`RejectReason`] code.
+    pub reason: u32,
+    /// Detail for the reason (e.g. the position of an unknown object).
+    pub detail: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+}
+payload!(PackJobReply);
+
+impl PackJobReply {
+    /// Header, flag and reason code.
+    pub fn validate(&self) -> Result<RejectReason, Invalid> {
+        self.header.validate()?;
+        flag("accepted", self.accepted)?;
+        let r = RejectReason::from_code(self.reason)
+            .ok_or(Invalid::new("reason", Reason::UnknownCode))?;
+        if (self.accepted == 1) != (r == RejectReason::None) {
+            return Err(Invalid::new("reason", Reason::OutOfRange));
+        }
+        Ok(r)
+    }
+}
+
+/// Simulated outcome of a release (sim-only service, published by the loopback for tests and
+/// evaluation; a real cell has no such service).
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::SimOutcome")]
+pub struct SimOutcome {
+    /// Header.
+    pub header: Header,
+    /// Objects in the box after this release.
+    pub objects: u32,
+    /// The released object's catalog type.
+    pub object_type: u32,
+    /// 1 when every object is inside the success volume.
+    pub all_inside: u32,
+    /// 1 when the released object is stable (tilt within the threshold).
+    pub stable: u32,
+    /// Tilt of the released object after settling (rad).
+    pub tilt_rad: f32,
+    /// Compactness C of the box after settling.
+    pub compactness: f32,
+    /// Release pose of the object's canonical origin in B: x, y, z (m), yaw (rad).
+    pub release: [f32; 4],
+    /// Largest joint-limit excess seen in received commands (rad; 0 when none).
+    pub max_limit_excess_rad: f64,
+    /// Joint commands received / rejected as invalid so far.
+    pub commands: u64,
+    /// Joint commands rejected (out of limits, malformed).
+    pub commands_rejected: u64,
+}
+payload!(SimOutcome);
+
+impl SimOutcome {
+    /// Header, flags and finite numbers.
+    pub fn validate(&self) -> Result<(), Invalid> {
+        self.header.validate()?;
+        flag("all_inside", self.all_inside)?;
+        flag("stable", self.stable)?;
+        finite_all("tilt_rad", &[self.tilt_rad])?;
+        finite_all("compactness", &[self.compactness])?;
+        finite_all("release", &self.release)
+    }
+}
+
+/// Service names under a configurable prefix (default [`Services::DEFAULT_PREFIX`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Services {
+    prefix: String,
+}
+
+/// A prefix that cannot name services.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "IPC prefix {0:?}: use 1-100 characters of [A-Za-z0-9_-/.], not starting or ending with '/'"
+)]
+pub struct BadPrefix(pub String);
+
+impl Services {
+    /// The default prefix.
+    pub const DEFAULT_PREFIX: &'static str = "herb";
+
+    /// Names under `prefix`.
+    pub fn new(prefix: &str) -> Result<Self, BadPrefix> {
+        let ok = (1..=100).contains(&prefix.len())
+            && !prefix.starts_with('/')
+            && !prefix.ends_with('/')
+            && prefix
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || "_-/.".contains(c));
+        if ok {
+            Ok(Self {
+                prefix: prefix.to_owned(),
+            })
+        } else {
+            Err(BadPrefix(prefix.to_owned()))
+        }
+    }
+
+    /// The prefix.
+    pub fn prefix(&self) -> &str {
+        &self.prefix
+    }
+
+    fn name(&self, leaf: &str) -> String {
+        format!("{}/{leaf}", self.prefix)
+    }
+
+    /// pub-sub [`HeightmapFrame`], camera adapter -> herbd, clients.
+    pub fn heightmap(&self) -> String {
+        self.name("heightmap")
+    }
+    /// pub-sub [`JointState`], adapter -> herbd.
+    pub fn joint_state(&self) -> String {
+        self.name("joint_state")
+    }
+    /// pub-sub [`JointCommand`], herbd -> adapter.
+    pub fn joint_command(&self) -> String {
+        self.name("joint_command")
+    }
+    /// pub-sub [`GripperCommand`], herbd -> adapter.
+    pub fn gripper_command(&self) -> String {
+        self.name("gripper_command")
+    }
+    /// pub-sub [`GripperState`], adapter -> herbd.
+    pub fn gripper_state(&self) -> String {
+        self.name("gripper_state")
+    }
+    /// pub-sub [`Status`], herbd -> clients.
+    pub fn status(&self) -> String {
+        self.name("status")
+    }
+    /// request-response [`PackJobRequest`] / [`PackJobReply`], clients -> herbd.
+    pub fn pack_job(&self) -> String {
+        self.name("pack_job")
+    }
+    /// pub-sub [`SimOutcome`], loopback -> tests (sim only).
+    pub fn sim_outcome(&self) -> String {
+        self.name("sim/outcome")
+    }
+}
+
+impl Default for Services {
+    fn default() -> Self {
+        Self {
+            prefix: Self::DEFAULT_PREFIX.to_owned(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn js() -> JointState {
+        JointState {
+            header: Header::now(1),
+            position: [0.1; DOF],
+            velocity: [0.0; DOF],
+        }
+    }
+
+    #[test]
+    fn joint_state_rejects_nan_version_and_range() {
+        assert_eq!(js().validate(), Ok(()));
+        let mut m = js();
+        m.position[3] = f64::NAN;
+        assert_eq!(
+            m.validate(),
+            Err(Invalid::at("position", Reason::NotFinite, 3))
+        );
+        let mut m = js();
+        m.header.version = 2;
+        assert_eq!(m.validate().unwrap_err().reason, Reason::WrongVersion);
+        let mut m = js();
+        m.velocity[0] = 100.0;
+        assert_eq!(m.validate().unwrap_err().reason, Reason::OutOfRange);
+        let mut m = js();
+        m.header.seq = 0;
+        assert_eq!(m.validate().unwrap_err().field, "header.seq");
+    }
+
+    #[test]
+    fn joint_command_checks_the_receivers_limits() {
+        let c = JointCommand {
+            header: Header::now(5),
+            position: [0.5; DOF],
+            velocity: [0.0; DOF],
+            acceleration: [0.0; DOF],
+        };
+        assert_eq!(c.validate(&[-1.0; DOF], &[1.0; DOF]), Ok(()));
+        let mut upper = [1.0; DOF];
+        upper[6] = 0.4;
+        assert_eq!(
+            c.validate(&[-1.0; DOF], &upper),
+            Err(Invalid::at("position", Reason::OutOfRange, 6))
+        );
+        let mut bad = c;
+        bad.acceleration[2] = f64::INFINITY;
+        assert_eq!(
+            bad.validate(&[-1.0; DOF], &[1.0; DOF]).unwrap_err().reason,
+            Reason::NotFinite
+        );
+    }
+
+    #[test]
+    fn heightmap_frame_lengths_and_values() {
+        let mut slot = Box::new(MaybeUninit::<HeightmapFrame>::uninit());
+        let f = zeroed_in_place(&mut slot);
+        assert_eq!(f.validate_meta().unwrap_err().field, "header.version");
+        f.header = Header::now(1);
+        assert_eq!(f.validate().unwrap_err().reason, Reason::BadLength);
+        f.nx = 300;
+        f.ny = 300; // 90000 cells > capacity
+        f.cell_m = 0.0015625;
+        assert_eq!(f.validate().unwrap_err().reason, Reason::BadLength);
+        f.nx = 222;
+        f.ny = 146;
+        assert_eq!(f.validate(), Ok(()));
+        assert_eq!(f.cells().len(), 222 * 146);
+        f.data[222 * 146 - 1] = f32::NAN;
+        assert_eq!(
+            f.validate(),
+            Err(Invalid::at("data", Reason::NotFinite, 222 * 146 - 1))
+        );
+        // Cells past nx * ny are not looked at.
+        f.data[222 * 146 - 1] = 0.1;
+        f.data[222 * 146] = f32::NAN;
+        assert_eq!(f.validate(), Ok(()));
+        f.data[5] = 2.0;
+        assert_eq!(f.validate().unwrap_err().reason, Reason::OutOfRange);
+        f.cell_m = f32::NAN;
+        assert_eq!(f.validate_meta().unwrap_err().field, "cell_m");
+    }
+
+    #[test]
+    fn pack_job_rejections() {
+        assert_eq!(PackJobRequest::new(7, &[1, 2, 3]).validate(24), Ok(()));
+        assert_eq!(
+            PackJobRequest::new(7, &[]).validate(24),
+            Err((RejectReason::Empty, 0))
+        );
+        assert_eq!(
+            PackJobRequest::new(7, &[1, 24, 3]).validate(24),
+            Err((RejectReason::UnknownObject, 1))
+        );
+        assert_eq!(
+            PackJobRequest::new(0, &[1]).validate(24),
+            Err((RejectReason::Malformed, 0))
+        );
+        let big: Vec<u16> = (0..65).map(|i| (i % 24) as u16).collect();
+        assert_eq!(
+            PackJobRequest::new(7, &big).validate(24),
+            Err((RejectReason::TooMany, 65))
+        );
+        let mut r = PackJobRequest::new(7, &[1]);
+        r.count = 1000;
+        assert!(r.objects().is_empty());
+        assert_eq!(r.validate(24), Err((RejectReason::TooMany, 1000)));
+    }
+
+    #[test]
+    fn reply_status_and_gripper_codes() {
+        let mut r = PackJobReply {
+            header: Header::now(1),
+            job_id: 3,
+            accepted: 1,
+            reason: 0,
+            detail: 0,
+            reserved: 0,
+        };
+        assert_eq!(r.validate(), Ok(RejectReason::None));
+        r.reason = RejectReason::Busy as u32;
+        assert!(r.validate().is_err(), "accepted with a reason");
+        r.accepted = 0;
+        assert_eq!(r.validate(), Ok(RejectReason::Busy));
+        r.reason = 99;
+        assert_eq!(r.validate().unwrap_err().reason, Reason::UnknownCode);
+
+        let g = GripperCommand {
+            header: Header::now(1),
+            action: 1,
+            object_type: 5,
+        };
+        assert_eq!(g.validate(24), Ok(GripperAction::Close));
+        assert!(GripperCommand { action: 2, ..g }.validate(24).is_err());
+        assert!(
+            GripperCommand {
+                object_type: 24,
+                ..g
+            }
+            .validate(24)
+            .is_err()
+        );
+        assert!(
+            GripperCommand {
+                object_type: NO_OBJECT,
+                ..g
+            }
+            .validate(24)
+            .is_ok()
+        );
+
+        let mut slot = MaybeUninit::<Status>::uninit();
+        let s = zeroed_in_place(&mut slot);
+        s.header = Header::now(1);
+        assert_eq!(s.validate(), Ok(()));
+        s.event = 42;
+        assert_eq!(s.validate().unwrap_err().field, "event");
+        s.event = 0;
+        s.objects_done = 3;
+        assert_eq!(s.validate().unwrap_err().field, "objects_done");
+    }
+
+    #[test]
+    fn type_names_are_explicit_and_versioned() {
+        // SAFETY: type_name has no preconditions for these types; it is unsafe only because
+        // the trait as a whole is.
+        let names = unsafe {
+            [
+                HeightmapFrame::type_name(),
+                JointState::type_name(),
+                JointCommand::type_name(),
+                Status::type_name(),
+                PackJobRequest::type_name(),
+            ]
+        };
+        assert_eq!(
+            names,
+            [
+                "herb::v1::HeightmapFrame",
+                "herb::v1::JointState",
+                "herb::v1::JointCommand",
+                "herb::v1::Status",
+                "herb::v1::PackJobRequest"
+            ]
+        );
+    }
+
+    #[test]
+    fn service_prefix() {
+        let s = Services::new("test/a1").unwrap();
+        assert_eq!(s.joint_state(), "test/a1/joint_state");
+        assert!(Services::new("").is_err());
+        assert!(Services::new("/abs").is_err());
+        assert!(Services::new("a b").is_err());
+        assert_eq!(Services::default().status(), "herb/status");
+    }
+}
