@@ -9,11 +9,14 @@
 #![warn(missing_docs)]
 
 pub mod cell;
+pub mod config;
+pub mod controller;
 pub mod error;
 pub mod evaluate;
 pub mod kinematics;
 pub mod motion;
 pub mod onnx;
+pub mod planner;
 pub mod policy;
 pub mod sequence;
 

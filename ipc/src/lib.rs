@@ -18,6 +18,8 @@
 
 #![warn(missing_docs)]
 
+pub mod bus;
+
 use iceoryx2::prelude::*;
 use std::mem::MaybeUninit;
 
@@ -592,6 +594,8 @@ pub enum RejectReason {
     Malformed = 5,
     /// The daemon is stopping.
     ShuttingDown = 6,
+    /// The robot adapter is not connected (no fresh joint and gripper states).
+    NotReady = 7,
 }
 
 impl RejectReason {

@@ -1,0 +1,261 @@
+//! `herbd`'s configuration: a TOML file (every key optional, unknown keys rejected) with
+//! command-line overrides applied by the binary. [`Config::validate`] checks every value and
+//! names the bad one; nothing is acted on before it passes.
+
+use crate::cell::CellConfig;
+use crate::kinematics::LEFT_ARM;
+use crate::motion::JointLimits;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The control loop.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LoopConfig {
+    /// Cycle rate (Hz).
+    pub rate_hz: f64,
+    /// Busy-wait this long before each deadline instead of sleeping (us); 0 sleeps the whole
+    /// way. Trades a core for lower wake-up jitter.
+    pub spin_us: u64,
+    /// Seconds between statistics reports (printed off the loop).
+    pub report_interval_s: f64,
+    /// Longest trajectory the planner can hand the loop (s): sizes the preallocated buffers.
+    pub max_trajectory_s: f64,
+}
+
+impl Default for LoopConfig {
+    fn default() -> Self {
+        Self {
+            rate_hz: 1000.0,
+            spin_us: 0,
+            report_interval_s: 10.0,
+            max_trajectory_s: 60.0,
+        }
+    }
+}
+
+/// Optional real-time setup; each step that is not permitted degrades to a warning.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RtConfig {
+    /// Lock all memory (mlockall).
+    pub mlockall: bool,
+    /// SCHED_FIFO priority of the loop thread (1-99); 0 keeps the default scheduler.
+    pub fifo_priority: i32,
+    /// CPU to pin the loop thread to; none when absent.
+    pub cpu: Option<usize>,
+}
+
+/// Input timeouts (s).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Timeouts {
+    /// Joint states older than this are a fault.
+    pub joint_state_s: f64,
+    /// Gripper states older than this are a fault.
+    pub gripper_state_s: f64,
+    /// Heightmaps older than this are a fault (while a job runs).
+    pub heightmap_s: f64,
+    /// The gripper must reach a commanded state within this.
+    pub gripper_action_s: f64,
+    /// Inputs must be healthy this long before a faulted job resumes.
+    pub resume_after_s: f64,
+    /// How long to wait for a heightmap newer than the last release.
+    pub fresh_heightmap_s: f64,
+}
+
+impl Default for Timeouts {
+    fn default() -> Self {
+        Self {
+            joint_state_s: 0.1,
+            gripper_state_s: 0.2,
+            heightmap_s: 2.0,
+            gripper_action_s: 2.0,
+            resume_after_s: 0.5,
+            fresh_heightmap_s: 10.0,
+        }
+    }
+}
+
+/// Models and data.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ModelsConfig {
+    /// `blbf` (the PackIt SO(2) baseline) or the path of an ONNX policy.
+    pub policy: String,
+    /// The sequence model (Beam-3 transition counts).
+    pub sequence: PathBuf,
+    /// BoxED folder for the object meshes; absent: `HERB_BOXED` or `../shared/boxed`,
+    /// falling back to primitives.
+    pub boxed: Option<PathBuf>,
+    /// Gap above the estimated resting height at release (m).
+    pub clearance_m: f64,
+}
+
+impl Default for ModelsConfig {
+    fn default() -> Self {
+        Self {
+            policy: "blbf".into(),
+            sequence: PathBuf::from("models/sequence.json"),
+            boxed: None,
+            clearance_m: herb_sim::WorldConfig::default().clearance_m as f64,
+        }
+    }
+}
+
+/// Everything `herbd` reads.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    /// Service-name prefix (`herb_ipc::Services`).
+    pub ipc_prefix: String,
+    /// The loop.
+    #[serde(rename = "loop")]
+    pub loop_: LoopConfig,
+    /// Real-time setup.
+    pub rt: RtConfig,
+    /// Input timeouts.
+    pub timeouts: Timeouts,
+    /// Models and data.
+    pub models: ModelsConfig,
+    /// Box and pick-station poses, approach geometry.
+    pub cell: CellConfig,
+    /// Joint limits.
+    pub limits: JointLimits,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            ipc_prefix: herb_ipc::Services::DEFAULT_PREFIX.into(),
+            loop_: LoopConfig::default(),
+            rt: RtConfig::default(),
+            timeouts: Timeouts::default(),
+            models: ModelsConfig::default(),
+            cell: CellConfig::default(),
+            limits: JointLimits::baxter_left(),
+        }
+    }
+}
+
+impl Default for JointLimits {
+    fn default() -> Self {
+        Self::baxter_left()
+    }
+}
+
+impl Config {
+    /// Parses TOML text (`origin` names it in errors) and validates it.
+    pub fn from_toml(text: &str, origin: &str) -> Result<Self, String> {
+        let c: Self = toml::from_str(text).map_err(|e| format!("{origin}: {e}"))?;
+        c.validate().map_err(|e| format!("{origin}: {e}"))?;
+        Ok(c)
+    }
+
+    /// Reads and validates a TOML file.
+    pub fn load(path: &Path) -> Result<Self, String> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("cannot read config {}: {e}", path.display()))?;
+        Self::from_toml(&text, &path.display().to_string())
+    }
+
+    /// Loop period (s).
+    pub fn period_s(&self) -> f64 {
+        1.0 / self.loop_.rate_hz
+    }
+
+    /// Checks every value; the error names the first bad one.
+    pub fn validate(&self) -> Result<(), String> {
+        herb_ipc::Services::new(&self.ipc_prefix).map_err(|e| e.to_string())?;
+        let l = &self.loop_;
+        if !(l.rate_hz.is_finite() && (10.0..=10_000.0).contains(&l.rate_hz)) {
+            return Err(format!("loop.rate_hz {} outside 10..=10000", l.rate_hz));
+        }
+        if l.spin_us as f64 * 1e-6 >= 1.0 / l.rate_hz {
+            return Err(format!(
+                "loop.spin_us {} is not shorter than the period",
+                l.spin_us
+            ));
+        }
+        if !(l.report_interval_s.is_finite() && l.report_interval_s >= 0.1) {
+            return Err(format!(
+                "loop.report_interval_s {} below 0.1",
+                l.report_interval_s
+            ));
+        }
+        if !(l.max_trajectory_s.is_finite() && (1.0..=600.0).contains(&l.max_trajectory_s)) {
+            return Err(format!(
+                "loop.max_trajectory_s {} outside 1..=600",
+                l.max_trajectory_s
+            ));
+        }
+        if !(0..=99).contains(&self.rt.fifo_priority) {
+            return Err(format!(
+                "rt.fifo_priority {} outside 0..=99",
+                self.rt.fifo_priority
+            ));
+        }
+        let t = &self.timeouts;
+        for (name, v) in [
+            ("joint_state_s", t.joint_state_s),
+            ("gripper_state_s", t.gripper_state_s),
+            ("heightmap_s", t.heightmap_s),
+            ("gripper_action_s", t.gripper_action_s),
+            ("resume_after_s", t.resume_after_s),
+            ("fresh_heightmap_s", t.fresh_heightmap_s),
+        ] {
+            if !(v.is_finite() && (0.001..=600.0).contains(&v)) {
+                return Err(format!("timeouts.{name} {v} outside 0.001..=600 s"));
+            }
+        }
+        if self.models.policy.is_empty() {
+            return Err("models.policy is empty".into());
+        }
+        if !(self.models.clearance_m.is_finite() && (0.0..=0.05).contains(&self.models.clearance_m))
+        {
+            return Err(format!(
+                "models.clearance_m {} outside 0..=0.05",
+                self.models.clearance_m
+            ));
+        }
+        self.cell.validate()?;
+        self.limits
+            .validate(&LEFT_ARM.map(|j| j.lower), &LEFT_ARM.map(|j| j.upper))
+            .map_err(|e| format!("limits: {e}"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_validate_and_bad_values_are_named() {
+        Config::default().validate().unwrap();
+        let c = Config::from_toml("ipc_prefix = \"t1\"\n[loop]\nrate_hz = 500.0\n", "x").unwrap();
+        assert_eq!(c.loop_.rate_hz, 500.0);
+        assert_eq!(c.ipc_prefix, "t1");
+        let e = Config::from_toml("[loop]\nrate_hz = 0.0\n", "cfg.toml").unwrap_err();
+        assert!(e.contains("cfg.toml") && e.contains("rate_hz"), "{e}");
+        let e = Config::from_toml("[loop]\nrate = 5\n", "x").unwrap_err();
+        assert!(e.contains("unknown field"), "{e}");
+        let e = Config::from_toml("[limits]\nlower = [0.0]\n", "x").unwrap_err();
+        assert!(e.contains("lower"), "{e}");
+        let mut c = Config::default();
+        c.limits.upper[1] = 3.0;
+        assert!(
+            c.validate()
+                .unwrap_err()
+                .contains("leaves the arm's limits")
+        );
+        c = Config::default();
+        c.limits.jerk[4] = f64::NAN;
+        assert!(c.validate().unwrap_err().contains("jerk"));
+        c = Config::default();
+        c.timeouts.joint_state_s = -1.0;
+        assert!(c.validate().unwrap_err().contains("joint_state_s"));
+        c = Config::default();
+        c.ipc_prefix = "/x".into();
+        assert!(c.validate().is_err());
+    }
+}

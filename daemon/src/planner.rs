@@ -1,0 +1,514 @@
+//! The planner thread: everything `herbd` does that allocates or takes longer than a cycle.
+//!
+//! The loop sends it [`Request`]s and receives [`Response`]s over two wait-free SPSC rings
+//! (`rtrb`); trajectory buffers ([`MotionPlan`]) are preallocated once and only move between
+//! the threads, so the loop never allocates. The planner orders a job (Beam-3), decides each
+//! placement from the newest heightmap (observation, policy, z: the decision the latency
+//! budget is about), plans the gripper waypoints, solves inverse kinematics and samples
+//! Ruckig trajectories at the loop period; it also computes brakes on request.
+
+use crate::cell::{CellConfig, lift_to, plan_waypoints};
+use crate::config::Config;
+use crate::kinematics::{Arm, DOF, IkOptions};
+use crate::motion::{MotionPlanner, Setpoint, Setpoints};
+use crate::policy::{Blbf, DecisionInput, Policy, check_action};
+use crate::sequence::{SequenceModel, beam3};
+use crate::{DecideError, OnnxPolicy};
+use herb_ipc::bus::{Bus, Sub};
+use herb_ipc::{Fault, GripperAction, HeightmapFrame, MAX_JOB_OBJECTS, Services};
+use herb_sim::observation::{Projections, action_to_placement};
+use herb_sim::zestimate::{ZScratch, estimate_z_rotated};
+use herb_sim::{GridSpec, Heightmap, ObsLayout, SharedCatalog, TypeIdx};
+use iceoryx2::prelude::ipc;
+use iceoryx2::sample::Sample;
+use rapier3d::math::Rotation;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// Most segments in one object's plan.
+pub const MAX_SEGMENTS: usize = 8;
+
+/// One rest-to-rest move of a plan, and the gripper action at its end.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Segment {
+    /// Index one past its last sample in [`MotionPlan::setpoints`].
+    pub end: usize,
+    /// Gripper action once the arm stands at the segment's end.
+    pub then: Option<GripperAction>,
+}
+
+/// A trajectory buffer and what it is for. Two are allocated at start and reused.
+#[derive(Debug, Clone)]
+pub struct MotionPlan {
+    /// Samples at the loop period.
+    pub setpoints: Setpoints,
+    /// Segments, in order.
+    pub segments: [Segment; MAX_SEGMENTS],
+    /// Segments used.
+    pub n_segments: usize,
+    /// Object index in the packing order.
+    pub index: u32,
+    /// Its catalog type.
+    pub object: u16,
+    /// Placement in B: x, y, z (m), yaw (rad).
+    pub pose: [f32; 4],
+    /// Decision latency (observation + policy + z), ns; 0 when not decided anew.
+    pub decision_ns: u64,
+}
+
+impl MotionPlan {
+    /// An empty plan holding `samples` samples at most.
+    pub fn with_capacity(samples: usize) -> Self {
+        Self {
+            setpoints: Setpoints::with_capacity(samples),
+            segments: [Segment::default(); MAX_SEGMENTS],
+            n_segments: 0,
+            index: 0,
+            object: 0,
+            pose: [0.0; 4],
+            decision_ns: 0,
+        }
+    }
+
+    fn reset(&mut self) {
+        self.setpoints.clear();
+        self.n_segments = 0;
+        self.decision_ns = 0;
+    }
+
+    fn push_segment(&mut self, then: Option<GripperAction>) {
+        if self.n_segments < MAX_SEGMENTS {
+            self.segments[self.n_segments] = Segment {
+                end: self.setpoints.len(),
+                then,
+            };
+            self.n_segments += 1;
+        }
+    }
+
+    /// The segments used.
+    pub fn segments(&self) -> &[Segment] {
+        &self.segments[..self.n_segments]
+    }
+}
+
+/// What the loop asks.
+#[derive(Debug)]
+pub enum Request {
+    /// Order a job's objects (Beam-3).
+    Order {
+        /// Job id.
+        job_id: u64,
+        /// Objects (catalog type indices).
+        objects: [u16; MAX_JOB_OBJECTS],
+        /// Used.
+        count: usize,
+    },
+    /// Decide and plan object `index` from rest at `from`, on a heightmap stamped after
+    /// `after_stamp_ns`. With `place_only`, the object is already held: reuse `pose` and plan
+    /// only the placing moves.
+    Plan {
+        /// Index in the order.
+        index: u32,
+        /// Its type.
+        object: u16,
+        /// Oldest acceptable heightmap stamp (exclusive).
+        after_stamp_ns: u64,
+        /// Current configuration (at rest).
+        from: [f64; DOF],
+        /// Held already: place at `pose`.
+        place_only: bool,
+        /// The placement to reuse with `place_only`.
+        pose: [f32; 4],
+        /// Buffer to fill.
+        buf: Box<MotionPlan>,
+    },
+    /// Brake from `state` to standstill.
+    Brake {
+        /// The last commanded state.
+        state: Setpoint,
+        /// Buffer to fill.
+        buf: Box<MotionPlan>,
+    },
+}
+
+/// What the planner answers.
+#[derive(Debug)]
+pub enum Response {
+    /// The packing order.
+    Ordered {
+        /// Job id.
+        job_id: u64,
+        /// Ordered objects.
+        order: [u16; MAX_JOB_OBJECTS],
+        /// Used.
+        count: usize,
+    },
+    /// The job could not be ordered.
+    OrderFailed {
+        /// Job id.
+        job_id: u64,
+    },
+    /// A plan for an object.
+    Planned(Box<MotionPlan>),
+    /// A brake trajectory.
+    Braked(Box<MotionPlan>),
+    /// Planning failed; the buffer comes back.
+    Failed {
+        /// Why.
+        fault: Fault,
+        /// The buffer.
+        buf: Box<MotionPlan>,
+    },
+}
+
+/// The loop's ends of the rings.
+pub struct PlannerLink {
+    /// Requests to the planner.
+    pub tx: rtrb::Producer<Request>,
+    /// Its responses.
+    pub rx: rtrb::Consumer<Response>,
+    thread: std::thread::Thread,
+}
+
+impl PlannerLink {
+    /// Sends a request and wakes the planner; gives the request back if the ring is full.
+    pub fn send(&mut self, r: Request) -> Result<(), Request> {
+        match self.tx.push(r) {
+            Ok(()) => {
+                self.thread.unpark();
+                Ok(())
+            }
+            Err(rtrb::PushError::Full(r)) => Err(r),
+        }
+    }
+}
+
+/// Decides placements: observation, policy, z (the shared estimate) plus clearance.
+pub struct Decider {
+    policy: Box<dyn Policy>,
+    catalog: SharedCatalog,
+    projections: Projections,
+    obs: Vec<f32>,
+    hm: Option<Heightmap>,
+    zs: ZScratch,
+    clearance_m: f32,
+}
+
+impl std::fmt::Debug for Decider {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Decider")
+            .field("policy", &self.policy.name())
+            .finish()
+    }
+}
+
+impl Decider {
+    /// A decider running `policy` (`blbf` or an ONNX path).
+    pub fn new(
+        policy: &str,
+        catalog: SharedCatalog,
+        clearance_m: f64,
+    ) -> Result<Self, DecideError> {
+        let policy: Box<dyn Policy> = if policy == "blbf" {
+            Box::new(Blbf::new())
+        } else {
+            Box::new(OnnxPolicy::load(std::path::Path::new(policy))?)
+        };
+        Ok(Self {
+            policy,
+            projections: Projections::new(&catalog),
+            obs: vec![0.0; ObsLayout::LEN],
+            hm: None,
+            zs: ZScratch::for_catalog(&catalog, ObsLayout::CELL_M),
+            catalog,
+            clearance_m: clearance_m as f32,
+        })
+    }
+
+    /// The policy's name.
+    pub fn policy_name(&self) -> &str {
+        self.policy.name()
+    }
+
+    /// The placement of `object` (step `step` of the episode) on `frame`: B x, y, z of the
+    /// canonical origin at release, and yaw.
+    pub fn decide(
+        &mut self,
+        frame: &HeightmapFrame,
+        object: TypeIdx,
+        step: usize,
+    ) -> Result<[f32; 4], String> {
+        frame
+            .validate()
+            .map_err(|e| format!("heightmap frame: {e}"))?;
+        let spec = GridSpec::for_box(frame.cell_m).map_err(|e| e.to_string())?;
+        if (spec.nx, spec.ny) != (frame.nx as usize, frame.ny as usize) {
+            return Err(format!(
+                "heightmap frame of {} x {} cells of {} m; the box needs {} x {}",
+                frame.nx, frame.ny, frame.cell_m, spec.nx, spec.ny
+            ));
+        }
+        if self.hm.as_ref().map(|h| *h.spec()) != Some(spec) {
+            self.hm = Some(Heightmap::new(spec));
+        }
+        let hm = self.hm.as_mut().expect("set above");
+        // One snapshot of the shared frame (the decision must not change under it).
+        hm.data_mut().copy_from_slice(frame.cells());
+        let hm = &*hm;
+        ObsLayout::write(hm, Some(self.projections.get(object)), &mut self.obs)
+            .map_err(|e| e.to_string())?;
+        let shape = self.catalog.shape(object);
+        let a = self
+            .policy
+            .decide(&DecisionInput {
+                observation: &self.obs,
+                heightmap: hm,
+                object,
+                shape,
+                step,
+            })
+            .and_then(|a| check_action(self.policy.name(), a))
+            .map_err(|e| e.to_string())?;
+        let (x, y, theta) = action_to_placement(a).map_err(|e| e.to_string())?;
+        let z = estimate_z_rotated(
+            hm,
+            shape,
+            x,
+            y,
+            Rotation::from_rotation_z(theta),
+            &mut self.zs,
+        ) + self.clearance_m;
+        Ok([x, y, z, theta])
+    }
+}
+
+struct Worker {
+    decider: Decider,
+    catalog: SharedCatalog,
+    sequence: SequenceModel,
+    cell: CellConfig,
+    arm: Arm,
+    ik: IkOptions,
+    motion: MotionPlanner,
+    hm_sub: Sub<HeightmapFrame>,
+    latest: Option<Sample<ipc::Service, HeightmapFrame, ()>>,
+    _bus: Bus,
+}
+
+impl Worker {
+    fn newest_frame(&mut self, after: u64, wait: Duration) -> Option<&HeightmapFrame> {
+        let t0 = Instant::now();
+        loop {
+            while let Ok(Some(s)) = self.hm_sub.receive() {
+                if s.payload().validate_meta().is_ok() {
+                    self.latest = Some(s);
+                }
+            }
+            let fresh = self
+                .latest
+                .as_ref()
+                .is_some_and(|s| s.payload().header.stamp_ns > after);
+            if fresh || t0.elapsed() > wait {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        self.latest
+            .as_ref()
+            .map(|s| s.payload())
+            .filter(|f| f.header.stamp_ns > after)
+    }
+
+    fn order(&self, objects: &[u16]) -> Option<Vec<TypeIdx>> {
+        let v: Vec<TypeIdx> = objects.iter().map(|&o| TypeIdx(o)).collect();
+        beam3(&self.sequence, &v).ok()
+    }
+
+    fn plan(
+        &mut self,
+        index: u32,
+        object: u16,
+        after: u64,
+        from: [f64; DOF],
+        place_only: Option<[f32; 4]>,
+        buf: &mut MotionPlan,
+    ) -> Result<(), Fault> {
+        buf.reset();
+        buf.index = index;
+        buf.object = object;
+        let ty = TypeIdx(object);
+        let pose = match place_only {
+            Some(p) => p,
+            None => {
+                let t0 = Instant::now();
+                let Some(frame) = self.newest_frame(after, Duration::from_millis(500)) else {
+                    return Err(Fault::HeightmapTimeout);
+                };
+                let frame: *const HeightmapFrame = frame;
+                // SAFETY: `frame` points into the sample held in `self.latest`, which is not
+                // touched until `decide` returns (the borrow checker cannot see through the
+                // split borrow of `self`).
+                let p = self.decider.decide(unsafe { &*frame }, ty, index as usize);
+                buf.decision_ns = t0.elapsed().as_nanos() as u64;
+                p.map_err(|_| Fault::Decision)?
+            }
+        };
+        buf.pose = pose;
+        let h = self.catalog.shape(ty).extents().z as f64;
+        let place = pose.map(|v| v as f64);
+        let w = plan_waypoints(&self.cell, &self.arm, &self.ik, h, place, &from)
+            .map_err(|_| Fault::Unreachable)?;
+        let transit = self.cell.transit_z(h);
+        let mut cur = from;
+        let mut go = |to: &[f64; DOF],
+                      then,
+                      buf: &mut MotionPlan,
+                      m: &mut MotionPlanner|
+         -> Result<(), Fault> {
+            m.point_to_point(&cur, to, &mut buf.setpoints)
+                .map_err(|_| Fault::Motion)?;
+            buf.push_segment(then);
+            cur = *to;
+            Ok(())
+        };
+        if let Some(up) = lift_to(&self.arm, &self.ik, &from, transit) {
+            go(&up, None, buf, &mut self.motion)?;
+        }
+        if place_only.is_none() {
+            go(&w.pre_grasp, None, buf, &mut self.motion)?;
+            go(&w.grasp, Some(GripperAction::Close), buf, &mut self.motion)?;
+            go(&w.pre_grasp, None, buf, &mut self.motion)?;
+        }
+        go(&w.pre_place, None, buf, &mut self.motion)?;
+        go(&w.place, Some(GripperAction::Open), buf, &mut self.motion)?;
+        go(&w.pre_place, None, buf, &mut self.motion)?;
+        Ok(())
+    }
+
+    fn handle(&mut self, r: Request) -> Response {
+        match r {
+            Request::Order {
+                job_id,
+                objects,
+                count,
+            } => match self.order(&objects[..count]) {
+                Some(v) => {
+                    let mut order = [0u16; MAX_JOB_OBJECTS];
+                    for (o, t) in order.iter_mut().zip(&v) {
+                        *o = t.0;
+                    }
+                    Response::Ordered {
+                        job_id,
+                        order,
+                        count,
+                    }
+                }
+                None => Response::OrderFailed { job_id },
+            },
+            Request::Plan {
+                index,
+                object,
+                after_stamp_ns,
+                from,
+                place_only,
+                pose,
+                mut buf,
+            } => {
+                let reuse = place_only.then_some(pose);
+                match self.plan(index, object, after_stamp_ns, from, reuse, &mut buf) {
+                    Ok(()) => Response::Planned(buf),
+                    Err(fault) => Response::Failed { fault, buf },
+                }
+            }
+            Request::Brake { state, mut buf } => {
+                buf.reset();
+                match self.motion.brake(&state, &mut buf.setpoints) {
+                    Ok(_) => {
+                        buf.push_segment(None);
+                        Response::Braked(buf)
+                    }
+                    Err(_) => {
+                        // Ruckig failed: stop where commanded (the adapter's own limits hold).
+                        buf.reset();
+                        Response::Failed {
+                            fault: Fault::Motion,
+                            buf,
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Starts the planner thread: loads the catalog, sequence model and policy (errors come back
+/// here, before the daemon reports ready), and opens its own heightmap subscriber.
+pub fn spawn(
+    cfg: &Config,
+    catalog: SharedCatalog,
+    stop: Arc<AtomicBool>,
+) -> Result<(PlannerLink, JoinHandle<()>), String> {
+    let (tx, req_rx) = rtrb::RingBuffer::<Request>::new(8);
+    let (resp_tx, rx) = rtrb::RingBuffer::<Response>::new(8);
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
+    let cfg = cfg.clone();
+    let handle = std::thread::Builder::new()
+        .name("herbd-planner".into())
+        .spawn(move || {
+            let setup = (|| -> Result<Worker, String> {
+                let services = Services::new(&cfg.ipc_prefix).map_err(|e| e.to_string())?;
+                let bus = Bus::open("herbd-planner", &services).map_err(|e| e.to_string())?;
+                let hm_sub = bus
+                    .subscriber::<HeightmapFrame>(&services.heightmap())
+                    .map_err(|e| e.to_string())?;
+                let sequence = SequenceModel::load(&cfg.models.sequence, &catalog)
+                    .map_err(|e| e.to_string())?;
+                let decider =
+                    Decider::new(&cfg.models.policy, catalog.clone(), cfg.models.clearance_m)
+                        .map_err(|e| e.to_string())?;
+                let limits = cfg.limits;
+                Ok(Worker {
+                    decider,
+                    catalog: catalog.clone(),
+                    sequence,
+                    cell: cfg.cell,
+                    arm: Arm::baxter_left().with_limits(&limits.lower, &limits.upper),
+                    ik: IkOptions::default(),
+                    motion: MotionPlanner::new(limits, cfg.period_s()),
+                    hm_sub,
+                    latest: None,
+                    _bus: bus,
+                })
+            })();
+            let (mut w, mut req_rx, mut resp_tx) = match setup {
+                Ok(w) => {
+                    let _ = ready_tx.send(Ok(()));
+                    (w, req_rx, resp_tx)
+                }
+                Err(e) => {
+                    let _ = ready_tx.send(Err(e));
+                    return;
+                }
+            };
+            while !stop.load(Ordering::Relaxed) {
+                while let Ok(r) = req_rx.pop() {
+                    let resp = w.handle(r);
+                    if resp_tx.push(resp).is_err() {
+                        // The loop reads every cycle and has at most two requests out.
+                        eprintln!("herbd: planner response ring full (a bug)");
+                    }
+                }
+                std::thread::park_timeout(Duration::from_millis(20));
+            }
+        })
+        .map_err(|e| format!("cannot start the planner thread: {e}"))?;
+    let thread = handle.thread().clone();
+    match ready_rx.recv() {
+        Ok(Ok(())) => Ok((PlannerLink { tx, rx, thread }, handle)),
+        Ok(Err(e)) => Err(e),
+        Err(_) => Err("the planner thread died while starting".into()),
+    }
+}

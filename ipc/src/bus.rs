@@ -1,0 +1,166 @@
+//! Opening HERB's services with one set of quality-of-service settings.
+//!
+//! iceoryx2 lets the first process that creates a service fix its limits, and checks the
+//! limits later processes ask for against them; every process therefore opens every service
+//! through these functions, so start order never matters. Publishers never block (safe
+//! overflow: a full subscriber queue drops its oldest sample), and each pub-sub service keeps
+//! its last sample for late subscribers (history 1), so a restarted daemon sees the current
+//! heightmap at once. Room is left for peers that were killed and not yet cleaned up.
+
+use crate::{PackJobReply, PackJobRequest, Payload, Services};
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::{client::Client, server::Server};
+use iceoryx2::prelude::*;
+
+/// A publisher of HERB payload `T`.
+pub type Pub<T> = Publisher<ipc::Service, T, ()>;
+/// A subscriber of HERB payload `T`.
+pub type Sub<T> = Subscriber<ipc::Service, T, ()>;
+/// The pack-job server (herbd).
+pub type JobServer = Server<ipc::Service, PackJobRequest, (), PackJobReply, ()>;
+/// A pack-job client.
+pub type JobClient = Client<ipc::Service, PackJobRequest, (), PackJobReply, ()>;
+
+/// A failure to open a node, service or port, with what was being opened.
+#[derive(Debug, thiserror::Error)]
+#[error("iceoryx2: {what}: {message}")]
+pub struct BusError {
+    /// What was being opened.
+    pub what: String,
+    /// iceoryx2's error.
+    pub message: String,
+}
+
+fn err(what: &str, e: impl std::fmt::Debug) -> BusError {
+    BusError {
+        what: what.to_owned(),
+        message: format!("{e:?}"),
+    }
+}
+
+/// Per-subscriber queue depth of each service.
+fn queue_depth(leaf: &str) -> usize {
+    if leaf.ends_with("/status") || leaf.ends_with("/outcome") {
+        256 // events must not be lost by a client that polls at 50 Hz
+    } else if leaf.ends_with("/heightmap") {
+        2 // 200 KB frames: only the newest matters
+    } else {
+        16
+    }
+}
+
+/// A node and the service names of one HERB instance. Not `Send`: open one per thread.
+pub struct Bus {
+    node: Node<ipc::Service>,
+    services: Services,
+}
+
+impl std::fmt::Debug for Bus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Bus")
+            .field("services", &self.services)
+            .finish()
+    }
+}
+
+impl Bus {
+    /// Opens a node named `name` for the services under `services`. iceoryx2 does not take
+    /// over SIGINT/SIGTERM (the processes handle them), and logs only errors.
+    pub fn open(name: &str, services: &Services) -> Result<Self, BusError> {
+        set_log_level(LogLevel::Error);
+        let node_name: NodeName = name.try_into().map_err(|e| err(name, e))?;
+        let node = NodeBuilder::new()
+            .name(&node_name)
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .map_err(|e| err("node", e))?;
+        Ok(Self {
+            node,
+            services: services.clone(),
+        })
+    }
+
+    /// The service names.
+    pub fn services(&self) -> &Services {
+        &self.services
+    }
+
+    fn pubsub<T: Payload>(
+        &self,
+        name: &str,
+    ) -> Result<
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
+        BusError,
+    > {
+        let sn: ServiceName = name.try_into().map_err(|e| err(name, e))?;
+        self.node
+            .service_builder(&sn)
+            .publish_subscribe::<T>()
+            .max_publishers(4)
+            .max_subscribers(8)
+            .history_size(1)
+            .subscriber_max_buffer_size(queue_depth(name))
+            .subscriber_max_borrowed_samples(2)
+            .enable_safe_overflow(true)
+            .open_or_create()
+            .map_err(|e| err(name, e))
+    }
+
+    /// A publisher on service `name` (one of [`Services`]'s names).
+    pub fn publisher<T: Payload>(&self, name: &str) -> Result<Pub<T>, BusError> {
+        self.pubsub::<T>(name)?
+            .publisher_builder()
+            .max_loaned_samples(2)
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
+            .create()
+            .map_err(|e| err(name, e))
+    }
+
+    /// A subscriber on service `name`.
+    pub fn subscriber<T: Payload>(&self, name: &str) -> Result<Sub<T>, BusError> {
+        self.pubsub::<T>(name)?
+            .subscriber_builder()
+            .create()
+            .map_err(|e| err(name, e))
+    }
+
+    fn jobs(
+        &self,
+    ) -> Result<
+        iceoryx2::service::port_factory::request_response::PortFactory<
+            ipc::Service,
+            PackJobRequest,
+            (),
+            PackJobReply,
+            (),
+        >,
+        BusError,
+    > {
+        let name = self.services.pack_job();
+        let sn: ServiceName = name.as_str().try_into().map_err(|e| err(&name, e))?;
+        self.node
+            .service_builder(&sn)
+            .request_response::<PackJobRequest, PackJobReply>()
+            .max_clients(8)
+            .max_servers(2)
+            .open_or_create()
+            .map_err(|e| err(&name, e))
+    }
+
+    /// The pack-job server.
+    pub fn job_server(&self) -> Result<JobServer, BusError> {
+        self.jobs()?
+            .server_builder()
+            .create()
+            .map_err(|e| err("pack_job server", e))
+    }
+
+    /// A pack-job client.
+    pub fn job_client(&self) -> Result<JobClient, BusError> {
+        self.jobs()?
+            .client_builder()
+            .create()
+            .map_err(|e| err("pack_job client", e))
+    }
+}
