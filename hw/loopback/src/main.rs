@@ -1,1 +1,390 @@
-fn main() {}
+//! `herb-loopback`: a stand-in for the Baxter arm, its gripper and the depth camera, so the
+//! whole controller runs on any machine.
+//!
+//! - **Arm**: follows `JointCommand`s (ideal tracking, or a first-order lag with `--lag-s`)
+//!   and publishes `JointState` every cycle. Commands are validated against the configured
+//!   joint limits (the same configuration file as `herbd`): an invalid one is counted and not
+//!   followed; the largest excess seen is reported.
+//! - **Gripper**: closing within 2 cm of the pick station's grasp point takes the object the
+//!   daemon expects there (`GripperCommand::object_type`; a real pick station is fed in the
+//!   planned order); opening releases the held object at the gripper pose given by forward
+//!   kinematics, in a `herb-sim` packing world that then settles. Publishes `GripperState`
+//!   every cycle.
+//! - **Camera**: publishes the world's heightmap after every settle (stamped when the settle
+//!   ended) and repeats the latest one every 200 ms with its original stamp.
+//! - **Sim-only**: publishes a `SimOutcome` after every release (inside, tilt, compactness,
+//!   command counts) for tests.
+//!
+//! SIGINT/SIGTERM: prints a JSON summary on stdout and exits 0.
+
+use clap::Parser;
+use herb_daemon::cell::CellConfig;
+use herb_daemon::config::Config;
+use herb_daemon::controller::{set_timer_slack, sleep_until};
+use herb_daemon::kinematics::{Arm, DOF, LEFT_TOP_DOWN_NOMINAL};
+use herb_ipc::bus::{Bus, Pub};
+use herb_ipc::{
+    GripperAction, GripperCommand, GripperState, Header, HeightmapFrame, JointCommand, JointState,
+    NO_OBJECT, Services, SimOutcome, monotonic_ns, zeroed_in_place,
+};
+use herb_sim::{Catalog, PackingWorld, TypeIdx, WorldConfig, paths};
+use nalgebra::Isometry3;
+use rapier3d::math::{Pose, Rotation, Vector};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::time::Duration;
+
+/// A simulated Baxter left arm, gripper and box camera over iceoryx2.
+#[derive(Debug, Parser)]
+#[command(name = "herb-loopback", version)]
+struct Cli {
+    /// The herbd configuration file (prefix, cell geometry, joint limits).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// IPC service-name prefix (overrides the file).
+    #[arg(long)]
+    prefix: Option<String>,
+    /// BoxED folder (object meshes; primitives without it).
+    #[arg(long)]
+    boxed: Option<PathBuf>,
+    /// Publishing rate (Hz).
+    #[arg(long, default_value_t = 1000.0)]
+    rate_hz: f64,
+    /// First-order tracking lag (s); 0 tracks ideally.
+    #[arg(long, default_value_t = 0.0)]
+    lag_s: f64,
+    /// Also write the final summary (JSON) here.
+    #[arg(long)]
+    report: Option<PathBuf>,
+}
+
+struct Released {
+    stamp_ns: u64,
+    heightmap: Vec<f32>,
+    nx: u32,
+    ny: u32,
+    cell_m: f32,
+    objects: u32,
+    outcome: Option<(herb_sim::PlacementOutcome, u32, [f32; 4])>,
+}
+
+/// The world thread: releases objects and settles, off the publishing loop.
+fn world_thread(
+    catalog: Arc<Catalog>,
+    rx: mpsc::Receiver<(TypeIdx, Pose)>,
+    tx: mpsc::Sender<Result<Released, String>>,
+) {
+    let mut world = match PackingWorld::new(catalog, WorldConfig::default()) {
+        Ok(w) => w,
+        Err(e) => {
+            let _ = tx.send(Err(format!("world: {e}")));
+            return;
+        }
+    };
+    let snapshot = |w: &PackingWorld, outcome| {
+        let hm = w.heightmap();
+        Released {
+            stamp_ns: monotonic_ns(),
+            heightmap: hm.data().to_vec(),
+            nx: hm.spec().nx as u32,
+            ny: hm.spec().ny as u32,
+            cell_m: hm.spec().cell,
+            objects: w.placed().len() as u32,
+            outcome,
+        }
+    };
+    let _ = tx.send(Ok(snapshot(&world, None)));
+    for (ty, pose) in rx {
+        let yaw = {
+            let x = pose.rotation * Vector::X;
+            x.y.atan2(x.x)
+        };
+        let release = [pose.translation.x, pose.translation.y, pose.translation.z, yaw];
+        match world.place_pose(ty, pose) {
+            Ok(o) => {
+                let _ = tx.send(Ok(snapshot(&world, Some((o, ty.0 as u32, release)))));
+            }
+            Err(e) => {
+                let _ = tx.send(Err(format!("release of type {}: {e}", ty.0)));
+            }
+        }
+    }
+}
+
+fn to_pose(iso: &Isometry3<f64>) -> Pose {
+    let t = iso.translation.vector;
+    let q = iso.rotation.quaternion();
+    Pose::from_parts(
+        Vector::new(t.x as f32, t.y as f32, t.z as f32),
+        Rotation::from_xyzw(q.i as f32, q.j as f32, q.k as f32, q.w as f32).normalize(),
+    )
+}
+
+struct Sim {
+    cell: CellConfig,
+    arm: Arm,
+    catalog: Arc<Catalog>,
+    lower: [f64; DOF],
+    upper: [f64; DOF],
+    q: [f64; DOF],
+    qd: [f64; DOF],
+    target: [f64; DOF],
+    closed: bool,
+    held: Option<(TypeIdx, Isometry3<f64>)>,
+    commands: u64,
+    rejected: u64,
+    max_excess: f64,
+    releases: u64,
+    last_outcome: Option<SimOutcome>,
+}
+
+impl Sim {
+    fn command(&mut self, c: &JointCommand) {
+        self.commands += 1;
+        for i in 0..DOF {
+            let p = c.position[i];
+            if p.is_finite() {
+                let excess = (self.lower[i] - p).max(p - self.upper[i]).max(0.0);
+                self.max_excess = self.max_excess.max(excess);
+            }
+        }
+        match c.validate(&self.lower, &self.upper) {
+            Ok(()) => self.target = c.position,
+            Err(_) => self.rejected += 1,
+        }
+    }
+
+    fn gripper(&mut self, c: &GripperCommand, release: &mpsc::Sender<(TypeIdx, Pose)>) {
+        let Ok(action) = c.validate(self.catalog.len()) else {
+            self.rejected += 1;
+            return;
+        };
+        match action {
+            GripperAction::Close if !self.closed => {
+                self.closed = true;
+                if c.object_type != NO_OBJECT {
+                    let ty = TypeIdx(c.object_type as u16);
+                    let h = self.catalog.shape(ty).extents().z as f64;
+                    let object = self.cell.pick_object_pose(h);
+                    let tool = self.arm.fk(&self.q);
+                    let grasp = object.translation.vector
+                        + nalgebra::Vector3::new(0.0, 0.0, 0.5 * h - self.cell.depth(h));
+                    if (tool.translation.vector - grasp).norm() < 0.02 {
+                        self.held = Some((ty, tool.inverse() * object));
+                    }
+                }
+            }
+            GripperAction::Open if self.closed => {
+                self.closed = false;
+                if let Some((ty, in_tool)) = self.held.take() {
+                    let object = self.arm.fk(&self.q) * in_tool;
+                    let in_box = self.cell.box_pose().inverse() * object;
+                    let _ = release.send((ty, to_pose(&in_box)));
+                    self.releases += 1;
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
+fn publish_frame(p: &Pub<HeightmapFrame>, seq: u64, r: &Released) {
+    if let Ok(mut s) = p.loan_uninit() {
+        let f = zeroed_in_place(s.payload_mut());
+        f.header = Header {
+            seq,
+            stamp_ns: r.stamp_ns,
+            ..Header::now(seq)
+        };
+        f.nx = r.nx;
+        f.ny = r.ny;
+        f.cell_m = r.cell_m;
+        f.objects = r.objects;
+        f.data[..r.heightmap.len()].copy_from_slice(&r.heightmap);
+        // SAFETY: zeroed_in_place initialised every byte.
+        let s = unsafe { s.assume_init() };
+        let _ = s.send();
+    }
+}
+
+fn run(cli: Cli) -> Result<serde_json::Value, String> {
+    let mut cfg = match &cli.config {
+        Some(p) => Config::load(p)?,
+        None => Config::default(),
+    };
+    if let Some(p) = &cli.prefix {
+        cfg.ipc_prefix = p.clone();
+    }
+    cfg.validate()?;
+    if !(cli.rate_hz.is_finite() && (10.0..=10_000.0).contains(&cli.rate_hz)) {
+        return Err(format!("--rate-hz {} outside 10..=10000", cli.rate_hz));
+    }
+    if !(cli.lag_s.is_finite() && (0.0..=1.0).contains(&cli.lag_s)) {
+        return Err(format!("--lag-s {} outside 0..=1", cli.lag_s));
+    }
+    let services = Services::new(&cfg.ipc_prefix).map_err(|e| e.to_string())?;
+    let root = paths::boxed_root(cli.boxed.as_deref().or(cfg.models.boxed.as_deref()));
+    let catalog = Arc::new(
+        Catalog::builtin(&paths::mesh_source(None, root.as_deref())).map_err(|e| format!("catalog: {e}"))?,
+    );
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let s = stop.clone();
+        ctrlc::set_handler(move || s.store(true, Ordering::Relaxed)).map_err(|e| e.to_string())?;
+    }
+    let bus = Bus::open("herb-loopback", &services).map_err(|e| e.to_string())?;
+    let cmd_sub = bus.subscriber::<JointCommand>(&services.joint_command()).map_err(|e| e.to_string())?;
+    let grip_sub = bus.subscriber::<GripperCommand>(&services.gripper_command()).map_err(|e| e.to_string())?;
+    let js_pub = bus.publisher::<JointState>(&services.joint_state()).map_err(|e| e.to_string())?;
+    let gs_pub = bus.publisher::<GripperState>(&services.gripper_state()).map_err(|e| e.to_string())?;
+    let hm_pub = bus.publisher::<HeightmapFrame>(&services.heightmap()).map_err(|e| e.to_string())?;
+    let out_pub = bus.publisher::<SimOutcome>(&services.sim_outcome()).map_err(|e| e.to_string())?;
+
+    let (rel_tx, rel_rx) = mpsc::channel();
+    let (res_tx, res_rx) = mpsc::channel();
+    {
+        let c = catalog.clone();
+        std::thread::Builder::new()
+            .name("loopback-world".into())
+            .spawn(move || world_thread(c, rel_rx, res_tx))
+            .map_err(|e| e.to_string())?;
+    }
+    let mut sim = Sim {
+        cell: cfg.cell,
+        arm: Arm::baxter_left(),
+        catalog: catalog.clone(),
+        lower: cfg.limits.lower,
+        upper: cfg.limits.upper,
+        q: LEFT_TOP_DOWN_NOMINAL,
+        qd: [0.0; DOF],
+        target: LEFT_TOP_DOWN_NOMINAL,
+        closed: false,
+        held: None,
+        commands: 0,
+        rejected: 0,
+        max_excess: 0.0,
+        releases: 0,
+        last_outcome: None,
+    };
+    eprintln!(
+        "herb-loopback: prefix {:?}, {} Hz, {} objects ({})",
+        cfg.ipc_prefix,
+        cli.rate_hz,
+        catalog.len(),
+        if root.is_some() { "meshes if present" } else { "primitives" }
+    );
+    let period = (1e9 / cli.rate_hz) as u64;
+    let dt = 1.0 / cli.rate_hz;
+    set_timer_slack();
+    let mut next = monotonic_ns() + period;
+    let mut seq = 0u64;
+    let mut latest: Option<Released> = None;
+    let mut last_frame = 0u64;
+    let mut world_error = None;
+    while !stop.load(Ordering::Relaxed) {
+        sleep_until(next, 0);
+        next += period;
+        let now = monotonic_ns();
+        if now > next {
+            next = now + period;
+        }
+        while let Ok(Some(c)) = cmd_sub.receive() {
+            sim.command(c.payload());
+        }
+        while let Ok(Some(c)) = grip_sub.receive() {
+            sim.gripper(c.payload(), &rel_tx);
+        }
+        // Track the target.
+        let a = if cli.lag_s > 0.0 { (dt / cli.lag_s).min(1.0) } else { 1.0 };
+        for i in 0..DOF {
+            let nq = sim.q[i] + a * (sim.target[i] - sim.q[i]);
+            sim.qd[i] = (nq - sim.q[i]) / dt;
+            sim.q[i] = nq;
+        }
+        seq += 1;
+        let _ = js_pub.send_copy(JointState {
+            header: Header::now(seq),
+            position: sim.q,
+            velocity: sim.qd,
+        });
+        let _ = gs_pub.send_copy(GripperState {
+            header: Header::now(seq),
+            closed: sim.closed as u32,
+            holding: sim.held.is_some() as u32,
+            object_type: sim.held.map_or(NO_OBJECT, |h| h.0.0 as u32),
+            reserved: 0,
+        });
+        while let Ok(r) = res_rx.try_recv() {
+            match r {
+                Ok(r) => {
+                    if let Some((o, ty, release)) = r.outcome {
+                        let m = SimOutcome {
+                            header: Header::now(seq),
+                            objects: r.objects,
+                            object_type: ty,
+                            all_inside: o.inside as u32,
+                            stable: o.stable as u32,
+                            tilt_rad: o.tilt_rad,
+                            compactness: o.compactness,
+                            release,
+                            max_limit_excess_rad: sim.max_excess,
+                            commands: sim.commands,
+                            commands_rejected: sim.rejected,
+                        };
+                        let _ = out_pub.send_copy(m);
+                        sim.last_outcome = Some(m);
+                    }
+                    publish_frame(&hm_pub, seq, &r);
+                    last_frame = now;
+                    latest = Some(r);
+                }
+                Err(e) => {
+                    eprintln!("herb-loopback: {e}");
+                    world_error = Some(e);
+                }
+            }
+        }
+        if now.saturating_sub(last_frame) >= 200_000_000
+            && let Some(r) = &latest
+        {
+            publish_frame(&hm_pub, seq, r);
+            last_frame = now;
+        }
+    }
+    std::thread::sleep(Duration::from_millis(1));
+    let o = sim.last_outcome;
+    Ok(serde_json::json!({ "loopback_final": {
+        "commands": sim.commands,
+        "commands_rejected": sim.rejected,
+        "max_limit_excess_rad": sim.max_excess,
+        "releases": sim.releases,
+        "objects_in_box": o.map_or(0, |o| o.objects),
+        "all_inside": o.is_some_and(|o| o.all_inside == 1),
+        "compactness": o.map_or(0.0, |o| o.compactness),
+        "world_error": world_error,
+    }}))
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let report = cli.report.clone();
+    match run(cli) {
+        Ok(v) => {
+            println!("{v}");
+            if let Some(p) = report
+                && let Err(e) = std::fs::write(&p, format!("{v}\n"))
+            {
+                eprintln!("herb-loopback: cannot write {}: {e}", p.display());
+                return ExitCode::from(2);
+            }
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("herb-loopback: error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}

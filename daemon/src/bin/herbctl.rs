@@ -1,0 +1,339 @@
+//! `herbctl`: submit a pack job to `herbd`, follow it live, print per-object results and a
+//! summary.
+
+use clap::{Parser, Subcommand};
+use herb_ipc::bus::Bus;
+use herb_ipc::{
+    Fault, HeightmapFrame, JobState, PackJobRequest, RejectReason, Services, SimOutcome, Status,
+    StatusEvent, monotonic_ns,
+};
+use herb_sim::{Catalog, GridSpec, Heightmap, TypeIdx, boxed, paths};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+/// Client of the HERB packing controller.
+#[derive(Debug, Parser)]
+#[command(name = "herbctl", version)]
+struct Cli {
+    /// IPC service-name prefix.
+    #[arg(long, default_value = Services::DEFAULT_PREFIX, global = true)]
+    prefix: String,
+    /// BoxED folder (sessions; object meshes are not needed here).
+    #[arg(long, global = true)]
+    boxed: Option<PathBuf>,
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Debug, Subcommand)]
+enum Cmd {
+    /// Submit a job and follow it to the end.
+    Pack {
+        /// A BoxED session whose objects to pack (e.g. p1_s1).
+        #[arg(long, conflicts_with = "objects")]
+        session: Option<String>,
+        /// Catalog ids, comma-separated (e.g. 003,005,011).
+        #[arg(long, value_delimiter = ',')]
+        objects: Vec<String>,
+        /// Write the final heightmap of the box here (PNG).
+        #[arg(long)]
+        picture: Option<PathBuf>,
+        /// Give up after this many seconds.
+        #[arg(long, default_value_t = 900.0)]
+        timeout: f64,
+        /// Print the summary as one JSON line.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Print the daemon's next heartbeat.
+    Status {
+        /// Give up after this many seconds.
+        #[arg(long, default_value_t = 5.0)]
+        timeout: f64,
+    },
+}
+
+fn objects_of(cli: &Cli, session: &Option<String>, ids: &[String], catalog: &Catalog) -> Result<(Vec<u16>, String), String> {
+    if let Some(name) = session {
+        let root = paths::boxed_root(cli.boxed.as_deref())
+            .ok_or("no BoxED folder found (set --boxed or HERB_BOXED)")?;
+        let s = boxed::load_session(&root, name, catalog).map_err(|e| e.to_string())?;
+        let ep = s.episode(catalog);
+        return Ok((ep.objects.iter().map(|t| t.0).collect(), format!("session {name}")));
+    }
+    if ids.is_empty() {
+        return Err("give --session NAME or --objects ID,ID,...".into());
+    }
+    let v = ids
+        .iter()
+        .map(|id| catalog.by_id(id.trim()).map(|t| t.0).map_err(|e| e.to_string()))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok((v, format!("{} objects", ids.len())))
+}
+
+fn name(catalog: &Catalog, t: u32) -> String {
+    if (t as usize) < catalog.len() {
+        let s = catalog.spec(TypeIdx(t as u16));
+        format!("{} {}", s.id, s.name)
+    } else {
+        "-".into()
+    }
+}
+
+fn pct(v: &mut [f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+#[allow(clippy::too_many_arguments)]
+fn pack(
+    cli: &Cli,
+    catalog: &Catalog,
+    session: &Option<String>,
+    ids: &[String],
+    picture: &Option<PathBuf>,
+    timeout: f64,
+    json: bool,
+) -> Result<bool, String> {
+    let (objects, what) = objects_of(cli, session, ids, catalog)?;
+    let services = Services::new(&cli.prefix).map_err(|e| e.to_string())?;
+    let bus = Bus::open("herbctl", &services).map_err(|e| e.to_string())?;
+    let status = bus.subscriber::<Status>(&services.status()).map_err(|e| e.to_string())?;
+    let frames = bus.subscriber::<HeightmapFrame>(&services.heightmap()).map_err(|e| e.to_string())?;
+    let outcomes = bus.subscriber::<SimOutcome>(&services.sim_outcome()).map_err(|e| e.to_string())?;
+    let client = bus.job_client().map_err(|e| e.to_string())?;
+    let deadline = Instant::now() + Duration::from_secs_f64(timeout);
+    let job_id = (monotonic_ns() & 0xffff_ffff) << 16 | (std::process::id() as u64 & 0xffff) | 1;
+    eprintln!("herbctl: submitting job {job_id}: {what}, {} objects", objects.len());
+
+    // Submit, waiting for the daemon to come up.
+    let reply = 'submit: loop {
+        if Instant::now() > deadline {
+            return Err("no reply from herbd (is it running with this prefix?)".into());
+        }
+        let req = PackJobRequest::new(job_id, &objects);
+        let pending = client.send_copy(req).map_err(|e| format!("send: {e:?}"))?;
+        if pending.number_of_server_connections() == 0 {
+            drop(pending);
+            std::thread::sleep(Duration::from_millis(100));
+            continue;
+        }
+        let t0 = Instant::now();
+        while t0.elapsed() < Duration::from_secs(2) {
+            if let Ok(Some(r)) = pending.receive() {
+                break 'submit *r.payload();
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    };
+    match reply.validate() {
+        Ok(RejectReason::None) => eprintln!("herbctl: accepted"),
+        Ok(r) => return Err(format!("rejected: {r:?} (detail {})", reply.detail)),
+        Err(e) => return Err(format!("malformed reply: {e}")),
+    }
+
+    let mut decision_ms = Vec::new();
+    let mut faults = Vec::new();
+    let mut last: Option<Status> = None;
+    let mut placed = 0u32;
+    let mut total = objects.len() as u32;
+    let mut ok = None;
+    let mut latest_frame: Option<Heightmap> = None;
+    let mut last_outcome: Option<SimOutcome> = None;
+    let keep_frame = |f: &HeightmapFrame, into: &mut Option<Heightmap>| {
+        if f.validate().is_ok()
+            && let Ok(spec) = GridSpec::for_box(f.cell_m)
+            && (spec.nx, spec.ny) == (f.nx as usize, f.ny as usize)
+        {
+            *into = Heightmap::from_data(spec, f.cells().to_vec()).ok();
+        }
+    };
+    while ok.is_none() {
+        if Instant::now() > deadline {
+            return Err(format!("timed out after {timeout} s; {placed}/{total} placed"));
+        }
+        while let Ok(Some(s)) = status.receive() {
+            let s = *s.payload();
+            if s.validate().is_err() || s.job_id != job_id {
+                continue;
+            }
+            last = Some(s);
+            total = s.objects_total;
+            let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
+            match StatusEvent::from_code(s.event) {
+                Some(StatusEvent::Decided) => {
+                    decision_ms.push(s.decision_ns as f64 / 1e6);
+                    println!(
+                        "object {:>2}/{total}: {:<28} x {:+.3} y {:+.3} z {:.3} m yaw {:+.2} rad  decision {:.3} ms",
+                        s.object_index + 1,
+                        name(catalog, s.object_type),
+                        s.pose[0],
+                        s.pose[1],
+                        s.pose[2],
+                        s.pose[3],
+                        s.decision_ns as f64 / 1e6
+                    );
+                }
+                Some(StatusEvent::Placed) => {
+                    placed = s.objects_done;
+                    println!("placed {placed}/{total}");
+                }
+                Some(StatusEvent::Fault) => {
+                    faults.push(format!("{fault:?}"));
+                    println!("FAULT {fault:?}: braking and holding");
+                }
+                Some(StatusEvent::Braked) => println!("braked: standing still"),
+                Some(StatusEvent::Resumed) => println!("resumed"),
+                Some(StatusEvent::JobDone) => ok = Some(true),
+                Some(StatusEvent::JobFailed) => {
+                    println!("job failed: {fault:?}");
+                    ok = Some(false)
+                }
+                Some(StatusEvent::Shutdown) => {
+                    println!("herbd shut down");
+                    ok = Some(false)
+                }
+                _ => {}
+            }
+        }
+        while let Ok(Some(o)) = outcomes.receive() {
+            if o.payload().validate().is_ok() {
+                last_outcome = Some(*o.payload());
+            }
+        }
+        while let Ok(Some(f)) = frames.receive() {
+            keep_frame(f.payload(), &mut latest_frame);
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    // The last release's settle: wait briefly for its heightmap and outcome.
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_millis(1500) {
+        while let Ok(Some(f)) = frames.receive() {
+            keep_frame(f.payload(), &mut latest_frame);
+        }
+        while let Ok(Some(o)) = outcomes.receive() {
+            if o.payload().validate().is_ok() {
+                last_outcome = Some(*o.payload());
+            }
+        }
+        if last_outcome.is_some_and(|o| o.objects >= placed) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    if let (Some(p), Some(hm)) = (picture, &latest_frame) {
+        if let Some(d) = p.parent() {
+            let _ = std::fs::create_dir_all(d);
+        }
+        herb_sim::image::write_heightmap_png(p, hm, 0.3, 4).map_err(|e| e.to_string())?;
+        println!("picture of the final pack: {}", p.display());
+    }
+    let s = last.unwrap_or_else(|| unreachable!("a final status was received"));
+    let mut d = decision_ms.clone();
+    let summary = serde_json::json!({
+        "job_id": job_id,
+        "ok": ok == Some(true),
+        "state": format!("{:?}", JobState::from_code(s.state).unwrap_or(JobState::Idle)),
+        "placed": placed,
+        "objects": total,
+        "decisions": decision_ms.len(),
+        "decision_ms_p50": pct(&mut d, 0.5),
+        "decision_ms_max": pct(&mut d, 1.0),
+        "faults": faults,
+        "loop_cycles": s.cycles,
+        "deadline_misses": s.deadline_misses,
+        "rejected_inputs": s.rejected_inputs,
+        "max_cycle_us": s.max_cycle_ns as f64 / 1000.0,
+        "sim": last_outcome.map(|o| serde_json::json!({
+            "objects_in_box": o.objects,
+            "all_inside": o.all_inside == 1,
+            "compactness": o.compactness,
+            "joint_commands": o.commands,
+            "joint_commands_rejected": o.commands_rejected,
+            "max_limit_excess_rad": o.max_limit_excess_rad,
+        })),
+    });
+    if json {
+        println!("{summary}");
+    } else {
+        println!(
+            "summary: {placed}/{total} placed, decision p50 {:.3} ms (max {:.3}), loop {} cycles, {} deadline misses, worst cycle {:.1} us, faults {:?}",
+            pct(&mut d, 0.5),
+            pct(&mut d, 1.0),
+            s.cycles,
+            s.deadline_misses,
+            s.max_cycle_ns as f64 / 1000.0,
+            faults
+        );
+        if let Some(o) = last_outcome {
+            println!(
+                "simulation: {} objects in the box, all inside: {}, compactness {:.3}",
+                o.objects,
+                o.all_inside == 1,
+                o.compactness
+            );
+        }
+    }
+    Ok(ok == Some(true))
+}
+
+fn status(cli: &Cli, timeout: f64) -> Result<bool, String> {
+    let services = Services::new(&cli.prefix).map_err(|e| e.to_string())?;
+    let bus = Bus::open("herbctl", &services).map_err(|e| e.to_string())?;
+    let sub = bus.subscriber::<Status>(&services.status()).map_err(|e| e.to_string())?;
+    let t0 = Instant::now();
+    while t0.elapsed().as_secs_f64() < timeout {
+        while let Ok(Some(s)) = sub.receive() {
+            let s = s.payload();
+            if s.validate().is_ok() && s.event == StatusEvent::Heartbeat as u32 {
+                println!(
+                    "herbd: {:?}, job {}, {}/{} placed, {} cycles, {} deadline misses, fault {:?}",
+                    JobState::from_code(s.state).unwrap_or(JobState::Idle),
+                    s.job_id,
+                    s.objects_done,
+                    s.objects_total,
+                    s.cycles,
+                    s.deadline_misses,
+                    Fault::from_code(s.fault).unwrap_or(Fault::None)
+                );
+                return Ok(true);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Err("no heartbeat from herbd".into())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let catalog = match Catalog::builtin(&paths::MeshSource::None("herbctl needs no meshes".into())) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("herbctl: catalog: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let r = match &cli.cmd {
+        Cmd::Pack {
+            session,
+            objects,
+            picture,
+            timeout,
+            json,
+        } => pack(&cli, &catalog, session, objects, picture, *timeout, *json),
+        Cmd::Status { timeout } => status(&cli, *timeout),
+    };
+    match r {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::from(1),
+        Err(e) => {
+            eprintln!("herbctl: error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}

@@ -1,0 +1,277 @@
+//! `herbd`: HERB's packing controller daemon. See `herb_daemon::controller` for the loop and
+//! `herb_daemon::config` for the configuration.
+
+use clap::Parser;
+use herb_daemon::config::Config;
+use herb_daemon::controller::{Controller, LoopStats, Ports, Shared};
+use herb_daemon::planner;
+use herb_ipc::bus::Bus;
+use herb_ipc::{Fault, JobState, Services, Status, StatusEvent};
+use herb_sim::{Catalog, paths};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+/// HERB's real-time packing controller.
+#[derive(Debug, Parser)]
+#[command(name = "herbd", version)]
+struct Cli {
+    /// TOML configuration (every key optional; see systemd/herbd.toml).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Loop rate (Hz).
+    #[arg(long)]
+    rate_hz: Option<f64>,
+    /// IPC service-name prefix.
+    #[arg(long)]
+    prefix: Option<String>,
+    /// Policy: `blbf` or an ONNX file.
+    #[arg(long)]
+    policy: Option<String>,
+    /// Sequence model (Beam-3 transition counts).
+    #[arg(long)]
+    sequence_model: Option<PathBuf>,
+    /// BoxED folder (object meshes).
+    #[arg(long)]
+    boxed: Option<PathBuf>,
+    /// Busy-wait before each deadline (us).
+    #[arg(long)]
+    spin_us: Option<u64>,
+    /// Seconds between statistics reports.
+    #[arg(long)]
+    report_interval: Option<f64>,
+    /// Stop by itself after this many seconds (benchmarks).
+    #[arg(long)]
+    run_for: Option<f64>,
+    /// Also write the final statistics (JSON) to this file.
+    #[arg(long)]
+    stats_json: Option<PathBuf>,
+}
+
+fn config(cli: &Cli) -> Result<Config, String> {
+    let mut c = match &cli.config {
+        Some(p) => Config::load(p)?,
+        None => Config::default(),
+    };
+    if let Some(v) = cli.rate_hz {
+        c.loop_.rate_hz = v;
+    }
+    if let Some(v) = &cli.prefix {
+        c.ipc_prefix = v.clone();
+    }
+    if let Some(v) = &cli.policy {
+        c.models.policy = v.clone();
+    }
+    if let Some(v) = &cli.sequence_model {
+        c.models.sequence = v.clone();
+    }
+    if let Some(v) = &cli.boxed {
+        c.models.boxed = Some(v.clone());
+    }
+    if let Some(v) = cli.spin_us {
+        c.loop_.spin_us = v;
+    }
+    if let Some(v) = cli.report_interval {
+        c.loop_.report_interval_s = v;
+    }
+    c.validate().map_err(|e| format!("configuration: {e}"))?;
+    Ok(c)
+}
+
+/// Real-time setup; every step not permitted is a warning.
+fn realtime(cfg: &Config) {
+    let rt = &cfg.rt;
+    if rt.mlockall {
+        // SAFETY: plain syscall.
+        if unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) } != 0 {
+            eprintln!(
+                "herbd: warning: mlockall failed ({}); memory may page",
+                std::io::Error::last_os_error()
+            );
+        }
+    }
+    if rt.fifo_priority > 0 {
+        let p = libc::sched_param {
+            sched_priority: rt.fifo_priority,
+        };
+        // SAFETY: plain syscall on the calling thread.
+        if unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &p) } != 0 {
+            eprintln!(
+                "herbd: warning: SCHED_FIFO {} not permitted ({}); running with the default scheduler",
+                rt.fifo_priority,
+                std::io::Error::last_os_error()
+            );
+        }
+    }
+    if let Some(cpu) = rt.cpu {
+        // SAFETY: a zeroed cpu_set_t is valid; CPU_SET indexes within it.
+        unsafe {
+            let mut set: libc::cpu_set_t = std::mem::zeroed();
+            libc::CPU_SET(cpu, &mut set);
+            if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
+                eprintln!(
+                    "herbd: warning: pinning to CPU {cpu} failed ({})",
+                    std::io::Error::last_os_error()
+                );
+            }
+        }
+    }
+}
+
+fn us(h: &hdrhistogram::Histogram<u64>, q: f64) -> f64 {
+    if h.is_empty() {
+        0.0
+    } else {
+        h.value_at_quantile(q) as f64 / 1000.0
+    }
+}
+
+fn summary(s: &LoopStats) -> serde_json::Value {
+    let h = |h: &hdrhistogram::Histogram<u64>| {
+        serde_json::json!({
+            "p50": us(h, 0.5), "p99": us(h, 0.99), "max": if h.is_empty() { 0.0 } else { h.max() as f64 / 1000.0 },
+            "n": h.len(),
+        })
+    };
+    serde_json::json!({
+        "cycles": s.cycles,
+        "deadline_misses": s.misses,
+        "cycle_us": h(&s.cycle_ns),
+        "jitter_us": h(&s.jitter_ns),
+        "decision_us": h(&s.decision_ns),
+    })
+}
+
+fn describe(s: &Status) -> Option<String> {
+    let ev = StatusEvent::from_code(s.event)?;
+    let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
+    let state = JobState::from_code(s.state).unwrap_or(JobState::Idle);
+    Some(match ev {
+        StatusEvent::Heartbeat => return None,
+        StatusEvent::Accepted => format!("job {}: accepted, {} objects", s.job_id, s.objects_total),
+        StatusEvent::Decided => format!(
+            "job {}: object {} (type {}) at x {:.3} y {:.3} z {:.3} m, yaw {:.2} rad; decided in {:.3} ms",
+            s.job_id,
+            s.object_index,
+            s.object_type,
+            s.pose[0],
+            s.pose[1],
+            s.pose[2],
+            s.pose[3],
+            s.decision_ns as f64 / 1e6
+        ),
+        StatusEvent::Placed => format!(
+            "job {}: placed {}/{}",
+            s.job_id, s.objects_done, s.objects_total
+        ),
+        StatusEvent::Fault => format!("job {}: FAULT {fault:?} ({state:?})", s.job_id),
+        StatusEvent::Braked => format!("job {}: braked, holding ({fault:?})", s.job_id),
+        StatusEvent::Resumed => format!("job {}: resumed", s.job_id),
+        StatusEvent::JobDone => format!(
+            "job {}: done, {}/{} placed",
+            s.job_id, s.objects_done, s.objects_total
+        ),
+        StatusEvent::JobFailed => format!(
+            "job {}: FAILED ({fault:?}), {}/{} placed",
+            s.job_id, s.objects_done, s.objects_total
+        ),
+        StatusEvent::Shutdown => "shutdown".into(),
+    })
+}
+
+fn run(cli: Cli) -> Result<(), String> {
+    let cfg = config(&cli)?;
+    let services = Services::new(&cfg.ipc_prefix).map_err(|e| e.to_string())?;
+    let root = paths::boxed_root(cfg.models.boxed.as_deref());
+    let meshes = paths::mesh_source(None, root.as_deref());
+    let catalog = Arc::new(Catalog::builtin(&meshes).map_err(|e| format!("catalog: {e}"))?);
+    let shared = Arc::new(Shared::default());
+    {
+        let s = shared.clone();
+        ctrlc::set_handler(move || s.stop.store(true, Ordering::Relaxed))
+            .map_err(|e| format!("cannot install the signal handler: {e}"))?;
+    }
+    let planner_stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let (link, planner_thread) = planner::spawn(&cfg, catalog.clone(), planner_stop.clone())?;
+    let bus = Bus::open("herbd", &services).map_err(|e| e.to_string())?;
+    let ports = Ports::open(bus).map_err(|e| e.to_string())?;
+    let (controller, mut stats_link) = Controller::new(&cfg, ports, link, shared.clone(), catalog.len());
+    eprintln!(
+        "herbd: {} Hz, prefix {:?}, policy {}, {} objects in the catalog",
+        cfg.loop_.rate_hz,
+        cfg.ipc_prefix,
+        cfg.models.policy,
+        catalog.len()
+    );
+
+    // Reporter: statistics and events, formatted off the loop; the systemd watchdog is
+    // pinged only while the loop's cycle counter advances.
+    let done = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let reporter = {
+        let (shared, done, services) = (shared.clone(), done.clone(), services.clone());
+        let run_for = cli.run_for;
+        std::thread::Builder::new()
+            .name("herbd-report".into())
+            .spawn(move || {
+                let mut total = LoopStats::new();
+                let bus = Bus::open("herbd-report", &services).ok();
+                let sub = bus.as_ref().and_then(|b| b.subscriber::<Status>(&services.status()).ok());
+                let t0 = std::time::Instant::now();
+                let mut last_cycles = 0;
+                while !done.load(Ordering::Relaxed) {
+                    while let Ok(mut s) = stats_link.rx.pop() {
+                        total.add(&s);
+                        eprintln!("herbd: stats {}", summary(&s));
+                        s.reset();
+                        let _ = stats_link.tx.push(s);
+                    }
+                    if let Some(sub) = &sub {
+                        while let Ok(Some(m)) = sub.receive() {
+                            if let Some(line) = describe(m.payload()) {
+                                eprintln!("herbd: {line}");
+                            }
+                        }
+                    }
+                    let c = shared.cycles.load(Ordering::Relaxed);
+                    if c > last_cycles {
+                        last_cycles = c;
+                        let _ = sd_notify::notify(false, &[sd_notify::NotifyState::Watchdog]);
+                    }
+                    if run_for.is_some_and(|t| t0.elapsed().as_secs_f64() >= t) {
+                        shared.stop.store(true, Ordering::Relaxed);
+                    }
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                total
+            })
+            .map_err(|e| format!("cannot start the reporter: {e}"))?
+    };
+
+    realtime(&cfg);
+    let _ = sd_notify::notify(false, &[sd_notify::NotifyState::Ready]);
+    let last = controller.run();
+    done.store(true, Ordering::Relaxed);
+    let mut total = reporter.join().map_err(|_| "reporter thread panicked")?;
+    total.add(&last);
+    planner_stop.store(true, Ordering::Relaxed);
+    let _ = planner_thread.join();
+    let report = serde_json::json!({ "herbd_final": summary(&total) });
+    println!("{report}");
+    if let Some(p) = &cli.stats_json {
+        std::fs::write(p, format!("{report}\n")).map_err(|e| format!("cannot write {}: {e}", p.display()))?;
+    }
+    let _ = sd_notify::notify(false, &[sd_notify::NotifyState::Stopping]);
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("herbd: error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
