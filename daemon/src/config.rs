@@ -27,7 +27,7 @@ impl Default for LoopConfig {
     fn default() -> Self {
         Self {
             rate_hz: 1000.0,
-            spin_us: 0,
+            spin_us: 100,
             report_interval_s: 10.0,
             max_trajectory_s: 60.0,
         }

@@ -610,6 +610,7 @@ impl RejectReason {
             UnknownObject,
             Malformed,
             ShuttingDown,
+            NotReady,
         ]
         .get(c as usize)
         .copied()
@@ -948,6 +949,8 @@ mod tests {
         assert!(r.validate().is_err(), "accepted with a reason");
         r.accepted = 0;
         assert_eq!(r.validate(), Ok(RejectReason::Busy));
+        r.reason = RejectReason::NotReady as u32;
+        assert_eq!(r.validate(), Ok(RejectReason::NotReady));
         r.reason = 99;
         assert_eq!(r.validate().unwrap_err().reason, Reason::UnknownCode);
 

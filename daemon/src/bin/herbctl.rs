@@ -125,7 +125,13 @@ fn pack(
         let t0 = Instant::now();
         while t0.elapsed() < Duration::from_secs(2) {
             if let Ok(Some(r)) = pending.receive() {
-                break 'submit *r.payload();
+                let r = *r.payload();
+                if r.validate() == Ok(RejectReason::NotReady) {
+                    // The robot adapter is still starting: ask again.
+                    std::thread::sleep(Duration::from_millis(200));
+                    continue 'submit;
+                }
+                break 'submit r;
             }
             std::thread::sleep(Duration::from_millis(2));
         }

@@ -11,7 +11,8 @@
 //!   kinematics, in a `herb-sim` packing world that then settles. Publishes `GripperState`
 //!   every cycle.
 //! - **Camera**: publishes the world's heightmap after every settle (stamped when the settle
-//!   ended) and repeats the latest one every 200 ms with its original stamp.
+//!   ended), and re-captures it every 200 ms (stamped then) while no release is settling:
+//!   a frame is never stamped later than a release whose settle it does not show.
 //! - **Sim-only**: publishes a `SimOutcome` after every release (inside, tilt, compactness,
 //!   command counts) for tests.
 //!
@@ -139,6 +140,7 @@ struct Sim {
     max_excess: f64,
     releases: u64,
     last_outcome: Option<SimOutcome>,
+    settling: u64,
 }
 
 impl Sim {
@@ -184,6 +186,7 @@ impl Sim {
                     let in_box = self.cell.box_pose().inverse() * object;
                     let _ = release.send((ty, to_pose(&in_box)));
                     self.releases += 1;
+                    self.settling += 1;
                 }
             }
             _ => {}
@@ -268,6 +271,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         max_excess: 0.0,
         releases: 0,
         last_outcome: None,
+        settling: 0,
     };
     eprintln!(
         "herb-loopback: prefix {:?}, {} Hz, {} objects ({})",
@@ -321,6 +325,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             match r {
                 Ok(r) => {
                     if let Some((o, ty, release)) = r.outcome {
+                        sim.settling = sim.settling.saturating_sub(1);
                         let m = SimOutcome {
                             header: Header::now(seq),
                             objects: r.objects,
@@ -342,14 +347,17 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
                     latest = Some(r);
                 }
                 Err(e) => {
+                    sim.settling = sim.settling.saturating_sub(1);
                     eprintln!("herb-loopback: {e}");
                     world_error = Some(e);
                 }
             }
         }
         if now.saturating_sub(last_frame) >= 200_000_000
-            && let Some(r) = &latest
+            && sim.settling == 0
+            && let Some(r) = &mut latest
         {
+            r.stamp_ns = now;
             publish_frame(&hm_pub, seq, r);
             last_frame = now;
         }

@@ -1,0 +1,267 @@
+//! End to end with real processes: `herbd`, `herb-loopback` and `herbctl` talk over iceoryx2
+//! (each test under its own service prefix).
+//!
+//! 1. A BoxED episode (the session with the fewest objects) is packed: every placement is
+//!    made, no joint command left the configured limits (the loopback checks each one), and
+//!    the loop reported its deadline misses (herbd's final statistics and herbctl's summary).
+//! 2. The loopback is killed mid-motion: the daemon reports the joint-state timeout, brakes,
+//!    holds, and resumes the job when the loopback is restarted; the job completes.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+fn loopback_exe() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_herb-loopback"))
+}
+
+/// `herbd` / `herbctl`, next to the loopback in the same target folder (built by
+/// `cargo test --workspace`; built here when this package is tested alone).
+fn exe(name: &str) -> PathBuf {
+    let p = loopback_exe().with_file_name(name);
+    if !p.exists() {
+        let profile = if cfg!(debug_assertions) { vec![] } else { vec!["--release"] };
+        let st = Command::new(env!("CARGO"))
+            .args(["build", "-p", "herb-daemon", "--bins"])
+            .args(profile)
+            .status()
+            .expect("cargo runs");
+        assert!(st.success(), "building herbd and herbctl failed");
+    }
+    p
+}
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// A configuration for tests: a unique prefix, and faster motion than the shipped defaults
+/// (still within the URDF speed limits) so an episode takes about a minute.
+fn config(dir: &Path, prefix: &str) -> PathBuf {
+    let p = dir.join(format!("{prefix}.toml"));
+    let text = format!(
+        r#"ipc_prefix = "{prefix}"
+[loop]
+report_interval_s = 5.0
+[models]
+sequence = "{seq}"
+[limits]
+lower = [-1.65167993878, -2.097, -3.00417993878, 0.0, -3.009, -1.5207963267948966, -3.009]
+upper = [1.65167993878, 0.997, 3.00417993878, 2.568, 3.009, 2.044, 3.009]
+velocity = [1.5, 1.5, 1.5, 1.5, 4.0, 4.0, 4.0]
+acceleration = [6.0, 6.0, 6.0, 6.0, 12.0, 12.0, 12.0]
+jerk = [60.0, 60.0, 60.0, 60.0, 120.0, 120.0, 120.0]
+"#,
+        seq = repo().join("models/sequence.json").display()
+    );
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+struct Proc(Child);
+
+impl Proc {
+    fn signal(&self, sig: i32) {
+        // SAFETY: kill on a child we own.
+        unsafe { libc::kill(self.0.id() as i32, sig) };
+    }
+
+    fn wait_for(&mut self, limit: Duration) -> ExitStatus {
+        let t0 = Instant::now();
+        loop {
+            if let Some(st) = self.0.try_wait().unwrap() {
+                return st;
+            }
+            assert!(t0.elapsed() < limit, "process did not exit in {limit:?}");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn spawn(exe: &Path, args: &[&str], log: &Path) -> Proc {
+    let err = std::fs::File::create(log).unwrap();
+    Proc(
+        Command::new(exe)
+            .args(args)
+            .current_dir(repo())
+            .stdout(Stdio::piped())
+            .stderr(err)
+            .spawn()
+            .unwrap_or_else(|e| panic!("cannot start {}: {e}", exe.display())),
+    )
+}
+
+/// Lines of a child's stdout, as they come.
+fn lines(p: &mut Proc) -> mpsc::Receiver<String> {
+    let out = p.0.stdout.take().unwrap();
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for l in BufReader::new(out).lines().map_while(Result::ok) {
+            if tx.send(l).is_err() {
+                break;
+            }
+        }
+    });
+    rx
+}
+
+fn last_json(rx: &mpsc::Receiver<String>, key: &str) -> serde_json::Value {
+    let mut found = None;
+    while let Ok(l) = rx.recv_timeout(Duration::from_secs(5)) {
+        if let Ok(v) = serde_json::from_str::<serde_json::Value>(&l)
+            && v.get(key).is_some()
+        {
+            found = Some(v[key].clone());
+        }
+    }
+    found.unwrap_or_else(|| panic!("no {key} line"))
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("herb-e2e-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// The session with the fewest objects (ties: name), and its object count.
+fn shortest_session(root: &Path) -> (String, usize) {
+    let catalog = herb_sim::Catalog::builtin(&herb_sim::paths::MeshSource::None("t".into())).unwrap();
+    let (sessions, _) = herb_sim::boxed::load_all(root, &catalog).unwrap();
+    sessions
+        .iter()
+        .map(|s| (s.episode(&catalog).objects.len(), s.episode(&catalog).name.clone()))
+        .min()
+        .map(|(n, name)| (name, n))
+        .unwrap()
+}
+
+#[test]
+fn packs_a_boxed_episode_end_to_end_with_real_processes() {
+    let Some(root) = herb_sim::paths::boxed_root_for_tests() else {
+        return;
+    };
+    let (session, n) = shortest_session(&root);
+    let dir = tmp("episode");
+    let prefix = format!("e2e{}a", std::process::id());
+    let cfg = config(&dir, &prefix);
+    let cfg_s = cfg.to_str().unwrap();
+    let boxed = root.to_str().unwrap();
+    let mut lb = spawn(&loopback_exe(), &["--config", cfg_s, "--boxed", boxed], &dir.join("loopback.log"));
+    let mut hd = spawn(&exe("herbd"), &["--config", cfg_s, "--boxed", boxed], &dir.join("herbd.log"));
+    let picture = dir.join("pack.png");
+    let mut ctl = spawn(
+        &exe("herbctl"),
+        &[
+            "--prefix",
+            &prefix,
+            "--boxed",
+            boxed,
+            "pack",
+            "--session",
+            &session,
+            "--json",
+            "--timeout",
+            "600",
+            "--picture",
+            picture.to_str().unwrap(),
+        ],
+        &dir.join("herbctl.log"),
+    );
+    let ctl_lines = lines(&mut ctl);
+    let st = ctl.wait_for(Duration::from_secs(660));
+    let summary = {
+        let mut v = None;
+        while let Ok(l) = ctl_lines.try_recv() {
+            if let Ok(j) = serde_json::from_str::<serde_json::Value>(&l) {
+                v = Some(j);
+            }
+        }
+        v.expect("herbctl printed its JSON summary")
+    };
+    assert!(st.success(), "herbctl failed: {summary}");
+    assert_eq!(summary["ok"], true, "{summary}");
+    assert_eq!(summary["placed"], n as u64, "every placement made: {summary}");
+    assert_eq!(summary["decisions"], n as u64);
+    assert!(summary["deadline_misses"].is_u64(), "{summary}");
+    assert!(picture.exists(), "picture of the final pack");
+
+    let (hd_lines, lb_lines) = (lines(&mut hd), lines(&mut lb));
+    hd.signal(libc::SIGTERM);
+    assert!(hd.wait_for(Duration::from_secs(10)).success(), "herbd exits 0 on SIGTERM");
+    let stats = last_json(&hd_lines, "herbd_final");
+    assert!(stats["cycles"].as_u64().unwrap() > 1000, "{stats}");
+    assert!(stats["deadline_misses"].is_u64(), "the loop reports its deadline misses: {stats}");
+    assert_eq!(stats["decision_us"]["n"], n as u64);
+    lb.signal(libc::SIGTERM);
+    assert!(lb.wait_for(Duration::from_secs(10)).success());
+    let sim = last_json(&lb_lines, "loopback_final");
+    assert!(sim["commands"].as_u64().unwrap() > 1000, "{sim}");
+    assert_eq!(sim["commands_rejected"], 0, "every command within limits: {sim}");
+    assert_eq!(sim["max_limit_excess_rad"], 0.0, "{sim}");
+    assert_eq!(sim["releases"], n as u64, "{sim}");
+    assert_eq!(sim["world_error"], serde_json::Value::Null);
+    eprintln!("episode {session} ({n} objects): {summary}\nherbd: {stats}\nloopback: {sim}");
+}
+
+#[test]
+fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
+    let dir = tmp("kill");
+    let prefix = format!("e2e{}b", std::process::id());
+    let cfg = config(&dir, &prefix);
+    let cfg_s = cfg.to_str().unwrap();
+    let lb_log = dir.join("loopback.log");
+    let mut lb = spawn(&loopback_exe(), &["--config", cfg_s], &lb_log);
+    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let mut ctl = spawn(
+        &exe("herbctl"),
+        &["--prefix", &prefix, "pack", "--objects", "003,005,011", "--json", "--timeout", "300"],
+        &dir.join("herbctl.log"),
+    );
+    let rx = lines(&mut ctl);
+    let mut seen = Vec::new();
+    let mut wait_for = |what: &str, limit: Duration| {
+        let t0 = Instant::now();
+        while t0.elapsed() < limit {
+            if let Ok(l) = rx.recv_timeout(Duration::from_millis(100)) {
+                seen.push(l.clone());
+                if l.contains(what) {
+                    return;
+                }
+            }
+        }
+        panic!("no {what:?} within {limit:?}; herbctl said:\n{}", seen.join("\n"));
+    };
+    // The first object is decided; the arm is on its way: kill the arm.
+    wait_for("object  1/3", Duration::from_secs(60));
+    std::thread::sleep(Duration::from_millis(700));
+    lb.0.kill().unwrap();
+    lb.0.wait().unwrap();
+    wait_for("FAULT JointStateTimeout", Duration::from_secs(5));
+    wait_for("braked", Duration::from_secs(5));
+    // Holding while the arm is away.
+    std::thread::sleep(Duration::from_secs(1));
+    let _lb2 = spawn(&loopback_exe(), &["--config", cfg_s], &dir.join("loopback2.log"));
+    wait_for("resumed", Duration::from_secs(10));
+    wait_for("placed 3/3", Duration::from_secs(120));
+    let st = ctl.wait_for(Duration::from_secs(30));
+    let mut summary = None;
+    while let Ok(l) = rx.recv_timeout(Duration::from_millis(200)) {
+        if let Ok(j) = serde_json::from_str::<serde_json::Value>(&l) {
+            summary = Some(j);
+        }
+    }
+    let summary = summary.expect("JSON summary");
+    assert!(st.success(), "{summary}");
+    assert_eq!(summary["placed"], 3);
+    let faults: Vec<String> = serde_json::from_value(summary["faults"].clone()).unwrap();
+    assert!(faults.contains(&"JointStateTimeout".to_string()), "{summary}");
+}
