@@ -338,7 +338,7 @@ impl Controller {
                 self.stats.misses += missed;
                 next += missed * self.period_ns;
             }
-            if self.cycles % self.report_every == 0 {
+            if self.cycles.is_multiple_of(self.report_every) {
                 self.swap_stats();
             }
         }
@@ -523,10 +523,10 @@ impl Controller {
                 Err(_) => {}
             }
         }
-        self.to_faulted(now);
+        self.enter_faulted(now);
     }
 
-    fn to_faulted(&mut self, now: u64) {
+    fn enter_faulted(&mut self, now: u64) {
         self.cmd.velocity = [0.0; DOF];
         self.cmd.acceleration = [0.0; DOF];
         self.phase = Phase::Faulted {
@@ -542,7 +542,7 @@ impl Controller {
                 self.begin_brake(now);
             }
             Phase::Braking { .. } => {}
-            _ => self.to_faulted(now),
+            _ => self.enter_faulted(now),
         }
     }
 
@@ -625,7 +625,7 @@ impl Controller {
                                 self.finish(now, false);
                             }
                         }
-                        Phase::Braking { .. } => self.to_faulted(now),
+                        Phase::Braking { .. } => self.enter_faulted(now),
                         _ => {}
                     }
                 }
@@ -751,7 +751,7 @@ impl Controller {
                             if let Some(b) = self.brake.take() {
                                 self.recycle(b);
                             }
-                            self.to_faulted(now);
+                            self.enter_faulted(now);
                         }
                     }
                 }

@@ -54,20 +54,33 @@ enum Cmd {
     },
 }
 
-fn objects_of(cli: &Cli, session: &Option<String>, ids: &[String], catalog: &Catalog) -> Result<(Vec<u16>, String), String> {
+fn objects_of(
+    cli: &Cli,
+    session: &Option<String>,
+    ids: &[String],
+    catalog: &Catalog,
+) -> Result<(Vec<u16>, String), String> {
     if let Some(name) = session {
         let root = paths::boxed_root(cli.boxed.as_deref())
             .ok_or("no BoxED folder found (set --boxed or HERB_BOXED)")?;
         let s = boxed::load_session(&root, name, catalog).map_err(|e| e.to_string())?;
         let ep = s.episode(catalog);
-        return Ok((ep.objects.iter().map(|t| t.0).collect(), format!("session {name}")));
+        return Ok((
+            ep.objects.iter().map(|t| t.0).collect(),
+            format!("session {name}"),
+        ));
     }
     if ids.is_empty() {
         return Err("give --session NAME or --objects ID,ID,...".into());
     }
     let v = ids
         .iter()
-        .map(|id| catalog.by_id(id.trim()).map(|t| t.0).map_err(|e| e.to_string()))
+        .map(|id| {
+            catalog
+                .by_id(id.trim())
+                .map(|t| t.0)
+                .map_err(|e| e.to_string())
+        })
         .collect::<Result<Vec<_>, _>>()?;
     Ok((v, format!("{} objects", ids.len())))
 }
@@ -102,13 +115,22 @@ fn pack(
     let (objects, what) = objects_of(cli, session, ids, catalog)?;
     let services = Services::new(&cli.prefix).map_err(|e| e.to_string())?;
     let bus = Bus::open("herbctl", &services).map_err(|e| e.to_string())?;
-    let status = bus.subscriber::<Status>(&services.status()).map_err(|e| e.to_string())?;
-    let frames = bus.subscriber::<HeightmapFrame>(&services.heightmap()).map_err(|e| e.to_string())?;
-    let outcomes = bus.subscriber::<SimOutcome>(&services.sim_outcome()).map_err(|e| e.to_string())?;
+    let status = bus
+        .subscriber::<Status>(&services.status())
+        .map_err(|e| e.to_string())?;
+    let frames = bus
+        .subscriber::<HeightmapFrame>(&services.heightmap())
+        .map_err(|e| e.to_string())?;
+    let outcomes = bus
+        .subscriber::<SimOutcome>(&services.sim_outcome())
+        .map_err(|e| e.to_string())?;
     let client = bus.job_client().map_err(|e| e.to_string())?;
     let deadline = Instant::now() + Duration::from_secs_f64(timeout);
     let job_id = (monotonic_ns() & 0xffff_ffff) << 16 | (std::process::id() as u64 & 0xffff) | 1;
-    eprintln!("herbctl: submitting job {job_id}: {what}, {} objects", objects.len());
+    eprintln!(
+        "herbctl: submitting job {job_id}: {what}, {} objects",
+        objects.len()
+    );
 
     // Submit, waiting for the daemon to come up.
     let reply = 'submit: loop {
@@ -160,7 +182,9 @@ fn pack(
     };
     while ok.is_none() {
         if Instant::now() > deadline {
-            return Err(format!("timed out after {timeout} s; {placed}/{total} placed"));
+            return Err(format!(
+                "timed out after {timeout} s; {placed}/{total} placed"
+            ));
         }
         while let Ok(Some(s)) = status.receive() {
             let s = *s.payload();
@@ -291,7 +315,9 @@ fn pack(
 fn status(cli: &Cli, timeout: f64) -> Result<bool, String> {
     let services = Services::new(&cli.prefix).map_err(|e| e.to_string())?;
     let bus = Bus::open("herbctl", &services).map_err(|e| e.to_string())?;
-    let sub = bus.subscriber::<Status>(&services.status()).map_err(|e| e.to_string())?;
+    let sub = bus
+        .subscriber::<Status>(&services.status())
+        .map_err(|e| e.to_string())?;
     let t0 = Instant::now();
     while t0.elapsed().as_secs_f64() < timeout {
         while let Ok(Some(s)) = sub.receive() {
@@ -317,7 +343,8 @@ fn status(cli: &Cli, timeout: f64) -> Result<bool, String> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let catalog = match Catalog::builtin(&paths::MeshSource::None("herbctl needs no meshes".into())) {
+    let catalog = match Catalog::builtin(&paths::MeshSource::None("herbctl needs no meshes".into()))
+    {
         Ok(c) => c,
         Err(e) => {
             eprintln!("herbctl: catalog: {e}");

@@ -197,7 +197,8 @@ fn run(cli: Cli) -> Result<(), String> {
     let (link, planner_thread) = planner::spawn(&cfg, catalog.clone(), planner_stop.clone())?;
     let bus = Bus::open("herbd", &services).map_err(|e| e.to_string())?;
     let ports = Ports::open(bus).map_err(|e| e.to_string())?;
-    let (controller, mut stats_link) = Controller::new(&cfg, ports, link, shared.clone(), catalog.len());
+    let (controller, mut stats_link) =
+        Controller::new(&cfg, ports, link, shared.clone(), catalog.len());
     eprintln!(
         "herbd: {} Hz, prefix {:?}, policy {}, {} objects in the catalog",
         cfg.loop_.rate_hz,
@@ -217,7 +218,9 @@ fn run(cli: Cli) -> Result<(), String> {
             .spawn(move || {
                 let mut total = LoopStats::new();
                 let bus = Bus::open("herbd-report", &services).ok();
-                let sub = bus.as_ref().and_then(|b| b.subscriber::<Status>(&services.status()).ok());
+                let sub = bus
+                    .as_ref()
+                    .and_then(|b| b.subscriber::<Status>(&services.status()).ok());
                 let t0 = std::time::Instant::now();
                 let mut last_cycles = 0;
                 while !done.load(Ordering::Relaxed) {
@@ -260,7 +263,8 @@ fn run(cli: Cli) -> Result<(), String> {
     let report = serde_json::json!({ "herbd_final": summary(&total) });
     println!("{report}");
     if let Some(p) = &cli.stats_json {
-        std::fs::write(p, format!("{report}\n")).map_err(|e| format!("cannot write {}: {e}", p.display()))?;
+        std::fs::write(p, format!("{report}\n"))
+            .map_err(|e| format!("cannot write {}: {e}", p.display()))?;
     }
     let _ = sd_notify::notify(false, &[sd_notify::NotifyState::Stopping]);
     Ok(())

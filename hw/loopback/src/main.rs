@@ -103,7 +103,12 @@ fn world_thread(
             let x = pose.rotation * Vector::X;
             x.y.atan2(x.x)
         };
-        let release = [pose.translation.x, pose.translation.y, pose.translation.z, yaw];
+        let release = [
+            pose.translation.x,
+            pose.translation.y,
+            pose.translation.z,
+            yaw,
+        ];
         match world.place_pose(ty, pose) {
             Ok(o) => {
                 let _ = tx.send(Ok(snapshot(&world, Some((o, ty.0 as u32, release)))));
@@ -231,7 +236,8 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
     let services = Services::new(&cfg.ipc_prefix).map_err(|e| e.to_string())?;
     let root = paths::boxed_root(cli.boxed.as_deref().or(cfg.models.boxed.as_deref()));
     let catalog = Arc::new(
-        Catalog::builtin(&paths::mesh_source(None, root.as_deref())).map_err(|e| format!("catalog: {e}"))?,
+        Catalog::builtin(&paths::mesh_source(None, root.as_deref()))
+            .map_err(|e| format!("catalog: {e}"))?,
     );
     let stop = Arc::new(AtomicBool::new(false));
     {
@@ -239,12 +245,24 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         ctrlc::set_handler(move || s.store(true, Ordering::Relaxed)).map_err(|e| e.to_string())?;
     }
     let bus = Bus::open("herb-loopback", &services).map_err(|e| e.to_string())?;
-    let cmd_sub = bus.subscriber::<JointCommand>(&services.joint_command()).map_err(|e| e.to_string())?;
-    let grip_sub = bus.subscriber::<GripperCommand>(&services.gripper_command()).map_err(|e| e.to_string())?;
-    let js_pub = bus.publisher::<JointState>(&services.joint_state()).map_err(|e| e.to_string())?;
-    let gs_pub = bus.publisher::<GripperState>(&services.gripper_state()).map_err(|e| e.to_string())?;
-    let hm_pub = bus.publisher::<HeightmapFrame>(&services.heightmap()).map_err(|e| e.to_string())?;
-    let out_pub = bus.publisher::<SimOutcome>(&services.sim_outcome()).map_err(|e| e.to_string())?;
+    let cmd_sub = bus
+        .subscriber::<JointCommand>(&services.joint_command())
+        .map_err(|e| e.to_string())?;
+    let grip_sub = bus
+        .subscriber::<GripperCommand>(&services.gripper_command())
+        .map_err(|e| e.to_string())?;
+    let js_pub = bus
+        .publisher::<JointState>(&services.joint_state())
+        .map_err(|e| e.to_string())?;
+    let gs_pub = bus
+        .publisher::<GripperState>(&services.gripper_state())
+        .map_err(|e| e.to_string())?;
+    let hm_pub = bus
+        .publisher::<HeightmapFrame>(&services.heightmap())
+        .map_err(|e| e.to_string())?;
+    let out_pub = bus
+        .publisher::<SimOutcome>(&services.sim_outcome())
+        .map_err(|e| e.to_string())?;
 
     let (rel_tx, rel_rx) = mpsc::channel();
     let (res_tx, res_rx) = mpsc::channel();
@@ -278,7 +296,11 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         cfg.ipc_prefix,
         cli.rate_hz,
         catalog.len(),
-        if root.is_some() { "meshes if present" } else { "primitives" }
+        if root.is_some() {
+            "meshes if present"
+        } else {
+            "primitives"
+        }
     );
     let period = (1e9 / cli.rate_hz) as u64;
     let dt = 1.0 / cli.rate_hz;
@@ -302,7 +324,11 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             sim.gripper(c.payload(), &rel_tx);
         }
         // Track the target.
-        let a = if cli.lag_s > 0.0 { (dt / cli.lag_s).min(1.0) } else { 1.0 };
+        let a = if cli.lag_s > 0.0 {
+            (dt / cli.lag_s).min(1.0)
+        } else {
+            1.0
+        };
         for i in 0..DOF {
             let nq = sim.q[i] + a * (sim.target[i] - sim.q[i]);
             sim.qd[i] = (nq - sim.q[i]) / dt;

@@ -22,7 +22,11 @@ fn loopback_exe() -> PathBuf {
 fn exe(name: &str) -> PathBuf {
     let p = loopback_exe().with_file_name(name);
     if !p.exists() {
-        let profile = if cfg!(debug_assertions) { vec![] } else { vec!["--release"] };
+        let profile = if cfg!(debug_assertions) {
+            vec![]
+        } else {
+            vec!["--release"]
+        };
         let st = Command::new(env!("CARGO"))
             .args(["build", "-p", "herb-daemon", "--bins"])
             .args(profile)
@@ -134,11 +138,17 @@ fn tmp(name: &str) -> PathBuf {
 
 /// The session with the fewest objects (ties: name), and its object count.
 fn shortest_session(root: &Path) -> (String, usize) {
-    let catalog = herb_sim::Catalog::builtin(&herb_sim::paths::MeshSource::None("t".into())).unwrap();
+    let catalog =
+        herb_sim::Catalog::builtin(&herb_sim::paths::MeshSource::None("t".into())).unwrap();
     let (sessions, _) = herb_sim::boxed::load_all(root, &catalog).unwrap();
     sessions
         .iter()
-        .map(|s| (s.episode(&catalog).objects.len(), s.episode(&catalog).name.clone()))
+        .map(|s| {
+            (
+                s.episode(&catalog).objects.len(),
+                s.episode(&catalog).name.clone(),
+            )
+        })
         .min()
         .map(|(n, name)| (name, n))
         .unwrap()
@@ -155,8 +165,16 @@ fn packs_a_boxed_episode_end_to_end_with_real_processes() {
     let cfg = config(&dir, &prefix);
     let cfg_s = cfg.to_str().unwrap();
     let boxed = root.to_str().unwrap();
-    let mut lb = spawn(&loopback_exe(), &["--config", cfg_s, "--boxed", boxed], &dir.join("loopback.log"));
-    let mut hd = spawn(&exe("herbd"), &["--config", cfg_s, "--boxed", boxed], &dir.join("herbd.log"));
+    let mut lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s, "--boxed", boxed],
+        &dir.join("loopback.log"),
+    );
+    let mut hd = spawn(
+        &exe("herbd"),
+        &["--config", cfg_s, "--boxed", boxed],
+        &dir.join("herbd.log"),
+    );
     let picture = dir.join("pack.png");
     let mut ctl = spawn(
         &exe("herbctl"),
@@ -189,23 +207,35 @@ fn packs_a_boxed_episode_end_to_end_with_real_processes() {
     };
     assert!(st.success(), "herbctl failed: {summary}");
     assert_eq!(summary["ok"], true, "{summary}");
-    assert_eq!(summary["placed"], n as u64, "every placement made: {summary}");
+    assert_eq!(
+        summary["placed"], n as u64,
+        "every placement made: {summary}"
+    );
     assert_eq!(summary["decisions"], n as u64);
     assert!(summary["deadline_misses"].is_u64(), "{summary}");
     assert!(picture.exists(), "picture of the final pack");
 
     let (hd_lines, lb_lines) = (lines(&mut hd), lines(&mut lb));
     hd.signal(libc::SIGTERM);
-    assert!(hd.wait_for(Duration::from_secs(10)).success(), "herbd exits 0 on SIGTERM");
+    assert!(
+        hd.wait_for(Duration::from_secs(10)).success(),
+        "herbd exits 0 on SIGTERM"
+    );
     let stats = last_json(&hd_lines, "herbd_final");
     assert!(stats["cycles"].as_u64().unwrap() > 1000, "{stats}");
-    assert!(stats["deadline_misses"].is_u64(), "the loop reports its deadline misses: {stats}");
+    assert!(
+        stats["deadline_misses"].is_u64(),
+        "the loop reports its deadline misses: {stats}"
+    );
     assert_eq!(stats["decision_us"]["n"], n as u64);
     lb.signal(libc::SIGTERM);
     assert!(lb.wait_for(Duration::from_secs(10)).success());
     let sim = last_json(&lb_lines, "loopback_final");
     assert!(sim["commands"].as_u64().unwrap() > 1000, "{sim}");
-    assert_eq!(sim["commands_rejected"], 0, "every command within limits: {sim}");
+    assert_eq!(
+        sim["commands_rejected"], 0,
+        "every command within limits: {sim}"
+    );
     assert_eq!(sim["max_limit_excess_rad"], 0.0, "{sim}");
     assert_eq!(sim["releases"], n as u64, "{sim}");
     assert_eq!(sim["world_error"], serde_json::Value::Null);
@@ -223,7 +253,16 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
     let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
     let mut ctl = spawn(
         &exe("herbctl"),
-        &["--prefix", &prefix, "pack", "--objects", "003,005,011", "--json", "--timeout", "300"],
+        &[
+            "--prefix",
+            &prefix,
+            "pack",
+            "--objects",
+            "003,005,011",
+            "--json",
+            "--timeout",
+            "300",
+        ],
         &dir.join("herbctl.log"),
     );
     let rx = lines(&mut ctl);
@@ -238,7 +277,10 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
                 }
             }
         }
-        panic!("no {what:?} within {limit:?}; herbctl said:\n{}", seen.join("\n"));
+        panic!(
+            "no {what:?} within {limit:?}; herbctl said:\n{}",
+            seen.join("\n")
+        );
     };
     // The first object is decided; the arm is on its way: kill the arm.
     wait_for("object  1/3", Duration::from_secs(60));
@@ -249,7 +291,11 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
     wait_for("braked", Duration::from_secs(5));
     // Holding while the arm is away.
     std::thread::sleep(Duration::from_secs(1));
-    let _lb2 = spawn(&loopback_exe(), &["--config", cfg_s], &dir.join("loopback2.log"));
+    let _lb2 = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s],
+        &dir.join("loopback2.log"),
+    );
     wait_for("resumed", Duration::from_secs(10));
     wait_for("placed 3/3", Duration::from_secs(120));
     let st = ctl.wait_for(Duration::from_secs(30));
@@ -263,5 +309,8 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
     assert!(st.success(), "{summary}");
     assert_eq!(summary["placed"], 3);
     let faults: Vec<String> = serde_json::from_value(summary["faults"].clone()).unwrap();
-    assert!(faults.contains(&"JointStateTimeout".to_string()), "{summary}");
+    assert!(
+        faults.contains(&"JointStateTimeout".to_string()),
+        "{summary}"
+    );
 }
