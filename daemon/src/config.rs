@@ -233,7 +233,25 @@ mod tests {
     fn the_shipped_example_is_the_defaults() {
         let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../systemd/herbd.toml");
         let c = Config::load(&p).unwrap();
-        assert_eq!(c, Config::default());
+        let mut d = Config::default();
+        // The file writes the derived numbers (URDF limits -+ 0.05 rad, 60 % speeds) rounded.
+        let (a, b) = (c.limits, d.limits);
+        for (x, y) in [
+            (a.lower, b.lower),
+            (a.upper, b.upper),
+            (a.velocity, b.velocity),
+            (a.acceleration, b.acceleration),
+            (a.jerk, b.jerk),
+        ] {
+            assert!(
+                x.iter().zip(&y).all(|(u, v)| (u - v).abs() < 1e-9),
+                "{x:?} vs {y:?}"
+            );
+        }
+        assert!((c.models.clearance_m - d.models.clearance_m).abs() < 1e-9);
+        d.limits = c.limits;
+        d.models.clearance_m = c.models.clearance_m;
+        assert_eq!(c, d);
     }
 
     #[test]
