@@ -314,3 +314,115 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
         "{summary}"
     );
 }
+
+/// Sends `req` to the pack-job server and returns the reply (waits for the server).
+fn submit(
+    client: &herb_ipc::bus::JobClient,
+    req: herb_ipc::PackJobRequest,
+) -> herb_ipc::PackJobReply {
+    let t0 = Instant::now();
+    loop {
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "no reply from herbd"
+        );
+        let pending = client.send_copy(req).unwrap();
+        if pending.number_of_server_connections() == 0 {
+            std::thread::sleep(Duration::from_millis(100));
+            continue;
+        }
+        let t1 = Instant::now();
+        while t1.elapsed() < Duration::from_secs(2) {
+            if let Ok(Some(r)) = pending.receive() {
+                return *r.payload();
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+}
+
+#[test]
+fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
+    use herb_ipc::{
+        Header, JointState, PackJobRequest, RejectReason, Services, Status, StatusEvent,
+    };
+    let dir = tmp("bad");
+    let prefix = format!("e2e{}c", std::process::id());
+    let cfg = config(&dir, &prefix);
+    let cfg_s = cfg.to_str().unwrap();
+    let _lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s],
+        &dir.join("loopback.log"),
+    );
+    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let services = Services::new(&prefix).unwrap();
+    let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
+    let client = bus.job_client().unwrap();
+    let status = bus.subscriber::<Status>(&services.status()).unwrap();
+    let reason = |r: herb_ipc::PackJobReply| (r.validate().unwrap(), r.detail);
+
+    // Invalid jobs are rejected for what they are, whether or not the adapter is up.
+    assert_eq!(
+        reason(submit(&client, PackJobRequest::new(2, &[]))),
+        (RejectReason::Empty, 0)
+    );
+    assert_eq!(
+        reason(submit(&client, PackJobRequest::new(3, &[1, 2, 999]))),
+        (RejectReason::UnknownObject, 2)
+    );
+    let many: Vec<u16> = (0..65).map(|i| i % 24).collect();
+    assert_eq!(
+        reason(submit(&client, PackJobRequest::new(4, &many))).0,
+        RejectReason::TooMany
+    );
+    let mut old = PackJobRequest::new(5, &[1]);
+    old.header.version = 0;
+    assert_eq!(reason(submit(&client, old)).0, RejectReason::Malformed);
+    let mut nan_count = PackJobRequest::new(6, &[1]);
+    nan_count.count = u32::MAX;
+    assert_eq!(reason(submit(&client, nan_count)).0, RejectReason::TooMany);
+
+    // A NaN joint state from a rogue publisher is dropped and counted.
+    let rogue = bus
+        .publisher::<JointState>(&services.joint_state())
+        .unwrap();
+    let mut js = JointState {
+        header: Header::now(1),
+        position: [0.0; 7],
+        velocity: [0.0; 7],
+    };
+    js.position[2] = f64::NAN;
+    rogue.send_copy(js).unwrap();
+
+    // A valid job is accepted once herbd hears the adapter (NotReady before); a second one
+    // while it runs is Busy (not queued).
+    let t0 = Instant::now();
+    let mut ok = submit(&client, PackJobRequest::new(7, &[1, 3]));
+    let mut not_ready = 0;
+    while reason(ok).0 == RejectReason::NotReady {
+        not_ready += 1;
+        assert!(t0.elapsed() < Duration::from_secs(30));
+        std::thread::sleep(Duration::from_millis(100));
+        ok = submit(&client, PackJobRequest::new(7, &[1, 3]));
+    }
+    assert_eq!(reason(ok), (RejectReason::None, 0));
+    assert_eq!(
+        reason(submit(&client, PackJobRequest::new(8, &[1]))).0,
+        RejectReason::Busy
+    );
+
+    // The daemon counts what it rejected: 6 jobs, the NotReady ones, and the NaN state.
+    let want = 6 + not_ready + 1;
+    let t0 = Instant::now();
+    let mut counted = 0;
+    while t0.elapsed() < Duration::from_secs(5) && counted < want {
+        while let Ok(Some(s)) = status.receive() {
+            if s.payload().event == StatusEvent::Heartbeat as u32 {
+                counted = s.payload().rejected_inputs;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert_eq!(counted, want, "rejections counted");
+}
