@@ -426,3 +426,64 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
     }
     assert_eq!(counted, want, "rejections counted");
 }
+
+#[test]
+fn sigterm_mid_motion_brakes_reports_and_exits_zero() {
+    let dir = tmp("sigterm");
+    let prefix = format!("e2e{}d", std::process::id());
+    let cfg = config(&dir, &prefix);
+    let cfg_s = cfg.to_str().unwrap();
+    let _lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s],
+        &dir.join("loopback.log"),
+    );
+    let mut hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let mut ctl = spawn(
+        &exe("herbctl"),
+        &[
+            "--prefix",
+            &prefix,
+            "pack",
+            "--objects",
+            "003,005",
+            "--timeout",
+            "120",
+        ],
+        &dir.join("herbctl.log"),
+    );
+    let rx = lines(&mut ctl);
+    let mut seen = Vec::new();
+    let mut wait_for = |what: &str, limit: Duration| {
+        let t0 = Instant::now();
+        while t0.elapsed() < limit {
+            if let Ok(l) = rx.recv_timeout(Duration::from_millis(100)) {
+                seen.push(l.clone());
+                if l.contains(what) {
+                    return;
+                }
+            }
+        }
+        panic!(
+            "no {what:?} within {limit:?}; herbctl said:\n{}",
+            seen.join("\n")
+        );
+    };
+    wait_for("object  1/2", Duration::from_secs(60));
+    std::thread::sleep(Duration::from_millis(500));
+    let hd_out = lines(&mut hd);
+    hd.signal(libc::SIGTERM);
+    wait_for("braked", Duration::from_secs(5));
+    wait_for("herbd shut down", Duration::from_secs(5));
+    assert!(
+        hd.wait_for(Duration::from_secs(10)).success(),
+        "herbd exits 0 after braking"
+    );
+    let stats = last_json(&hd_out, "herbd_final");
+    assert!(stats["deadline_misses"].is_u64(), "{stats}");
+    assert_eq!(
+        ctl.wait_for(Duration::from_secs(10)).code(),
+        Some(1),
+        "the job did not finish"
+    );
+}
