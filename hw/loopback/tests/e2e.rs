@@ -118,6 +118,46 @@ fn lines(p: &mut Proc) -> mpsc::Receiver<String> {
     rx
 }
 
+/// A child's stdout lines, followed until an expected one appears.
+struct Follow {
+    rx: mpsc::Receiver<String>,
+    seen: Vec<String>,
+}
+
+impl Follow {
+    fn new(p: &mut Proc) -> Self {
+        Self {
+            rx: lines(p),
+            seen: Vec::new(),
+        }
+    }
+
+    /// Waits for a line containing `what`; panics with everything seen after `limit`.
+    fn wait_for(&mut self, what: &str, limit: Duration) {
+        let t0 = Instant::now();
+        while t0.elapsed() < limit {
+            if let Ok(l) = self.rx.recv_timeout(Duration::from_millis(100)) {
+                self.seen.push(l.clone());
+                if l.contains(what) {
+                    return;
+                }
+            }
+        }
+        panic!(
+            "no {what:?} within {limit:?}; the process said:\n{}",
+            self.seen.join("\n")
+        );
+    }
+}
+
+/// A temporary folder, a unique prefix and a configuration for test `tag`.
+fn setup(tag: &str) -> (PathBuf, String, PathBuf) {
+    let dir = tmp(tag);
+    let prefix = format!("e2e{}{tag}", std::process::id());
+    let cfg = config(&dir, &prefix);
+    (dir, prefix, cfg)
+}
+
 fn last_json(rx: &mpsc::Receiver<String>, key: &str) -> serde_json::Value {
     let mut found = None;
     while let Ok(l) = rx.recv_timeout(Duration::from_secs(5)) {
@@ -160,9 +200,7 @@ fn packs_a_boxed_episode_end_to_end_with_real_processes() {
         return;
     };
     let (session, n) = shortest_session(&root);
-    let dir = tmp("episode");
-    let prefix = format!("e2e{}a", std::process::id());
-    let cfg = config(&dir, &prefix);
+    let (dir, prefix, cfg) = setup("episode");
     let cfg_s = cfg.to_str().unwrap();
     let boxed = root.to_str().unwrap();
     let mut lb = spawn(
@@ -244,9 +282,7 @@ fn packs_a_boxed_episode_end_to_end_with_real_processes() {
 
 #[test]
 fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
-    let dir = tmp("kill");
-    let prefix = format!("e2e{}b", std::process::id());
-    let cfg = config(&dir, &prefix);
+    let (dir, prefix, cfg) = setup("kill");
     let cfg_s = cfg.to_str().unwrap();
     let lb_log = dir.join("loopback.log");
     let mut lb = spawn(&loopback_exe(), &["--config", cfg_s], &lb_log);
@@ -265,30 +301,14 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
         ],
         &dir.join("herbctl.log"),
     );
-    let rx = lines(&mut ctl);
-    let mut seen = Vec::new();
-    let mut wait_for = |what: &str, limit: Duration| {
-        let t0 = Instant::now();
-        while t0.elapsed() < limit {
-            if let Ok(l) = rx.recv_timeout(Duration::from_millis(100)) {
-                seen.push(l.clone());
-                if l.contains(what) {
-                    return;
-                }
-            }
-        }
-        panic!(
-            "no {what:?} within {limit:?}; herbctl said:\n{}",
-            seen.join("\n")
-        );
-    };
+    let mut ctl_out = Follow::new(&mut ctl);
     // The first object is decided; the arm is on its way: kill the arm.
-    wait_for("object  1/3", Duration::from_secs(60));
+    ctl_out.wait_for("object  1/3", Duration::from_secs(60));
     std::thread::sleep(Duration::from_millis(700));
     lb.0.kill().unwrap();
     lb.0.wait().unwrap();
-    wait_for("FAULT JointStateTimeout", Duration::from_secs(5));
-    wait_for("braked", Duration::from_secs(5));
+    ctl_out.wait_for("FAULT JointStateTimeout", Duration::from_secs(5));
+    ctl_out.wait_for("braked", Duration::from_secs(5));
     // Holding while the arm is away.
     std::thread::sleep(Duration::from_secs(1));
     let _lb2 = spawn(
@@ -296,11 +316,11 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
         &["--config", cfg_s],
         &dir.join("loopback2.log"),
     );
-    wait_for("resumed", Duration::from_secs(10));
-    wait_for("placed 3/3", Duration::from_secs(120));
+    ctl_out.wait_for("resumed", Duration::from_secs(10));
+    ctl_out.wait_for("placed 3/3", Duration::from_secs(120));
     let st = ctl.wait_for(Duration::from_secs(30));
     let mut summary = None;
-    while let Ok(l) = rx.recv_timeout(Duration::from_millis(200)) {
+    while let Ok(l) = ctl_out.rx.recv_timeout(Duration::from_millis(200)) {
         if let Ok(j) = serde_json::from_str::<serde_json::Value>(&l) {
             summary = Some(j);
         }
@@ -346,9 +366,7 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
     use herb_ipc::{
         Header, JointState, PackJobRequest, RejectReason, Services, Status, StatusEvent,
     };
-    let dir = tmp("bad");
-    let prefix = format!("e2e{}c", std::process::id());
-    let cfg = config(&dir, &prefix);
+    let (dir, prefix, cfg) = setup("bad");
     let cfg_s = cfg.to_str().unwrap();
     let _lb = spawn(
         &loopback_exe(),
@@ -429,9 +447,7 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
 
 #[test]
 fn sigterm_mid_motion_brakes_reports_and_exits_zero() {
-    let dir = tmp("sigterm");
-    let prefix = format!("e2e{}d", std::process::id());
-    let cfg = config(&dir, &prefix);
+    let (dir, prefix, cfg) = setup("sigterm");
     let cfg_s = cfg.to_str().unwrap();
     let _lb = spawn(
         &loopback_exe(),
@@ -452,29 +468,13 @@ fn sigterm_mid_motion_brakes_reports_and_exits_zero() {
         ],
         &dir.join("herbctl.log"),
     );
-    let rx = lines(&mut ctl);
-    let mut seen = Vec::new();
-    let mut wait_for = |what: &str, limit: Duration| {
-        let t0 = Instant::now();
-        while t0.elapsed() < limit {
-            if let Ok(l) = rx.recv_timeout(Duration::from_millis(100)) {
-                seen.push(l.clone());
-                if l.contains(what) {
-                    return;
-                }
-            }
-        }
-        panic!(
-            "no {what:?} within {limit:?}; herbctl said:\n{}",
-            seen.join("\n")
-        );
-    };
-    wait_for("object  1/2", Duration::from_secs(60));
+    let mut ctl_out = Follow::new(&mut ctl);
+    ctl_out.wait_for("object  1/2", Duration::from_secs(60));
     std::thread::sleep(Duration::from_millis(500));
     let hd_out = lines(&mut hd);
     hd.signal(libc::SIGTERM);
-    wait_for("braked", Duration::from_secs(5));
-    wait_for("herbd shut down", Duration::from_secs(5));
+    ctl_out.wait_for("braked", Duration::from_secs(5));
+    ctl_out.wait_for("herbd shut down", Duration::from_secs(5));
     assert!(
         hd.wait_for(Duration::from_secs(10)).success(),
         "herbd exits 0 after braking"
