@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# The test command (README, CI): the Rust tests of the whole workspace, then the Python
+# bindings' tests (pytest), with maturin, numpy, gymnasium and pytest in a virtualenv
+# (.venv, or $HERB_VENV).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+cargo test --workspace
+VENV=${HERB_VENV:-$ROOT/.venv}
+[ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
+"$VENV/bin/pip" install -q --disable-pip-version-check maturin numpy gymnasium pytest
+(cd sim/py && VIRTUAL_ENV="$VENV" PATH="$VENV/bin:$PATH" maturin develop -q)
+"$VENV/bin/python" -m pytest -q sim/py/tests

@@ -1,0 +1,80 @@
+"""The HERB packing world as Gymnasium environments, stepped in Rust.
+
+- ``PackingEnv``: one environment (``gymnasium.Env``), for checks and evaluation.
+- ``HerbVectorEnv``: N environments (``gymnasium.vector.VectorEnv``) stepped in parallel inside
+  Rust by one call; episodes that end restart in the same step (``AutoresetMode.SAME_STEP``).
+
+Observations follow the shared layout (``[2, 224, 224]`` float32 in ``[0, 1]``: box heightmap
+and the next object's top-down projection); actions are ``(x, y, theta)`` in ``[-1, 1]^3``.
+Rewards: ``simple``, ``c`` or ``cs<alpha>`` (HERB paper). Episodes: random multisets of catalog
+objects ordered by Beam-3 (``sequence="beam3"``) or randomly (``sequence="random"``).
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+
+from ._native import INPUT_NAME, OBS_LEN, OUTPUT_NAME, VecEnv
+
+__all__ = ["PackingEnv", "HerbVectorEnv", "VecEnv", "OBS_LEN", "INPUT_NAME", "OUTPUT_NAME"]
+
+OBS_SHAPE = VecEnv.observation_shape()
+
+
+def _spaces():
+    obs = gym.spaces.Box(0.0, 1.0, shape=OBS_SHAPE, dtype=np.float32)
+    act = gym.spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+    return obs, act
+
+
+class PackingEnv(gym.Env):
+    """One packing episode per reset; one object placed per step.
+
+    Keyword arguments go to ``VecEnv`` (``reward``, ``sequence``, ``min_objects``,
+    ``max_objects``, ``boxed``, ``meshes``, ``sequence_model``).
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, **kwargs):
+        super().__init__()
+        self.observation_space, self.action_space = _spaces()
+        self._env = VecEnv(1, autoreset=False, threads=1, **kwargs)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        if seed is None:
+            seed = int(self.np_random.integers(0, 2**63 - 1))
+        obs = self._env.reset(seed=seed)
+        return obs[0], {}
+
+    def step(self, action):
+        a = np.asarray(action, dtype=np.float32).reshape(1, 3)
+        obs, reward, terminated, info = self._env.step(a)
+        out = {k: v[0].item() for k, v in info.items()}
+        return obs[0], float(reward[0]), bool(terminated[0]), False, out
+
+
+class HerbVectorEnv(gym.vector.VectorEnv):
+    """``num_envs`` packing environments stepped together in Rust (rayon, GIL released)."""
+
+    def __init__(self, num_envs: int, **kwargs):
+        self._env = VecEnv(num_envs, autoreset=True, **kwargs)
+        self.num_envs = num_envs
+        self.single_observation_space, self.single_action_space = _spaces()
+        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, num_envs)
+        self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)
+        mode = getattr(gym.vector, "AutoresetMode", None)
+        self.metadata = {"autoreset_mode": mode.SAME_STEP} if mode else {}
+
+    def reset(self, *, seed=None, options=None):
+        if isinstance(seed, (list, tuple)):
+            seed = seed[0]
+        return self._env.reset(seed=seed), {}
+
+    def step(self, actions):
+        a = np.ascontiguousarray(actions, dtype=np.float32).reshape(self.num_envs, 3)
+        obs, reward, terminated, info = self._env.step(a)
+        truncated = np.zeros(self.num_envs, dtype=bool)
+        return obs, reward, terminated, truncated, info

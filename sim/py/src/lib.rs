@@ -1,0 +1,365 @@
+//! `herb_sim._native`: the packing world for Python training.
+//!
+//! [`VecEnv`] holds N independent [`PackingEnv`]s and steps them in parallel on a rayon pool,
+//! with the GIL released: one Python call advances every environment. Observations are the
+//! shared layout (`herb_sim::ObsLayout`, `[N, 2, 224, 224]` f32), actions `[N, 3]` in
+//! `[-1, 1]`. Episodes are sampled as in the paper's training: a random multiset of catalog
+//! objects (size uniform in `[min_objects, max_objects]`, types uniform), ordered by Beam-3
+//! over the human transition model, or in random order for the ablation. With `autoreset`, an
+//! environment whose episode ended starts the next one in the same step (its returned
+//! observation is the new episode's first).
+//!
+//! The Gymnasium classes are in the Python package (`herb_sim/__init__.py`).
+
+use herb_daemon::sequence::{SequenceModel, beam3};
+use herb_sim::paths::{self, MeshSource};
+use herb_sim::{Catalog, ObsLayout, PackingEnv, RewardMode, SharedCatalog, TypeIdx, WorldConfig};
+use numpy::ndarray::{Array1, Array4};
+use numpy::{IntoPyArray, PyArray1, PyArray4, PyReadonlyArray2};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use std::path::Path;
+use std::sync::Arc;
+
+fn value_err(e: impl std::fmt::Display) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}
+
+/// How episodes are ordered.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Order {
+    Beam3,
+    Random,
+}
+
+/// Samples training episodes.
+struct Sampler {
+    catalog_len: u16,
+    order: Order,
+    model: Option<Arc<SequenceModel>>,
+    min_objects: usize,
+    max_objects: usize,
+}
+
+impl Sampler {
+    fn episode(&self, rng: &mut ChaCha8Rng) -> Vec<TypeIdx> {
+        let n = rng.random_range(self.min_objects..=self.max_objects);
+        let mut v: Vec<TypeIdx> = (0..n)
+            .map(|_| TypeIdx(rng.random_range(0..self.catalog_len)))
+            .collect();
+        match (self.order, &self.model) {
+            (Order::Beam3, Some(m)) => beam3(m, &v).unwrap_or(v),
+            _ => {
+                v.shuffle(rng);
+                v
+            }
+        }
+    }
+}
+
+struct Slot {
+    env: PackingEnv,
+    rng: ChaCha8Rng,
+    running: bool,
+    ret: f32,
+    len: u32,
+}
+
+/// Results of one environment's step.
+#[derive(Default, Clone, Copy)]
+struct Out {
+    reward: f32,
+    terminated: bool,
+    packed: u32,
+    success: bool,
+    ep_return: f32,
+    ep_len: u32,
+}
+
+/// N packing environments stepped together.
+#[pyclass(module = "herb_sim._native")]
+struct VecEnv {
+    slots: Vec<Slot>,
+    sampler: Sampler,
+    pool: rayon::ThreadPool,
+    autoreset: bool,
+    catalog: SharedCatalog,
+}
+
+impl VecEnv {
+    fn reset_slot(sampler: &Sampler, s: &mut Slot) -> Result<(), String> {
+        let ep = sampler.episode(&mut s.rng);
+        let seed = s.rng.random();
+        s.env.reset(&ep, seed).map_err(|e| e.to_string())?;
+        s.running = true;
+        s.ret = 0.0;
+        s.len = 0;
+        Ok(())
+    }
+
+    fn observations<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray4<f32>>> {
+        let n = self.slots.len();
+        let mut buf = vec![0.0f32; n * ObsLayout::LEN];
+        let slots = &self.slots;
+        py.detach(|| {
+            buf.par_chunks_mut(ObsLayout::LEN)
+                .zip(slots.par_iter())
+                .for_each(|(dst, s)| dst.copy_from_slice(s.env.observation()));
+        });
+        let a = Array4::from_shape_vec(
+            (n, ObsLayout::CHANNELS, ObsLayout::SIZE, ObsLayout::SIZE),
+            buf,
+        )
+        .map_err(value_err)?;
+        Ok(a.into_pyarray(py))
+    }
+}
+
+#[pymethods]
+impl VecEnv {
+    /// `num_envs` environments. `reward`: `simple`, `c` or `cs<alpha>`; `sequence`: `beam3` or
+    /// `random`; `boxed`: the BoxED folder (meshes; default `HERB_BOXED` or ../shared/boxed,
+    /// primitives without it); `meshes=False` forces primitives; `sequence_model`: the
+    /// transition counts (default `models/sequence.json` of this repository); `threads`:
+    /// rayon threads (default: all cores).
+    #[new]
+    #[pyo3(signature = (num_envs, reward="cs0.6", sequence="beam3", seed=0, min_objects=10, max_objects=25, boxed=None, meshes=true, sequence_model=None, threads=None, autoreset=true))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        num_envs: usize,
+        reward: &str,
+        sequence: &str,
+        seed: u64,
+        min_objects: usize,
+        max_objects: usize,
+        boxed: Option<String>,
+        meshes: bool,
+        sequence_model: Option<String>,
+        threads: Option<usize>,
+        autoreset: bool,
+    ) -> PyResult<Self> {
+        if !(1..=4096).contains(&num_envs) {
+            return Err(value_err(format!("num_envs {num_envs} outside 1..=4096")));
+        }
+        if min_objects == 0 || min_objects > max_objects || max_objects > 64 {
+            return Err(value_err(format!(
+                "objects per episode {min_objects}..={max_objects}: need 1 <= min <= max <= 64"
+            )));
+        }
+        let reward = RewardMode::parse(reward).map_err(value_err)?;
+        let order = match sequence {
+            "beam3" => Order::Beam3,
+            "random" => Order::Random,
+            s => {
+                return Err(value_err(format!(
+                    "sequence {s:?}: expected beam3 or random"
+                )));
+            }
+        };
+        let root = paths::boxed_root(boxed.as_deref().map(Path::new));
+        let source = if meshes {
+            paths::mesh_source(None, root.as_deref())
+        } else {
+            MeshSource::None("meshes=False".into())
+        };
+        let catalog: SharedCatalog = Arc::new(Catalog::builtin(&source).map_err(value_err)?);
+        let model = match order {
+            Order::Beam3 => {
+                let p = sequence_model
+                    .map(std::path::PathBuf::from)
+                    .unwrap_or_else(|| {
+                        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/sequence.json")
+                    });
+                Some(Arc::new(
+                    SequenceModel::load(&p, &catalog).map_err(value_err)?,
+                ))
+            }
+            Order::Random => None,
+        };
+        let sampler = Sampler {
+            catalog_len: catalog.len() as u16,
+            order,
+            model,
+            min_objects,
+            max_objects,
+        };
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads.unwrap_or(0))
+            .build()
+            .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+        let mut root_rng = ChaCha8Rng::seed_from_u64(seed);
+        let slots = (0..num_envs)
+            .map(|_| {
+                Ok(Slot {
+                    env: PackingEnv::new(catalog.clone(), WorldConfig::default(), reward)
+                        .map_err(value_err)?,
+                    rng: ChaCha8Rng::seed_from_u64(root_rng.random()),
+                    running: false,
+                    ret: 0.0,
+                    len: 0,
+                })
+            })
+            .collect::<PyResult<Vec<_>>>()?;
+        Ok(Self {
+            slots,
+            sampler,
+            pool,
+            autoreset,
+            catalog,
+        })
+    }
+
+    /// Environments.
+    #[getter]
+    fn num_envs(&self) -> usize {
+        self.slots.len()
+    }
+
+    /// Object types in the catalog.
+    #[getter]
+    fn catalog_len(&self) -> usize {
+        self.catalog.len()
+    }
+
+    /// The observation shape of one environment, `(2, 224, 224)`.
+    #[staticmethod]
+    fn observation_shape() -> (usize, usize, usize) {
+        (ObsLayout::CHANNELS, ObsLayout::SIZE, ObsLayout::SIZE)
+    }
+
+    /// Starts new episodes everywhere (reseeding every environment first when `seed` is
+    /// given) and returns the observations `[N, 2, 224, 224]`.
+    #[pyo3(signature = (seed=None))]
+    fn reset<'py>(
+        &mut self,
+        py: Python<'py>,
+        seed: Option<u64>,
+    ) -> PyResult<Bound<'py, PyArray4<f32>>> {
+        if let Some(seed) = seed {
+            let mut r = ChaCha8Rng::seed_from_u64(seed);
+            for s in &mut self.slots {
+                s.rng = ChaCha8Rng::seed_from_u64(r.random());
+            }
+        }
+        let (slots, sampler, pool) = (&mut self.slots, &self.sampler, &self.pool);
+        py.detach(|| {
+            pool.install(|| {
+                slots
+                    .par_iter_mut()
+                    .map(|s| Self::reset_slot(sampler, s))
+                    .collect::<Result<Vec<_>, _>>()
+            })
+        })
+        .map_err(PyRuntimeError::new_err)?;
+        self.observations(py)
+    }
+
+    /// Places each environment's next object at `actions[i]` (`[N, 3]`, clipped to
+    /// `[-1, 1]`; NaN is an error). Returns `(observations, rewards, terminated, info)`;
+    /// `info` holds arrays `packed`, `success`, and, for environments whose episode just
+    /// ended, `episode_return` and `episode_length` (others 0).
+    #[allow(clippy::type_complexity)]
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        actions: PyReadonlyArray2<'py, f32>,
+    ) -> PyResult<(
+        Bound<'py, PyArray4<f32>>,
+        Bound<'py, PyArray1<f32>>,
+        Bound<'py, PyArray1<bool>>,
+        Bound<'py, PyDict>,
+    )> {
+        let a = actions.as_array();
+        let n = self.slots.len();
+        if a.shape() != [n, 3] {
+            return Err(value_err(format!(
+                "actions of shape {:?}, expected [{n}, 3]",
+                a.shape()
+            )));
+        }
+        if let Some(i) = a.iter().position(|v| !v.is_finite()) {
+            return Err(value_err(format!(
+                "action value {} at {} is not finite",
+                a.iter().nth(i).unwrap(),
+                i
+            )));
+        }
+        if let Some(i) = self.slots.iter().position(|s| !s.running) {
+            return Err(PyRuntimeError::new_err(format!(
+                "environment {i} has ended its episode: call reset()"
+            )));
+        }
+        let acts: Vec<[f32; 3]> = (0..n)
+            .map(|i| std::array::from_fn(|k| a[[i, k]].clamp(-1.0, 1.0)))
+            .collect();
+        let (slots, sampler, pool, autoreset) =
+            (&mut self.slots, &self.sampler, &self.pool, self.autoreset);
+        let outs: Result<Vec<Out>, String> = py.detach(|| {
+            pool.install(|| {
+                slots
+                    .par_iter_mut()
+                    .zip(acts.par_iter())
+                    .map(|(s, act)| {
+                        let r = s.env.step(*act).map_err(|e| e.to_string())?;
+                        let mut o = Out {
+                            reward: r.reward,
+                            terminated: r.terminated,
+                            packed: r.info.packed as u32,
+                            success: r.info.success,
+                            ..Out::default()
+                        };
+                        s.ret += r.reward;
+                        s.len += 1;
+                        if o.terminated {
+                            o.ep_return = s.ret;
+                            o.ep_len = s.len;
+                            s.running = false;
+                            if autoreset {
+                                Self::reset_slot(sampler, s)?;
+                            }
+                        }
+                        Ok(o)
+                    })
+                    .collect()
+            })
+        });
+        let outs = outs.map_err(PyRuntimeError::new_err)?;
+        let obs = self.observations(py)?;
+        let col = |f: &dyn Fn(&Out) -> f32| Array1::from_iter(outs.iter().map(f)).into_pyarray(py);
+        let info = PyDict::new(py);
+        info.set_item(
+            "packed",
+            Array1::from_iter(outs.iter().map(|o| o.packed)).into_pyarray(py),
+        )?;
+        info.set_item(
+            "success",
+            Array1::from_iter(outs.iter().map(|o| o.success)).into_pyarray(py),
+        )?;
+        info.set_item("episode_return", col(&|o| o.ep_return))?;
+        info.set_item(
+            "episode_length",
+            Array1::from_iter(outs.iter().map(|o| o.ep_len)).into_pyarray(py),
+        )?;
+        Ok((
+            obs,
+            col(&|o| o.reward),
+            Array1::from_iter(outs.iter().map(|o| o.terminated)).into_pyarray(py),
+            info,
+        ))
+    }
+}
+
+/// The native module.
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<VecEnv>()?;
+    m.add("OBS_LEN", ObsLayout::LEN)?;
+    m.add("INPUT_NAME", ObsLayout::INPUT_NAME)?;
+    m.add("OUTPUT_NAME", ObsLayout::OUTPUT_NAME)?;
+    Ok(())
+}
