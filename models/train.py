@@ -1,0 +1,329 @@
+#!/usr/bin/env python3
+"""SAC training of HERB's placement policy in our packing world (herb_sim), in chunks.
+
+    python models/train.py --config models/configs/cs06.toml --out runs/cs06 [--minutes 8]
+
+One call is one chunk: it resumes from ``<out>/checkpoint-{actor,critic}.pt`` when present, trains for
+``run.chunk_minutes`` (or ``--minutes``), then saves the checkpoint, exports the deterministic
+actor to ``<out>/policy.onnx`` (only if it passes the ONNX contract check and matches PyTorch
+within 1e-4 in onnxruntime; a failing export never replaces a good one), writes parity samples
+(``policy.parity.bin`` + ``.json``) for the tract test, and appends progress to
+``<out>/progress.csv``. The replay buffer and the critics' Adam moments are not saved: they
+restart with every chunk (the accelerator returns at most 8 files of 16 MiB per call).
+
+Network (``herbnet112``, chosen by the decision-latency benchmark): 2 x 2 average pool of the
+[2, 224, 224] observation, convolutions 16@8s4, 32@4s2, 32@3s1 (ReLU), MLP 256-256-256 (ReLU),
+then a Gaussian head (actor) or a Q value (twin critics, each with its own extractor).
+Observations are stored pooled and quantised to uint8 (1/255 of the 0.30 m height scale,
+1.2 mm) to fit the buffer in memory; the exported actor takes the full-resolution float input.
+"""
+
+import argparse
+import csv
+import json
+import math
+import os
+import random
+import sys
+import time
+import tomllib
+import warnings
+
+import numpy as np
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+
+import herb_sim
+
+POOLED = (2, 112, 112)
+CONTRACT = dict(input="obs", input_shape=[1, 2, 224, 224], output="action", output_shape=[1, 3])
+
+
+def load_config(path):
+    with open(path, "rb") as f:
+        c = tomllib.load(f)
+    for key in ("name", "seed", "env", "sac", "run"):
+        if key not in c:
+            raise SystemExit(f"{path}: missing '{key}'")
+    s = c["sac"]
+    for key in ("total_steps", "learning_starts", "buffer_size", "batch_size"):
+        if not (isinstance(s.get(key), int) and s[key] > 0):
+            raise SystemExit(f"{path}: sac.{key} must be a positive integer")
+    for key in ("updates_per_step", "gamma", "tau", "lr"):
+        if not (isinstance(s.get(key), (int, float)) and s[key] > 0):
+            raise SystemExit(f"{path}: sac.{key} must be a positive number")
+    return c
+
+
+def extractor():
+    return nn.Sequential(
+        nn.Conv2d(2, 16, 8, stride=4), nn.ReLU(),
+        nn.Conv2d(16, 32, 4, stride=2), nn.ReLU(),
+        nn.Conv2d(32, 32, 3, stride=1), nn.ReLU(),
+        nn.Flatten(),
+    )
+
+
+FEATURES = 32 * 10 * 10
+
+
+def mlp(n_in, n_out):
+    return nn.Sequential(
+        nn.Linear(n_in, 256), nn.ReLU(),
+        nn.Linear(256, 256), nn.ReLU(),
+        nn.Linear(256, 256), nn.ReLU(),
+        nn.Linear(256, n_out),
+    )
+
+
+class Actor(nn.Module):
+    """Gaussian policy on pooled observations; tanh-squashed actions in (-1, 1)."""
+
+    def __init__(self):
+        super().__init__()
+        self.features = extractor()
+        self.body = mlp(FEATURES, 6)
+
+    def forward(self, x):
+        mu, log_std = self.body(self.features(x)).chunk(2, dim=-1)
+        return mu, log_std.clamp(-20.0, 2.0)
+
+    def sample(self, x):
+        mu, log_std = self(x)
+        std = log_std.exp()
+        u = mu + std * torch.randn_like(mu)
+        a = torch.tanh(u)
+        logp = (-0.5 * ((u - mu) / std) ** 2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
+        logp = logp - (2 * (math.log(2) - u - F.softplus(-2 * u))).sum(-1)
+        return a, logp
+
+
+class Deployed(nn.Module):
+    """What ships: full observation in, deterministic action (tanh of the mean) out."""
+
+    def __init__(self, actor):
+        super().__init__()
+        self.actor = actor
+
+    def forward(self, obs):
+        mu, _ = self.actor(F.avg_pool2d(obs, 2))
+        return torch.tanh(mu)
+
+
+class Critic(nn.Module):
+    def __init__(self):
+        super().__init__()
+        self.f1, self.q1 = extractor(), mlp(FEATURES + 3, 1)
+        self.f2, self.q2 = extractor(), mlp(FEATURES + 3, 1)
+
+    def forward(self, x, a):
+        return (self.q1(torch.cat([self.f1(x), a], -1)).squeeze(-1),
+                self.q2(torch.cat([self.f2(x), a], -1)).squeeze(-1))
+
+
+def pool_u8(obs):
+    """[N, 2, 224, 224] float in [0, 1] -> [N, 2, 112, 112] uint8."""
+    n = obs.shape[0]
+    p = obs.reshape(n, 2, 112, 2, 112, 2).mean(axis=(3, 5))
+    return np.rint(p * 255.0).astype(np.uint8)
+
+
+class Replay:
+    def __init__(self, size):
+        self.obs = np.zeros((size, *POOLED), np.uint8)
+        self.next = np.zeros((size, *POOLED), np.uint8)
+        self.act = np.zeros((size, 3), np.float32)
+        self.rew = np.zeros(size, np.float32)
+        self.done = np.zeros(size, np.float32)
+        self.size, self.n, self.i = size, 0, 0
+
+    def add(self, o, a, r, o2, d):
+        for k in range(len(a)):
+            j = self.i
+            self.obs[j], self.next[j], self.act[j], self.rew[j], self.done[j] = o[k], o2[k], a[k], r[k], d[k]
+            self.i = (self.i + 1) % self.size
+            self.n = min(self.n + 1, self.size)
+
+    def sample(self, b, dev):
+        idx = np.random.randint(0, self.n, size=b)
+        f = lambda x: torch.as_tensor(x[idx], device=dev)
+        return (f(self.obs).float() / 255.0, f(self.act), f(self.rew),
+                f(self.next).float() / 255.0, f(self.done))
+
+
+def export(actor, out, env, dev):
+    """Exports the deterministic actor; replaces out/policy.onnx only if it passes the checks."""
+    import onnx
+    import onnxruntime as ort
+
+    model = Deployed(actor).to("cpu").eval()
+    tmp = os.path.join(out, "policy.onnx.tmp")
+    dummy = torch.zeros(*CONTRACT["input_shape"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        torch.onnx.export(model, dummy, tmp, input_names=[CONTRACT["input"]],
+                          output_names=[CONTRACT["output"]], opset_version=17, dynamo=False)
+    m = onnx.load(tmp)
+    onnx.checker.check_model(m)
+    dims = lambda v: [d.dim_value for d in v.type.tensor_type.shape.dim]
+    ins, outs = m.graph.input, m.graph.output
+    ok = (len(ins) == 1 and ins[0].name == CONTRACT["input"] and dims(ins[0]) == CONTRACT["input_shape"]
+          and len(outs) == 1 and outs[0].name == CONTRACT["output"] and dims(outs[0]) == CONTRACT["output_shape"])
+    if not ok:
+        os.remove(tmp)
+        raise RuntimeError("exported model breaks the I/O contract; the shipped one is kept")
+    # Parity samples: real observations from the environment.
+    obs = env.reset(seed=12345)[0][:4]
+    sess = ort.InferenceSession(tmp, providers=["CPUExecutionProvider"])
+    expect = []
+    for k in range(len(obs)):
+        x = obs[k:k + 1].astype(np.float32)
+        with torch.no_grad():
+            t = model(torch.as_tensor(x)).numpy()
+        o = sess.run(None, {CONTRACT["input"]: x})[0]
+        if not np.allclose(t, o, atol=1e-4):
+            os.remove(tmp)
+            raise RuntimeError(f"onnxruntime differs from PyTorch: {t} vs {o}")
+        expect.append(t[0].tolist())
+    os.replace(tmp, os.path.join(out, "policy.onnx"))
+    obs.astype("<f4").tofile(os.path.join(out, "policy.parity.bin"))
+    with open(os.path.join(out, "policy.parity.json"), "w") as f:
+        json.dump({"samples": len(expect), "shape": CONTRACT["input_shape"], "actions": expect}, f)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--config", required=True)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--minutes", type=float, default=None)
+    ap.add_argument("--boxed", default=None)
+    ap.add_argument("--threads", type=int, default=None)
+    a = ap.parse_args()
+    c = load_config(a.config)
+    e, s = c["env"], c["sac"]
+    os.makedirs(a.out, exist_ok=True)
+    dev = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    seed = int(c["seed"])
+    env = herb_sim.HerbVectorEnv(
+        e["num_envs"], reward=e["reward"], sequence=e["sequence"], seed=seed,
+        min_objects=e["min_objects"], max_objects=e["max_objects"], meshes=e["meshes"],
+        boxed=a.boxed, threads=a.threads,
+    )
+    actor, critic = Actor().to(dev), Critic().to(dev)
+    target = Critic().to(dev)
+    target.load_state_dict(critic.state_dict())
+    log_alpha = torch.zeros((), device=dev, requires_grad=True)
+    opt_a = torch.optim.Adam(actor.parameters(), lr=s["lr"])
+    opt_c = torch.optim.Adam(critic.parameters(), lr=s["lr"])
+    opt_t = torch.optim.Adam([log_alpha], lr=s["lr"])
+    steps, updates, episodes, wall = 0, 0, 0, 0.0
+    ck_a = os.path.join(a.out, "checkpoint-actor.pt")
+    ck_c = os.path.join(a.out, "checkpoint-critic.pt")
+    if os.path.exists(ck_a) and os.path.exists(ck_c):
+        st = torch.load(ck_a, map_location=dev, weights_only=False)
+        sc = torch.load(ck_c, map_location=dev, weights_only=False)
+        actor.load_state_dict(st["actor"])
+        opt_a.load_state_dict(st["opt_a"])
+        opt_t.load_state_dict(st["opt_t"])
+        critic.load_state_dict(sc["critic"])
+        target.load_state_dict(sc["target"])
+        with torch.no_grad():
+            log_alpha.copy_(st["log_alpha"])
+        steps, updates, episodes, wall = st["steps"], st["updates"], st["episodes"], st["wall_s"]
+        seed = seed + steps  # a fresh stream of episodes per chunk
+        print(f"resumed at {steps} steps, {updates} updates", flush=True)
+    torch.manual_seed(seed)
+    np.random.seed(seed % 2**32)
+    random.seed(seed)
+    buf = Replay(s["buffer_size"])
+    obs = env.reset(seed=seed)[0]
+    po = pool_u8(obs)
+    n = e["num_envs"]
+    minutes = a.minutes if a.minutes is not None else c["run"]["chunk_minutes"]
+    t0 = last_log = time.time()
+    ep_len, ep_ret = [], []
+    debt = 0.0
+    chunk_start = steps
+    while steps < s["total_steps"] and time.time() - t0 < minutes * 60:
+        if steps - chunk_start < s["learning_starts"] and updates == 0:
+            act = np.random.uniform(-1, 1, size=(n, 3)).astype(np.float32)
+        else:
+            with torch.no_grad():
+                x = torch.as_tensor(po, device=dev).float() / 255.0
+                act = actor.sample(x)[0].cpu().numpy().astype(np.float32)
+        obs2, rew, term, _, info = env.step(act)
+        # With same-step autoreset the returned observation of an ended episode is the next
+        # episode's first; its value is never bootstrapped (done = 1), so it is stored as is.
+        po2 = pool_u8(obs2)
+        buf.add(po, act, rew, po2, term.astype(np.float32))
+        po = po2
+        steps += n
+        for k in np.flatnonzero(term):
+            episodes += 1
+            ep_len.append(int(info["episode_length"][k]))
+            ep_ret.append(float(info["episode_return"][k]))
+        if buf.n >= max(s["batch_size"], s["learning_starts"]):
+            debt += n * s["updates_per_step"]
+            while debt >= 1.0:
+                debt -= 1.0
+                o, ac, r, o2, d = buf.sample(s["batch_size"], dev)
+                alpha = log_alpha.exp().detach()
+                with torch.no_grad():
+                    a2, logp2 = actor.sample(o2)
+                    q1t, q2t = target(o2, a2)
+                    y = r + s["gamma"] * (1 - d) * (torch.min(q1t, q2t) - alpha * logp2)
+                q1, q2 = critic(o, ac)
+                loss_c = F.mse_loss(q1, y) + F.mse_loss(q2, y)
+                opt_c.zero_grad(set_to_none=True)
+                loss_c.backward()
+                opt_c.step()
+                an, logp = actor.sample(o)
+                q1n, q2n = critic(o, an)
+                loss_a = (alpha * logp - torch.min(q1n, q2n)).mean()
+                opt_a.zero_grad(set_to_none=True)
+                loss_a.backward()
+                opt_a.step()
+                loss_t = -(log_alpha * (logp.detach() + s["target_entropy"])).mean()
+                opt_t.zero_grad(set_to_none=True)
+                loss_t.backward()
+                opt_t.step()
+                with torch.no_grad():
+                    for p, pt in zip(critic.parameters(), target.parameters()):
+                        pt.mul_(1 - s["tau"]).add_(s["tau"] * p)
+                updates += 1
+        if time.time() - last_log >= c["run"]["log_every_s"]:
+            last_log = time.time()
+            el = time.time() - t0
+            print(f"steps {steps} ({(steps - chunk_start) / el:.0f}/s) updates {updates} "
+                  f"({updates / max(el, 1e-9):.1f}/s this chunk) episodes {episodes} "
+                  f"len {np.mean(ep_len[-200:]) if ep_len else 0:.2f} "
+                  f"return {np.mean(ep_ret[-200:]) if ep_ret else 0:.3f} alpha {log_alpha.exp().item():.4f}",
+                  flush=True)
+    wall += time.time() - t0
+    # Two files under 16 MiB each (the accelerator returns at most 16 MiB per file): the
+    # critics' Adam moments are not kept and restart with every chunk.
+    meta = {"steps": steps, "updates": updates, "episodes": episodes, "wall_s": wall, "config": c}
+    torch.save({"actor": actor.state_dict(), "opt_a": opt_a.state_dict(), "opt_t": opt_t.state_dict(),
+                "log_alpha": log_alpha.detach(), **meta}, ck_a + ".tmp")
+    torch.save({"critic": critic.state_dict(), "target": target.state_dict()}, ck_c + ".tmp")
+    os.replace(ck_a + ".tmp", ck_a)
+    os.replace(ck_c + ".tmp", ck_c)
+    row = {"steps": steps, "updates": updates, "episodes": episodes, "wall_s": round(wall, 1),
+           "mean_len": round(float(np.mean(ep_len)), 3) if ep_len else "",
+           "mean_return": round(float(np.mean(ep_ret)), 4) if ep_ret else "",
+           "device": str(dev)}
+    path = os.path.join(a.out, "progress.csv")
+    new = not os.path.exists(path)
+    with open(path, "a", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(row))
+        if new:
+            w.writeheader()
+        w.writerow(row)
+    export(actor, a.out, env, dev)
+    print(json.dumps(row), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
