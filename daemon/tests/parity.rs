@@ -12,17 +12,28 @@ use std::path::{Path, PathBuf};
 fn check(onnx: &Path) {
     let json = onnx.with_extension("parity.json");
     let bin = onnx.with_extension("parity.bin");
-    let meta: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap_or_else(|e| panic!("{}: {e}", json.display())))
-            .unwrap();
+    let meta: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(&json).unwrap_or_else(|e| panic!("{}: {e}", json.display())),
+    )
+    .unwrap();
     let bytes = std::fs::read(&bin).unwrap_or_else(|e| panic!("{}: {e}", bin.display()));
-    let obs: Vec<f32> = bytes.chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect();
+    let obs: Vec<f32> = bytes
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+        .collect();
     let actions = meta["actions"].as_array().unwrap();
-    assert_eq!(obs.len(), actions.len() * ObsLayout::LEN, "{}", bin.display());
+    assert_eq!(
+        obs.len(),
+        actions.len() * ObsLayout::LEN,
+        "{}",
+        bin.display()
+    );
     assert!(!actions.is_empty());
     let mut p = OnnxPolicy::load(onnx).unwrap();
     for (k, want) in actions.iter().enumerate() {
-        let got = p.infer(&obs[k * ObsLayout::LEN..(k + 1) * ObsLayout::LEN]).unwrap();
+        let got = p
+            .infer(&obs[k * ObsLayout::LEN..(k + 1) * ObsLayout::LEN])
+            .unwrap();
         for j in 0..3 {
             let w = want[j].as_f64().unwrap() as f32;
             assert!(
