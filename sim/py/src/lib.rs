@@ -125,7 +125,8 @@ impl VecEnv {
     /// `num_envs` environments. `reward`: `simple`, `c` or `cs<alpha>`; `sequence`: `beam3` or
     /// `random`; `boxed`: the BoxED folder (meshes; default `HERB_BOXED` or ../shared/boxed,
     /// primitives without it); `meshes=False` forces primitives; `sequence_model`: the
-    /// transition counts (default `models/sequence.json` of this repository); `threads`:
+    /// transition counts (default `models/sequence.json` in the working directory, else in
+    /// the checkout the extension was built from); `threads`:
     /// rayon threads (default: all cores).
     #[new]
     #[pyo3(signature = (num_envs, reward="cs0.6", sequence="beam3", seed=0, min_objects=10, max_objects=25, boxed=None, meshes=true, sequence_model=None, threads=None, autoreset=true))]
