@@ -10,7 +10,6 @@ import json
 import time
 
 import torch
-import torch.nn.functional as F
 
 import train
 
@@ -36,27 +35,8 @@ def main():
     r, d = torch.rand(b, device=dev), torch.zeros(b, device=dev)
 
     def update():
-        alpha = log_alpha.exp().detach()
-        with torch.no_grad():
-            a2, lp2 = actor.sample(o2)
-            y = r + 0.99 * (1 - d) * (torch.min(*target(o2, a2)) - alpha * lp2)
-        q1, q2 = critic(o, act)
-        lc = F.mse_loss(q1, y) + F.mse_loss(q2, y)
-        oc.zero_grad(set_to_none=True)
-        lc.backward()
-        oc.step()
-        an, lp = actor.sample(o)
-        la = (alpha * lp - torch.min(*critic(o, an))).mean()
-        oa.zero_grad(set_to_none=True)
-        la.backward()
-        oa.step()
-        lt = -(log_alpha * (lp.detach() - 3.0)).mean()
-        ot.zero_grad(set_to_none=True)
-        lt.backward()
-        ot.step()
-        with torch.no_grad():
-            for p, pt in zip(critic.parameters(), target.parameters()):
-                pt.mul_(0.995).add_(0.005 * p)
+        train.sac_update(actor, critic, target, log_alpha, (oa, oc, ot), (o, act, r, o2, d),
+                         0.99, 0.005, -3.0)
 
     for _ in range(3):
         update()

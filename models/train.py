@@ -152,6 +152,37 @@ class Replay:
                 f(self.next).float() / 255.0, f(self.done))
 
 
+def sac_update(actor, critic, target, log_alpha, opts, batch, gamma, tau, target_entropy):
+    """One SAC update: twin critics on the soft Bellman target, then the actor, then the
+    entropy temperature, then a Polyak step of the target critics. `opts` = (actor, critic,
+    temperature) optimisers; `batch` = (obs, action, reward, next obs, done)."""
+    opt_a, opt_c, opt_t = opts
+    o, ac, r, o2, d = batch
+    alpha = log_alpha.exp().detach()
+    with torch.no_grad():
+        a2, logp2 = actor.sample(o2)
+        q1t, q2t = target(o2, a2)
+        y = r + gamma * (1 - d) * (torch.min(q1t, q2t) - alpha * logp2)
+    q1, q2 = critic(o, ac)
+    loss_c = F.mse_loss(q1, y) + F.mse_loss(q2, y)
+    opt_c.zero_grad(set_to_none=True)
+    loss_c.backward()
+    opt_c.step()
+    an, logp = actor.sample(o)
+    q1n, q2n = critic(o, an)
+    loss_a = (alpha * logp - torch.min(q1n, q2n)).mean()
+    opt_a.zero_grad(set_to_none=True)
+    loss_a.backward()
+    opt_a.step()
+    loss_t = -(log_alpha * (logp.detach() + target_entropy)).mean()
+    opt_t.zero_grad(set_to_none=True)
+    loss_t.backward()
+    opt_t.step()
+    with torch.no_grad():
+        for p, pt in zip(critic.parameters(), target.parameters()):
+            pt.mul_(1 - tau).add_(tau * p)
+
+
 def export(actor, out, env, dev):
     """Exports the deterministic actor; replaces out/policy.onnx only if it passes the checks."""
     import onnx
@@ -267,30 +298,9 @@ def main():
             debt += n * s["updates_per_step"]
             while debt >= 1.0:
                 debt -= 1.0
-                o, ac, r, o2, d = buf.sample(s["batch_size"], dev)
-                alpha = log_alpha.exp().detach()
-                with torch.no_grad():
-                    a2, logp2 = actor.sample(o2)
-                    q1t, q2t = target(o2, a2)
-                    y = r + s["gamma"] * (1 - d) * (torch.min(q1t, q2t) - alpha * logp2)
-                q1, q2 = critic(o, ac)
-                loss_c = F.mse_loss(q1, y) + F.mse_loss(q2, y)
-                opt_c.zero_grad(set_to_none=True)
-                loss_c.backward()
-                opt_c.step()
-                an, logp = actor.sample(o)
-                q1n, q2n = critic(o, an)
-                loss_a = (alpha * logp - torch.min(q1n, q2n)).mean()
-                opt_a.zero_grad(set_to_none=True)
-                loss_a.backward()
-                opt_a.step()
-                loss_t = -(log_alpha * (logp.detach() + s["target_entropy"])).mean()
-                opt_t.zero_grad(set_to_none=True)
-                loss_t.backward()
-                opt_t.step()
-                with torch.no_grad():
-                    for p, pt in zip(critic.parameters(), target.parameters()):
-                        pt.mul_(1 - s["tau"]).add_(s["tau"] * p)
+                sac_update(actor, critic, target, log_alpha, (opt_a, opt_c, opt_t),
+                           buf.sample(s["batch_size"], dev), s["gamma"], s["tau"],
+                           s["target_entropy"])
                 updates += 1
         if time.time() - last_log >= c["run"]["log_every_s"]:
             last_log = time.time()
