@@ -87,6 +87,13 @@ impl CellConfig {
         )
     }
 
+    /// The gripper endpoint at the grasp of an object of height `h` at the pick station
+    /// (`base`, m): on the object's axis, [`Self::depth`] below its top.
+    pub fn grasp_point(&self, h: f64) -> Vector3<f64> {
+        self.pick_object_pose(h).translation.vector
+            + Vector3::new(0.0, 0.0, 0.5 * h - self.depth(h))
+    }
+
     /// Depth of the grasp below the top of an object of height `h`.
     pub fn depth(&self, h: f64) -> f64 {
         self.grasp_depth.min(0.5 * h)
@@ -140,8 +147,7 @@ pub fn plan_waypoints(
 ) -> Result<Waypoints, Unreachable> {
     let depth = cell.depth(h);
     let transit = cell.transit_z(h);
-    let pick = cell.pick_object_pose(h);
-    let grasp_xyz = pick.translation.vector + Vector3::new(0.0, 0.0, 0.5 * h - depth);
+    let grasp_xyz = cell.grasp_point(h);
     let b = cell.box_pose();
     let c = b * Point3::new(place[0], place[1], place[2] + 0.5 * h - depth);
     let object_yaw = cell.box_yaw + place[3];

@@ -138,12 +138,6 @@ impl Default for Config {
     }
 }
 
-impl Default for JointLimits {
-    fn default() -> Self {
-        Self::baxter_left()
-    }
-}
-
 impl Config {
     /// Parses TOML text (`origin` names it in errors) and validates it.
     pub fn from_toml(text: &str, origin: &str) -> Result<Self, String> {

@@ -327,7 +327,7 @@ impl Controller {
             self.stats.cycles += 1;
             self.shared.cycles.store(self.cycles, Ordering::Relaxed);
             if finished {
-                self.emit(end, StatusEvent::Shutdown, NO_OBJECT, [0.0; 4], 0);
+                self.emit(StatusEvent::Shutdown, NO_OBJECT, [0.0; 4], 0);
                 return self.stats;
             }
             next += self.period_ns;
@@ -361,7 +361,7 @@ impl Controller {
         self.serve_jobs(now);
         if self.shared.stop.load(Ordering::Relaxed) && !self.stopping {
             self.stopping = true;
-            self.begin_stop(now);
+            self.begin_stop();
         }
         self.check_health(now);
         self.step(now);
@@ -433,12 +433,12 @@ impl Controller {
                 reserved: 0,
             });
             if reason == RejectReason::None {
-                self.start_job(now, &r);
+                self.start_job(&r);
             }
         }
     }
 
-    fn start_job(&mut self, now: u64, r: &herb_ipc::PackJobRequest) {
+    fn start_job(&mut self, r: &herb_ipc::PackJobRequest) {
         let n = r.objects().len();
         let mut objects = [0u16; MAX_JOB_OBJECTS];
         objects[..n].copy_from_slice(r.objects());
@@ -458,15 +458,11 @@ impl Controller {
             count: n,
         });
         self.phase = Phase::Ordering;
-        self.emit(now, StatusEvent::Accepted, NO_OBJECT, [0.0; 4], 0);
+        self.emit(StatusEvent::Accepted, NO_OBJECT, [0.0; 4], 0);
     }
 
     fn inputs_fresh(&self, now: u64) -> bool {
-        self.js.is_some()
-            && self.gs.is_some()
-            && now.saturating_sub(self.js_at) < self.lim.js
-            && now.saturating_sub(self.gs_at) < self.lim.gs
-            && now.saturating_sub(self.hm_rx_at) < self.lim.hm
+        self.js.is_some() && self.gs.is_some() && self.stale_input(now).is_none()
     }
 
     fn stale_input(&self, now: u64) -> Option<Fault> {
@@ -486,20 +482,20 @@ impl Controller {
             Phase::Idle | Phase::Braking { .. } | Phase::Faulted { .. } => {}
             _ => {
                 if let Some(f) = self.stale_input(now) {
-                    self.raise(now, f);
+                    self.raise(f);
                 }
             }
         }
     }
 
     /// A fault: brake if moving, report, hold.
-    fn raise(&mut self, now: u64, fault: Fault) {
+    fn raise(&mut self, fault: Fault) {
         self.fault = fault;
-        self.emit(now, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
-        self.begin_brake(now);
+        self.emit(StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+        self.begin_brake();
     }
 
-    fn begin_brake(&mut self, now: u64) {
+    fn begin_brake(&mut self) {
         let moving = self.cmd.velocity.iter().any(|v| *v != 0.0)
             || self.cmd.acceleration.iter().any(|a| *a != 0.0);
         let (seg, cursor) = match self.phase {
@@ -523,26 +519,26 @@ impl Controller {
                 Err(_) => {}
             }
         }
-        self.enter_faulted(now);
+        self.enter_faulted();
     }
 
-    fn enter_faulted(&mut self, now: u64) {
+    fn enter_faulted(&mut self) {
         self.cmd.velocity = [0.0; DOF];
         self.cmd.acceleration = [0.0; DOF];
         self.phase = Phase::Faulted {
             healthy_since: None,
         };
-        self.emit(now, StatusEvent::Braked, self.current_type(), [0.0; 4], 0);
+        self.emit(StatusEvent::Braked, self.current_type(), [0.0; 4], 0);
     }
 
-    fn begin_stop(&mut self, now: u64) {
+    fn begin_stop(&mut self) {
         match self.phase {
             Phase::Streaming { .. } => {
                 self.fault = Fault::Stop;
-                self.begin_brake(now);
+                self.begin_brake();
             }
             Phase::Braking { .. } => {}
-            _ => self.enter_faulted(now),
+            _ => self.enter_faulted(),
         }
     }
 
@@ -581,7 +577,7 @@ impl Controller {
                 Response::Ordered { .. } => {}
                 Response::OrderFailed { .. } => {
                     self.fault = Fault::Decision;
-                    self.finish(now, false);
+                    self.finish(false);
                 }
                 Response::Planned(plan) => {
                     if self.phase == Phase::Planning && !self.stopping {
@@ -594,7 +590,7 @@ impl Controller {
                         let (ty, pose, dns) = (plan.object as u32, plan.pose, plan.decision_ns);
                         self.active = Some(plan);
                         self.phase = Phase::Streaming { seg: 0, cursor: 0 };
-                        self.emit(now, StatusEvent::Decided, ty, pose, dns);
+                        self.emit(StatusEvent::Decided, ty, pose, dns);
                     } else {
                         self.recycle(plan);
                     }
@@ -622,10 +618,10 @@ impl Controller {
                             if fault == Fault::HeightmapTimeout {
                                 self.phase = Phase::WaitHeightmap { since: now };
                             } else {
-                                self.finish(now, false);
+                                self.finish(false);
                             }
                         }
-                        Phase::Braking { .. } => self.enter_faulted(now),
+                        Phase::Braking { .. } => self.enter_faulted(),
                         _ => {}
                     }
                 }
@@ -633,7 +629,7 @@ impl Controller {
         }
     }
 
-    fn finish(&mut self, now: u64, ok: bool) {
+    fn finish(&mut self, ok: bool) {
         let ev = if ok {
             StatusEvent::JobDone
         } else {
@@ -641,7 +637,7 @@ impl Controller {
         };
         self.phase = Phase::Idle;
         self.commanding = false;
-        self.emit(now, ev, NO_OBJECT, [0.0; 4], 0);
+        self.emit(ev, NO_OBJECT, [0.0; 4], 0);
         self.job_id = 0;
     }
 
@@ -676,7 +672,7 @@ impl Controller {
                 if self.hm_stamp > self.release_stamp {
                     self.request_plan(false);
                 } else if now.saturating_sub(since) > self.lim.fresh_hm {
-                    self.raise(now, Fault::HeightmapTimeout);
+                    self.raise(Fault::HeightmapTimeout);
                 }
             }
             Phase::Streaming { seg, cursor } => self.stream(now, seg, cursor),
@@ -698,15 +694,15 @@ impl Controller {
                                 .map(|p| (p.object as u32, p.pose, p.decision_ns))
                                 .unwrap_or((NO_OBJECT, [0.0; 4], 0));
                             self.done += 1;
-                            self.emit(now, StatusEvent::Placed, ty, pose, dns);
+                            self.emit(StatusEvent::Placed, ty, pose, dns);
                             self.index += 1;
                         }
                     }
                     self.next_segment(now, seg + 1);
                 } else if now.saturating_sub(since) > self.lim.grip {
                     self.fault = Fault::Gripper;
-                    self.emit(now, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
-                    self.finish(now, false);
+                    self.emit(StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+                    self.finish(false);
                 }
             }
             Phase::Braking {
@@ -751,7 +747,7 @@ impl Controller {
                             if let Some(b) = self.brake.take() {
                                 self.recycle(b);
                             }
-                            self.enter_faulted(now);
+                            self.enter_faulted();
                         }
                     }
                 }
@@ -784,14 +780,14 @@ impl Controller {
             self.cmd = Setpoint::at_rest(j.position);
         }
         let held = self.gs.is_some_and(|g| g.holding == 1);
-        self.emit(now, StatusEvent::Resumed, self.current_type(), [0.0; 4], 0);
+        self.emit(StatusEvent::Resumed, self.current_type(), [0.0; 4], 0);
         if self.index >= self.count {
-            self.finish(now, true);
+            self.finish(true);
             return;
         }
         if self.holding && !held {
             self.fault = Fault::ObjectLost;
-            self.emit(now, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+            self.emit(StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
             self.holding = false;
         }
         self.grip_cmd = if self.holding {
@@ -817,7 +813,7 @@ impl Controller {
                 .map_or(0, |p| if seg == 0 { 0 } else { p.segments[seg - 1].end });
             self.phase = Phase::Streaming { seg, cursor: start };
         } else if self.index >= self.count {
-            self.finish(now, true);
+            self.finish(true);
         } else {
             self.phase = Phase::WaitHeightmap { since: now };
         }
@@ -889,13 +885,7 @@ impl Controller {
         }
         if now.saturating_sub(self.last_heartbeat) >= 100_000_000 {
             self.last_heartbeat = now;
-            self.emit(
-                now,
-                StatusEvent::Heartbeat,
-                self.current_type(),
-                [0.0; 4],
-                0,
-            );
+            self.emit(StatusEvent::Heartbeat, self.current_type(), [0.0; 4], 0);
         }
     }
 
@@ -908,14 +898,7 @@ impl Controller {
         }
     }
 
-    fn emit(
-        &mut self,
-        _now: u64,
-        event: StatusEvent,
-        object_type: u32,
-        pose: [f32; 4],
-        decision_ns: u64,
-    ) {
+    fn emit(&mut self, event: StatusEvent, object_type: u32, pose: [f32; 4], decision_ns: u64) {
         self.seq += 1;
         let state = match event {
             StatusEvent::JobDone => JobState::Done,

@@ -33,6 +33,12 @@ pub struct JointLimits {
     pub jerk: [f64; DOF],
 }
 
+impl Default for JointLimits {
+    fn default() -> Self {
+        Self::baxter_left()
+    }
+}
+
 impl JointLimits {
     /// Baxter's left arm: the URDF position limits shrunk by 0.05 rad, 60 % of the URDF speed
     /// limits, and accelerations/jerks chosen for smooth motion (Rethink publishes none).

@@ -300,7 +300,9 @@ struct Worker {
 }
 
 impl Worker {
-    fn newest_frame(&mut self, after: u64, wait: Duration) -> Option<&HeightmapFrame> {
+    /// Keeps the newest valid frame in `latest`, waiting up to `wait` for one stamped after
+    /// `after`; true when it has one.
+    fn refresh_frame(&mut self, after: u64, wait: Duration) -> bool {
         let t0 = Instant::now();
         loop {
             while let Ok(Some(s)) = self.hm_sub.receive() {
@@ -319,8 +321,7 @@ impl Worker {
         }
         self.latest
             .as_ref()
-            .map(|s| s.payload())
-            .filter(|f| f.header.stamp_ns > after)
+            .is_some_and(|s| s.payload().header.stamp_ns > after)
     }
 
     fn order(&self, objects: &[u16]) -> Option<Vec<TypeIdx>> {
@@ -345,14 +346,15 @@ impl Worker {
             Some(p) => p,
             None => {
                 let t0 = Instant::now();
-                let Some(frame) = self.newest_frame(after, Duration::from_millis(500)) else {
+                if !self.refresh_frame(after, Duration::from_millis(500)) {
                     return Err(Fault::HeightmapTimeout);
-                };
-                let frame: *const HeightmapFrame = frame;
-                // SAFETY: `frame` points into the sample held in `self.latest`, which is not
-                // touched until `decide` returns (the borrow checker cannot see through the
-                // split borrow of `self`).
-                let p = self.decider.decide(unsafe { &*frame }, ty, index as usize);
+                }
+                let frame = self
+                    .latest
+                    .as_ref()
+                    .expect("refresh_frame found one")
+                    .payload();
+                let p = self.decider.decide(frame, ty, index as usize);
                 buf.decision_ns = t0.elapsed().as_nanos() as u64;
                 p.map_err(|_| Fault::Decision)?
             }

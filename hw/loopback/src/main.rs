@@ -177,9 +177,7 @@ impl Sim {
                     let h = self.catalog.shape(ty).extents().z as f64;
                     let object = self.cell.pick_object_pose(h);
                     let tool = self.arm.fk(&self.q);
-                    let grasp = object.translation.vector
-                        + nalgebra::Vector3::new(0.0, 0.0, 0.5 * h - self.cell.depth(h));
-                    if (tool.translation.vector - grasp).norm() < 0.02 {
+                    if (tool.translation.vector - self.cell.grasp_point(h)).norm() < 0.02 {
                         self.held = Some((ty, tool.inverse() * object));
                     }
                 }
