@@ -11,9 +11,12 @@ within 1e-4 in onnxruntime; a failing export never replaces a good one), writes 
 ``<out>/progress.csv``. The replay buffer and the critics' Adam moments are not saved: they
 restart with every chunk (the accelerator returns at most 8 files of 16 MiB per call).
 
-Network (``herbnet112``, chosen by the decision-latency benchmark): 2 x 2 average pool of the
-[2, 224, 224] observation, convolutions 16@8s4, 32@4s2, 32@3s1 (ReLU), MLP 256-256-256 (ReLU),
-then a Gaussian head (actor) or a Q value (twin critics, each with its own extractor).
+Networks (``[net] pool`` in the config): ``herbnet112`` (pool = 2, chosen by the decision-latency
+benchmark): 2 x 2 average pool of the [2, 224, 224] observation, convolutions 16@8s4, 32@4s2,
+32@3s1 (ReLU); ``herbnet56`` (pool = 4, the CPU recipe): 4 x 4 average pool, convolutions
+16@5s2, 32@3s2, 32@3s2. Both continue with an MLP 256-256-256 (ReLU), then a Gaussian head
+(actor) or two Q values (twin critic heads on one shared extractor, trained by the critic loss
+only; the actor's loss reads it without gradient, as in DrQ).
 Observations are stored pooled and quantised to uint8 (1/255 of the 0.30 m height scale,
 1.2 mm) to fit the buffer in memory; the exported actor takes the full-resolution float input.
 """
@@ -36,7 +39,7 @@ import torch.nn.functional as F
 
 import herb_sim
 
-POOLED = (2, 112, 112)
+NETS = {2: "herbnet112", 4: "herbnet56"}
 CONTRACT = dict(input="obs", input_shape=[1, 2, 224, 224], output="action", output_shape=[1, 3])
 
 
@@ -53,19 +56,28 @@ def load_config(path):
     for key in ("updates_per_step", "gamma", "tau", "lr"):
         if not (isinstance(s.get(key), (int, float)) and s[key] > 0):
             raise SystemExit(f"{path}: sac.{key} must be a positive number")
+    pool = c.setdefault("net", {}).setdefault("pool", 2)
+    if pool not in NETS:
+        raise SystemExit(f"{path}: net.pool must be one of {sorted(NETS)} (got {pool!r})")
     return c
 
 
-def extractor():
-    return nn.Sequential(
-        nn.Conv2d(2, 16, 8, stride=4), nn.ReLU(),
-        nn.Conv2d(16, 32, 4, stride=2), nn.ReLU(),
-        nn.Conv2d(32, 32, 3, stride=1), nn.ReLU(),
-        nn.Flatten(),
-    )
+def pooled_shape(pool):
+    """Shape of one stored (pooled) observation."""
+    return (2, 224 // pool, 224 // pool)
 
 
-FEATURES = 32 * 10 * 10
+def extractor(pool):
+    """Convolutional features of a pooled observation; returns (module, feature count)."""
+    if pool == 2:
+        convs = [nn.Conv2d(2, 16, 8, stride=4), nn.ReLU(), nn.Conv2d(16, 32, 4, stride=2), nn.ReLU()]
+        side = 10
+        last = nn.Conv2d(32, 32, 3, stride=1)
+    else:
+        convs = [nn.Conv2d(2, 16, 5, stride=2), nn.ReLU(), nn.Conv2d(16, 32, 3, stride=2), nn.ReLU()]
+        side = 5
+        last = nn.Conv2d(32, 32, 3, stride=2)
+    return nn.Sequential(*convs, last, nn.ReLU(), nn.Flatten()), 32 * side * side
 
 
 def mlp(n_in, n_out):
@@ -80,10 +92,11 @@ def mlp(n_in, n_out):
 class Actor(nn.Module):
     """Gaussian policy on pooled observations; tanh-squashed actions in (-1, 1)."""
 
-    def __init__(self):
+    def __init__(self, pool=2):
         super().__init__()
-        self.features = extractor()
-        self.body = mlp(FEATURES, 6)
+        self.pool = pool
+        self.features, n = extractor(pool)
+        self.body = mlp(n, 6)
 
     def forward(self, x):
         mu, log_std = self.body(self.features(x)).chunk(2, dim=-1)
@@ -107,32 +120,38 @@ class Deployed(nn.Module):
         self.actor = actor
 
     def forward(self, obs):
-        mu, _ = self.actor(F.avg_pool2d(obs, 2))
+        mu, _ = self.actor(F.avg_pool2d(obs, self.actor.pool))
         return torch.tanh(mu)
 
 
 class Critic(nn.Module):
-    def __init__(self):
+    """Twin Q heads on one extractor."""
+
+    def __init__(self, pool=2):
         super().__init__()
-        self.f1, self.q1 = extractor(), mlp(FEATURES + 3, 1)
-        self.f2, self.q2 = extractor(), mlp(FEATURES + 3, 1)
+        self.features, n = extractor(pool)
+        self.q1, self.q2 = mlp(n + 3, 1), mlp(n + 3, 1)
+
+    def heads(self, h, a):
+        """Both Q values from extracted features `h` and actions `a`."""
+        ha = torch.cat([h, a], -1)
+        return self.q1(ha).squeeze(-1), self.q2(ha).squeeze(-1)
 
     def forward(self, x, a):
-        return (self.q1(torch.cat([self.f1(x), a], -1)).squeeze(-1),
-                self.q2(torch.cat([self.f2(x), a], -1)).squeeze(-1))
+        return self.heads(self.features(x), a)
 
 
-def pool_u8(obs):
-    """[N, 2, 224, 224] float in [0, 1] -> [N, 2, 112, 112] uint8."""
-    n = obs.shape[0]
-    p = obs.reshape(n, 2, 112, 2, 112, 2).mean(axis=(3, 5))
+def pool_u8(obs, pool):
+    """[N, 2, 224, 224] float in [0, 1] -> [N, 2, 224/pool, 224/pool] uint8."""
+    n, m = obs.shape[0], 224 // pool
+    p = obs.reshape(n, 2, m, pool, m, pool).mean(axis=(3, 5))
     return np.rint(p * 255.0).astype(np.uint8)
 
 
 class Replay:
-    def __init__(self, size):
-        self.obs = np.zeros((size, *POOLED), np.uint8)
-        self.next = np.zeros((size, *POOLED), np.uint8)
+    def __init__(self, size, shape):
+        self.obs = np.zeros((size, *shape), np.uint8)
+        self.next = np.zeros((size, *shape), np.uint8)
         self.act = np.zeros((size, 3), np.float32)
         self.rew = np.zeros(size, np.float32)
         self.done = np.zeros(size, np.float32)
@@ -169,7 +188,9 @@ def sac_update(actor, critic, target, log_alpha, opts, batch, gamma, tau, target
     loss_c.backward()
     opt_c.step()
     an, logp = actor.sample(o)
-    q1n, q2n = critic(o, an)
+    with torch.no_grad():
+        h = critic.features(o)
+    q1n, q2n = critic.heads(h, an)
     loss_a = (alpha * logp - torch.min(q1n, q2n)).mean()
     opt_a.zero_grad(set_to_none=True)
     loss_a.backward()
@@ -223,11 +244,31 @@ def export(actor, out, env, dev):
         json.dump({"samples": len(expect), "shape": CONTRACT["input_shape"], "actions": expect}, f)
 
 
+def progress_row(steps, updates, episodes, wall, ep_len, ep_ret, dev):
+    """One line of progress.csv: totals so far, and the mean length (objects packed) and return
+    of the last 200 episodes that ended."""
+    return {"steps": steps, "updates": updates, "episodes": episodes, "wall_s": round(wall, 1),
+            "mean_len": round(float(np.mean(ep_len[-200:])), 3) if ep_len else "",
+            "mean_return": round(float(np.mean(ep_ret[-200:])), 4) if ep_ret else "",
+            "device": str(dev)}
+
+
+def append_progress(out, row):
+    path = os.path.join(out, "progress.csv")
+    new = not os.path.exists(path)
+    with open(path, "a", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(row))
+        if new:
+            w.writeheader()
+        w.writerow(row)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--config", required=True)
     ap.add_argument("--out", required=True)
-    ap.add_argument("--minutes", type=float, default=None)
+    ap.add_argument("--minutes", type=float, default=None,
+                    help="chunk length (default run.chunk_minutes; 'inf' trains to sac.total_steps)")
     ap.add_argument("--boxed", default=None)
     ap.add_argument("--threads", type=int, default=None)
     a = ap.parse_args()
@@ -241,8 +282,9 @@ def main():
         min_objects=e["min_objects"], max_objects=e["max_objects"], meshes=e["meshes"],
         boxed=a.boxed, threads=a.threads,
     )
-    actor, critic = Actor().to(dev), Critic().to(dev)
-    target = Critic().to(dev)
+    pool = c["net"]["pool"]
+    actor, critic = Actor(pool).to(dev), Critic(pool).to(dev)
+    target = Critic(pool).to(dev)
     target.load_state_dict(critic.state_dict())
     log_alpha = torch.zeros((), device=dev, requires_grad=True)
     opt_a = torch.optim.Adam(actor.parameters(), lr=s["lr"])
@@ -267,9 +309,9 @@ def main():
     torch.manual_seed(seed)
     np.random.seed(seed % 2**32)
     random.seed(seed)
-    buf = Replay(s["buffer_size"])
+    buf = Replay(s["buffer_size"], pooled_shape(pool))
     obs = env.reset(seed=seed)[0]
-    po = pool_u8(obs)
+    po = pool_u8(obs, pool)
     n = e["num_envs"]
     minutes = a.minutes if a.minutes is not None else c["run"]["chunk_minutes"]
     t0 = last_log = time.time()
@@ -286,7 +328,7 @@ def main():
         obs2, rew, term, _, info = env.step(act)
         # With same-step autoreset the returned observation of an ended episode is the next
         # episode's first; its value is never bootstrapped (done = 1), so it is stored as is.
-        po2 = pool_u8(obs2)
+        po2 = pool_u8(obs2, pool)
         buf.add(po, act, rew, po2, term.astype(np.float32))
         po = po2
         steps += n
@@ -305,10 +347,11 @@ def main():
         if time.time() - last_log >= c["run"]["log_every_s"]:
             last_log = time.time()
             el = time.time() - t0
+            row = progress_row(steps, updates, episodes, wall + el, ep_len, ep_ret, dev)
+            append_progress(a.out, row)
             print(f"steps {steps} ({(steps - chunk_start) / el:.0f}/s) updates {updates} "
                   f"({updates / max(el, 1e-9):.1f}/s this chunk) episodes {episodes} "
-                  f"len {np.mean(ep_len[-200:]) if ep_len else 0:.2f} "
-                  f"return {np.mean(ep_ret[-200:]) if ep_ret else 0:.3f} alpha {log_alpha.exp().item():.4f}",
+                  f"len {row['mean_len']} return {row['mean_return']} alpha {log_alpha.exp().item():.4f}",
                   flush=True)
     wall += time.time() - t0
     # Two files under 16 MiB each (the accelerator returns at most 16 MiB per file): the
@@ -319,17 +362,8 @@ def main():
     torch.save({"critic": critic.state_dict(), "target": target.state_dict()}, ck_c + ".tmp")
     os.replace(ck_a + ".tmp", ck_a)
     os.replace(ck_c + ".tmp", ck_c)
-    row = {"steps": steps, "updates": updates, "episodes": episodes, "wall_s": round(wall, 1),
-           "mean_len": round(float(np.mean(ep_len)), 3) if ep_len else "",
-           "mean_return": round(float(np.mean(ep_ret)), 4) if ep_ret else "",
-           "device": str(dev)}
-    path = os.path.join(a.out, "progress.csv")
-    new = not os.path.exists(path)
-    with open(path, "a", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(row))
-        if new:
-            w.writeheader()
-        w.writerow(row)
+    row = progress_row(steps, updates, episodes, wall, ep_len, ep_ret, dev)
+    append_progress(a.out, row)
     export(actor, a.out, env, dev)
     print(json.dumps(row), flush=True)
     return 0

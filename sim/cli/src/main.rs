@@ -132,9 +132,10 @@ enum Cmd {
         /// replays and random use the human order.
         #[arg(long, value_enum)]
         sequence: Option<SequenceArg>,
-        /// The ONNX placement policy for herb.
+        /// The ONNX placement policy for herb (repeat for one herb row per policy, labelled by
+        /// file stem).
         #[arg(long)]
-        policy: Option<PathBuf>,
+        policy: Vec<PathBuf>,
         /// The sequence model for Beam-3.
         #[arg(long, default_value = "models/sequence.json")]
         sequence_model: PathBuf,
@@ -330,6 +331,14 @@ fn run(cli: Cli) -> AnyResult<()> {
                     "give at least one --method (herb, blbf, human, human-pose, random)".into(),
                 );
             }
+            if method.contains(&EvalMethod::Herb) && policy.is_empty() {
+                return Err(
+                    "herb needs --policy <model.onnx> (e.g. models/policy-cs06.onnx)".into(),
+                );
+            }
+            if !policy.is_empty() && !method.contains(&EvalMethod::Herb) {
+                return Err("--policy is used by --method herb only".into());
+            }
             if sequence.is_some() && method.iter().any(|m| m.sim_method().is_some()) {
                 return Err("--sequence applies to herb and blbf only (replays and random use the human order)".into());
             }
@@ -357,11 +366,27 @@ fn run(cli: Cli) -> AnyResult<()> {
             let mut csv_text = String::from(
                 "method,sequence,episode,objects,packed,success,placements,stable,final_compactness,physics_steps,latency_mean_ms\n",
             );
-            for m in method {
+            // One run per (method, policy): herb once per policy, the others once.
+            let runs: Vec<(EvalMethod, Option<&Path>)> = method
+                .iter()
+                .flat_map(|&m| match m {
+                    EvalMethod::Herb => policy.iter().map(|p| (m, Some(p.as_path()))).collect(),
+                    _ => vec![(m, None)],
+                })
+                .collect();
+            for (m, policy) in runs {
                 let t = Instant::now();
+                let name = match policy {
+                    Some(p) => format!(
+                        "{} {}",
+                        m.name(),
+                        p.file_stem().and_then(|s| s.to_str()).unwrap_or("policy")
+                    ),
+                    None => m.name().to_string(),
+                };
                 let (label, seq_name, results) = match m.sim_method() {
                     Some(sm) => (
-                        m.name().to_string(),
+                        name.clone(),
                         "human",
                         eval::run_all(&catalog, &cfg, &episodes, sm, seed, jobs)?,
                     ),
@@ -378,15 +403,11 @@ fn run(cli: Cli) -> AnyResult<()> {
                             m,
                             mode,
                             model.as_ref(),
-                            policy.as_deref(),
+                            policy,
                             seed,
                             jobs,
                         )?;
-                        (
-                            format!("{} ({})", m.name(), mode.name()),
-                            mode.name(),
-                            results,
-                        )
+                        (format!("{name} ({})", mode.name()), mode.name(), results)
                     }
                 };
                 let secs = t.elapsed().as_secs_f64();
@@ -410,7 +431,7 @@ fn run(cli: Cli) -> AnyResult<()> {
                                 eval::mean_std(r.decision_ns.iter().map(|&n| n as f64 / 1e6)).0;
                             csv_text.push_str(&format!(
                                 "{},{},{},{},{},{},{},{},{:.4},{},{}\n",
-                                m.name(),
+                                name,
                                 seq_name,
                                 r.name,
                                 r.objects,
@@ -495,9 +516,7 @@ fn run_policy_method(
     jobs: usize,
 ) -> AnyResult<Vec<Result<eval::EpisodeResult, String>>> {
     match (m, policy_path) {
-        (EvalMethod::Herb, None) => {
-            return Err("herb needs --policy <model.onnx> (the trained policy comes with the training issue)".into());
-        }
+        (EvalMethod::Herb, None) => return Err("herb needs --policy <model.onnx>".into()),
         // Load once up front: a bad model is one clear error, not one per episode.
         (EvalMethod::Herb, Some(p)) => {
             let probe = OnnxPolicy::load(p)?;
