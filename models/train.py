@@ -13,7 +13,7 @@ restart with every chunk (the accelerator returns at most 8 files of 16 MiB per 
 
 Networks (``[net] pool`` in the config): ``herbnet112`` (pool = 2, chosen by the decision-latency
 benchmark): 2 x 2 average pool of the [2, 224, 224] observation, convolutions 16@8s4, 32@4s2,
-32@3s1 (ReLU); ``herbnet56`` (pool = 4, the CPU recipe): 4 x 4 average pool, convolutions
+32@3s1 (ReLU); ``herblite56`` (pool = 4, the CPU recipe): 4 x 4 average pool, convolutions
 16@5s2, 32@3s2, 32@3s2. Both continue with an MLP 256-256-256 (ReLU), then a Gaussian head
 (actor) or two Q values (twin critic heads on one shared extractor, trained by the critic loss
 only; the actor's loss reads it without gradient, as in DrQ).
@@ -39,7 +39,7 @@ import torch.nn.functional as F
 
 import herb_sim
 
-NETS = {2: "herbnet112", 4: "herbnet56"}
+NETS = {2: "herbnet112", 4: "herblite56"}
 CONTRACT = dict(input="obs", input_shape=[1, 2, 224, 224], output="action", output_shape=[1, 3])
 
 
