@@ -41,9 +41,10 @@ fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
-/// A configuration for tests: a unique prefix, and faster motion than the shipped defaults
-/// (still within the URDF speed limits) so an episode takes about a minute.
-fn config(dir: &Path, prefix: &str) -> PathBuf {
+/// A configuration for tests: a unique prefix, placement `policy` (`blbf` or an ONNX path),
+/// and faster motion than the shipped defaults (still within the URDF speed limits) so an
+/// episode takes about a minute.
+fn config(dir: &Path, prefix: &str, policy: &str) -> PathBuf {
     let p = dir.join(format!("{prefix}.toml"));
     let text = format!(
         r#"ipc_prefix = "{prefix}"
@@ -51,6 +52,7 @@ fn config(dir: &Path, prefix: &str) -> PathBuf {
 report_interval_s = 5.0
 [models]
 sequence = "{seq}"
+policy = "{policy}"
 [limits]
 lower = [-1.65167993878, -2.097, -3.00417993878, 0.0, -3.009, -1.5207963267948966, -3.009]
 upper = [1.65167993878, 0.997, 3.00417993878, 2.568, 3.009, 2.044, 3.009]
@@ -150,11 +152,16 @@ impl Follow {
     }
 }
 
-/// A temporary folder, a unique prefix and a configuration for test `tag`.
+/// A temporary folder, a unique prefix and a configuration (BLBF placements) for test `tag`.
 fn setup(tag: &str) -> (PathBuf, String, PathBuf) {
+    setup_with(tag, "blbf")
+}
+
+/// [`setup`] with the given placement policy.
+fn setup_with(tag: &str, policy: &str) -> (PathBuf, String, PathBuf) {
     let dir = tmp(tag);
     let prefix = format!("e2e{}{tag}", std::process::id());
-    let cfg = config(&dir, &prefix);
+    let cfg = config(&dir, &prefix, policy);
     (dir, prefix, cfg)
 }
 
@@ -194,13 +201,16 @@ fn shortest_session(root: &Path) -> (String, usize) {
         .unwrap()
 }
 
+/// With the shipped SAC policy (CS0.6): herbd loads it and decides every placement with it; the
+/// other tests use BLBF.
 #[test]
 fn packs_a_boxed_episode_end_to_end_with_real_processes() {
     let Some(root) = herb_sim::paths::boxed_root_for_tests() else {
         return;
     };
     let (session, n) = shortest_session(&root);
-    let (dir, prefix, cfg) = setup("episode");
+    let policy = repo().join("models/policy-cs06.onnx");
+    let (dir, prefix, cfg) = setup_with("episode", policy.to_str().unwrap());
     let cfg_s = cfg.to_str().unwrap();
     let boxed = root.to_str().unwrap();
     let mut lb = spawn(
@@ -266,6 +276,11 @@ fn packs_a_boxed_episode_end_to_end_with_real_processes() {
         "the loop reports its deadline misses: {stats}"
     );
     assert_eq!(stats["decision_us"]["n"], n as u64);
+    let log = std::fs::read_to_string(dir.join("herbd.log")).unwrap();
+    assert!(
+        log.contains("policy-cs06.onnx"),
+        "herbd ran the SAC policy:\n{log}"
+    );
     lb.signal(libc::SIGTERM);
     assert!(lb.wait_for(Duration::from_secs(10)).success());
     let sim = last_json(&lb_lines, "loopback_final");
