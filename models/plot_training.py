@@ -44,6 +44,7 @@ def main():
     ap.add_argument("csv", nargs="+")
     ap.add_argument("--out", default="results/ablation.png")
     ap.add_argument("--max-steps", type=int, default=None, help="clip the x axis here")
+    ap.add_argument("--title", default="SAC training in herb-sim: sequence and reward ablation")
     a = ap.parse_args()
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
     for path in a.csv:
@@ -56,7 +57,7 @@ def main():
         ax.plot(steps, lens, style, label=LABELS.get(name, name))
     ax.set_xlabel("environment steps")
     ax.set_ylabel("episode length (objects placed), last 200 episodes")
-    ax.set_title("SAC training in herb-sim: sequence and reward ablation")
+    ax.set_title(a.title)
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()

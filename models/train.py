@@ -8,8 +8,10 @@ One call is one chunk: it resumes from ``<out>/checkpoint-{actor,critic}.pt`` wh
 actor to ``<out>/policy.onnx`` (only if it passes the ONNX contract check and matches PyTorch
 within 1e-4 in onnxruntime; a failing export never replaces a good one), writes parity samples
 (``policy.parity.bin`` + ``.json``) for the tract test, and appends progress to
-``<out>/progress.csv``. The replay buffer and the critics' Adam moments are not saved: they
-restart with every chunk (the accelerator returns at most 8 files of 16 MiB per call).
+``<out>/progress.csv``. The checkpoint is three files, each under 16 MiB (the accelerator
+returns at most 8 files of 16 MiB per call): actor (with its and the temperature's Adam
+state), critic and target, and the critic's Adam state. The replay buffer is not saved: it
+restarts with every chunk.
 
 Networks (``[net] pool`` in the config): ``herbnet112`` (pool = 2, chosen by the decision-latency
 benchmark): 2 x 2 average pool of the [2, 224, 224] observation, convolutions 16@8s4, 32@4s2,
@@ -293,6 +295,7 @@ def main():
     steps, updates, episodes, wall = 0, 0, 0, 0.0
     ck_a = os.path.join(a.out, "checkpoint-actor.pt")
     ck_c = os.path.join(a.out, "checkpoint-critic.pt")
+    ck_o = os.path.join(a.out, "checkpoint-critic-adam.pt")
     if os.path.exists(ck_a) and os.path.exists(ck_c):
         st = torch.load(ck_a, map_location=dev, weights_only=False)
         sc = torch.load(ck_c, map_location=dev, weights_only=False)
@@ -301,6 +304,8 @@ def main():
         opt_t.load_state_dict(st["opt_t"])
         critic.load_state_dict(sc["critic"])
         target.load_state_dict(sc["target"])
+        if os.path.exists(ck_o):  # absent in checkpoints from before it was saved
+            opt_c.load_state_dict(torch.load(ck_o, map_location=dev, weights_only=False))
         with torch.no_grad():
             log_alpha.copy_(st["log_alpha"])
         steps, updates, episodes, wall = st["steps"], st["updates"], st["episodes"], st["wall_s"]
@@ -317,7 +322,7 @@ def main():
     t0 = last_log = time.time()
     ep_len, ep_ret = [], []
     debt = 0.0
-    chunk_start = steps
+    chunk_start, chunk_updates = steps, updates
     while steps < s["total_steps"] and time.time() - t0 < minutes * 60:
         if steps - chunk_start < s["learning_starts"] and updates == 0:
             act = np.random.uniform(-1, 1, size=(n, 3)).astype(np.float32)
@@ -350,18 +355,19 @@ def main():
             row = progress_row(steps, updates, episodes, wall + el, ep_len, ep_ret, dev)
             append_progress(a.out, row)
             print(f"steps {steps} ({(steps - chunk_start) / el:.0f}/s) updates {updates} "
-                  f"({updates / max(el, 1e-9):.1f}/s this chunk) episodes {episodes} "
+                  f"({(updates - chunk_updates) / max(el, 1e-9):.1f}/s this chunk) episodes {episodes} "
                   f"len {row['mean_len']} return {row['mean_return']} alpha {log_alpha.exp().item():.4f}",
                   flush=True)
     wall += time.time() - t0
-    # Two files under 16 MiB each (the accelerator returns at most 16 MiB per file): the
-    # critics' Adam moments are not kept and restart with every chunk.
+    # Three files under 16 MiB each (the accelerator returns at most 16 MiB per file).
     meta = {"steps": steps, "updates": updates, "episodes": episodes, "wall_s": wall, "config": c}
     torch.save({"actor": actor.state_dict(), "opt_a": opt_a.state_dict(), "opt_t": opt_t.state_dict(),
                 "log_alpha": log_alpha.detach(), **meta}, ck_a + ".tmp")
     torch.save({"critic": critic.state_dict(), "target": target.state_dict()}, ck_c + ".tmp")
+    torch.save(opt_c.state_dict(), ck_o + ".tmp")
     os.replace(ck_a + ".tmp", ck_a)
     os.replace(ck_c + ".tmp", ck_c)
+    os.replace(ck_o + ".tmp", ck_o)
     row = progress_row(steps, updates, episodes, wall, ep_len, ep_ret, dev)
     append_progress(a.out, row)
     export(actor, a.out, env, dev)

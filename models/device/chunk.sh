@@ -14,4 +14,4 @@ mkdir -p .data/boxed && tar xzf .data/meshes.tgz -C .data/boxed
 python3 models/train.py --config "models/configs/$SETTING.toml" --out "runs/$SETTING" \
   --boxed .data/boxed --minutes "$MINUTES"
 mkdir -p "$OUT/$SETTING"
-cp runs/"$SETTING"/{checkpoint-actor.pt,checkpoint-critic.pt,policy.onnx,policy.parity.bin,policy.parity.json,progress.csv} "$OUT/$SETTING/"
+cp runs/"$SETTING"/{checkpoint-actor.pt,checkpoint-critic.pt,checkpoint-critic-adam.pt,policy.onnx,policy.parity.bin,policy.parity.json,progress.csv} "$OUT/$SETTING/"
