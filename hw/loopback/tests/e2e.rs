@@ -106,6 +106,17 @@ fn spawn(exe: &Path, args: &[&str], log: &Path) -> Proc {
     )
 }
 
+/// `herbctl pack --objects <objects>` under `prefix`, logging to `dir/herbctl.log`.
+fn pack_objects(dir: &Path, prefix: &str, objects: &str, timeout_s: u32, json: bool) -> Proc {
+    let timeout = timeout_s.to_string();
+    let mut args = vec!["--prefix", prefix, "pack", "--objects", objects];
+    if json {
+        args.push("--json");
+    }
+    args.extend(["--timeout", &timeout]);
+    spawn(&exe("herbctl"), &args, &dir.join("herbctl.log"))
+}
+
 /// Lines of a child's stdout, as they come.
 fn lines(p: &mut Proc) -> mpsc::Receiver<String> {
     let out = p.0.stdout.take().unwrap();
@@ -302,20 +313,7 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
     let lb_log = dir.join("loopback.log");
     let mut lb = spawn(&loopback_exe(), &["--config", cfg_s], &lb_log);
     let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
-    let mut ctl = spawn(
-        &exe("herbctl"),
-        &[
-            "--prefix",
-            &prefix,
-            "pack",
-            "--objects",
-            "003,005,011",
-            "--json",
-            "--timeout",
-            "300",
-        ],
-        &dir.join("herbctl.log"),
-    );
+    let mut ctl = pack_objects(&dir, &prefix, "003,005,011", 300, true);
     let mut ctl_out = Follow::new(&mut ctl);
     // The first object is decided; the arm is on its way: kill the arm.
     ctl_out.wait_for("object  1/3", Duration::from_secs(60));
@@ -470,19 +468,7 @@ fn sigterm_mid_motion_brakes_reports_and_exits_zero() {
         &dir.join("loopback.log"),
     );
     let mut hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
-    let mut ctl = spawn(
-        &exe("herbctl"),
-        &[
-            "--prefix",
-            &prefix,
-            "pack",
-            "--objects",
-            "003,005",
-            "--timeout",
-            "120",
-        ],
-        &dir.join("herbctl.log"),
-    );
+    let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, false);
     let mut ctl_out = Follow::new(&mut ctl);
     ctl_out.wait_for("object  1/2", Duration::from_secs(60));
     std::thread::sleep(Duration::from_millis(500));
