@@ -35,9 +35,10 @@ def main():
     o2 = torch.rand(b, *train.pooled_shape(a.pool), device=dev)
     act = torch.rand(b, 3, device=dev) * 2 - 1
     r, d = torch.rand(b, device=dev), torch.zeros(b, device=dev)
+    ea, ev = torch.zeros(b, 3, device=dev), torch.zeros(b, device=dev)  # no expert labels
 
     def update():
-        train.sac_update(actor, critic, target, log_alpha, (oa, oc, ot), (o, act, r, o2, d),
+        train.sac_update(actor, critic, target, log_alpha, (oa, oc, ot), (o, act, r, o2, d, ea, ev),
                          0.99, 0.005, -3.0)
 
     for _ in range(3):

@@ -21,6 +21,16 @@ benchmark): 2 x 2 average pool of the [2, 224, 224] observation, convolutions 16
 only; the actor's loss reads it without gradient, as in DrQ).
 Observations are stored pooled and quantised to uint8 (1/255 of the 0.30 m height scale,
 1.2 mm) to fit the buffer in memory; the exported actor takes the full-resolution float input.
+
+Guidance by the BLBF heuristic (optional ``[bc]`` table; without it, plain SAC as in the
+paper): every stored state is labelled with the BLBF action (``VecEnv.expert_actions``, the
+daemon's ``Blbf``); for the first ``bc.expert_act_steps`` steps each environment acts with
+that label with a probability falling linearly from ``bc.expert_act`` to 0 (off-policy
+demonstrations), and the actor's loss is the SAC loss divided by the batch's mean |Q| plus
+``w`` times the squared distance of its mean action to the label, ``w`` falling linearly from
+``bc.weight_start`` to ``bc.weight_end`` over ``bc.decay_steps`` (as in TD3+BC).
+``run.snapshot_every_min`` saves the actor to ``<out>/snapshots/actor-<steps>.pt``;
+``--export-snapshot`` exports one of them instead of training.
 """
 
 import argparse
@@ -58,6 +68,17 @@ def load_config(path):
     for key in ("updates_per_step", "gamma", "tau", "lr"):
         if not (isinstance(s.get(key), (int, float)) and s[key] > 0):
             raise SystemExit(f"{path}: sac.{key} must be a positive number")
+    b = c.get("bc")
+    if b is not None:
+        for key in ("expert_act", "weight_start", "weight_end"):
+            v = b.get(key)
+            if not (isinstance(v, (int, float)) and v >= 0):
+                raise SystemExit(f"{path}: bc.{key} must be a number >= 0")
+        if b["expert_act"] > 1:
+            raise SystemExit(f"{path}: bc.expert_act is a probability, in [0, 1]")
+        for key in ("expert_act_steps", "decay_steps"):
+            if not (isinstance(b.get(key), int) and b[key] > 0):
+                raise SystemExit(f"{path}: bc.{key} must be a positive integer")
     pool = c.setdefault("net", {}).setdefault("pool", 2)
     if pool not in NETS:
         raise SystemExit(f"{path}: net.pool must be one of {sorted(NETS)} (got {pool!r})")
@@ -105,13 +126,14 @@ class Actor(nn.Module):
         return mu, log_std.clamp(-20.0, 2.0)
 
     def sample(self, x):
+        """A sampled action, its log-probability and the deterministic action tanh(mean)."""
         mu, log_std = self(x)
         std = log_std.exp()
         u = mu + std * torch.randn_like(mu)
         a = torch.tanh(u)
         logp = (-0.5 * ((u - mu) / std) ** 2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
         logp = logp - (2 * (math.log(2) - u - F.softplus(-2 * u))).sum(-1)
-        return a, logp
+        return a, logp, torch.tanh(mu)
 
 
 class Deployed(nn.Module):
@@ -151,37 +173,46 @@ def pool_u8(obs, pool):
 
 
 class Replay:
+    """Transitions, each with the expert's label of its state (zero and invalid without one)."""
+
     def __init__(self, size, shape):
         self.obs = np.zeros((size, *shape), np.uint8)
         self.next = np.zeros((size, *shape), np.uint8)
         self.act = np.zeros((size, 3), np.float32)
         self.rew = np.zeros(size, np.float32)
         self.done = np.zeros(size, np.float32)
+        self.expert = np.zeros((size, 3), np.float32)
+        self.valid = np.zeros(size, np.float32)
         self.size, self.n, self.i = size, 0, 0
 
-    def add(self, o, a, r, o2, d):
+    def add(self, o, a, r, o2, d, ea, ev):
         for k in range(len(a)):
             j = self.i
             self.obs[j], self.next[j], self.act[j], self.rew[j], self.done[j] = o[k], o2[k], a[k], r[k], d[k]
+            self.expert[j], self.valid[j] = ea[k], ev[k]
             self.i = (self.i + 1) % self.size
             self.n = min(self.n + 1, self.size)
 
     def sample(self, b, dev):
+        """(obs, action, reward, next obs, done, expert action, expert valid) tensors."""
         idx = np.random.randint(0, self.n, size=b)
         f = lambda x: torch.as_tensor(x[idx], device=dev)
         return (f(self.obs).float() / 255.0, f(self.act), f(self.rew),
-                f(self.next).float() / 255.0, f(self.done))
+                f(self.next).float() / 255.0, f(self.done), f(self.expert), f(self.valid))
 
 
-def sac_update(actor, critic, target, log_alpha, opts, batch, gamma, tau, target_entropy):
+def sac_update(actor, critic, target, log_alpha, opts, batch, gamma, tau, target_entropy, bc_weight=None):
     """One SAC update: twin critics on the soft Bellman target, then the actor, then the
     entropy temperature, then a Polyak step of the target critics. `opts` = (actor, critic,
-    temperature) optimisers; `batch` = (obs, action, reward, next obs, done)."""
+    temperature) optimisers; `batch` = (obs, action, reward, next obs, done, expert action,
+    expert valid). With `bc_weight` (a number), the actor's loss is normalised by the mean |Q|
+    and adds that weight times the squared distance of the mean action to the expert's; returns
+    that distance (mean over labelled states), else None."""
     opt_a, opt_c, opt_t = opts
-    o, ac, r, o2, d = batch
+    o, ac, r, o2, d, ea, ev = batch
     alpha = log_alpha.exp().detach()
     with torch.no_grad():
-        a2, logp2 = actor.sample(o2)
+        a2, logp2, _ = actor.sample(o2)
         q1t, q2t = target(o2, a2)
         y = r + gamma * (1 - d) * (torch.min(q1t, q2t) - alpha * logp2)
     q1, q2 = critic(o, ac)
@@ -189,11 +220,16 @@ def sac_update(actor, critic, target, log_alpha, opts, batch, gamma, tau, target
     opt_c.zero_grad(set_to_none=True)
     loss_c.backward()
     opt_c.step()
-    an, logp = actor.sample(o)
+    an, logp, mean_a = actor.sample(o)
     with torch.no_grad():
         h = critic.features(o)
-    q1n, q2n = critic.heads(h, an)
-    loss_a = (alpha * logp - torch.min(q1n, q2n)).mean()
+    qn = torch.min(*critic.heads(h, an))
+    loss_a = (alpha * logp - qn).mean()
+    bc = None
+    if bc_weight is not None:
+        dist = ((mean_a - ea) ** 2).sum(-1)
+        bc = (dist * ev).sum() / ev.sum().clamp(min=1.0)
+        loss_a = loss_a / qn.detach().abs().mean().clamp(min=1e-3) + bc_weight * bc
     opt_a.zero_grad(set_to_none=True)
     loss_a.backward()
     opt_a.step()
@@ -204,6 +240,7 @@ def sac_update(actor, critic, target, log_alpha, opts, batch, gamma, tau, target
     with torch.no_grad():
         for p, pt in zip(critic.parameters(), target.parameters()):
             pt.mul_(1 - tau).add_(tau * p)
+    return None if bc is None else bc.item()
 
 
 def export(actor, out, env, dev):
@@ -246,13 +283,22 @@ def export(actor, out, env, dev):
         json.dump({"samples": len(expect), "shape": CONTRACT["input_shape"], "actions": expect}, f)
 
 
-def progress_row(steps, updates, episodes, wall, ep_len, ep_ret, dev):
-    """One line of progress.csv: totals so far, and the mean length (objects packed) and return
-    of the last 200 episodes that ended."""
-    return {"steps": steps, "updates": updates, "episodes": episodes, "wall_s": round(wall, 1),
-            "mean_len": round(float(np.mean(ep_len[-200:])), 3) if ep_len else "",
-            "mean_return": round(float(np.mean(ep_ret[-200:])), 4) if ep_ret else "",
-            "device": str(dev)}
+def progress_row(steps, updates, episodes, wall, ep_len, ep_ret, dev, bc=None):
+    """One line of progress.csv: totals so far, the mean length (objects packed) and return
+    of the last 200 episodes that ended, and with BLBF guidance the actor's last mean squared
+    distance to the expert's action (`bc_dist`, over the last 200 updates)."""
+    row = {"steps": steps, "updates": updates, "episodes": episodes, "wall_s": round(wall, 1),
+           "mean_len": round(float(np.mean(ep_len[-200:])), 3) if ep_len else "",
+           "mean_return": round(float(np.mean(ep_ret[-200:])), 4) if ep_ret else "",
+           "device": str(dev)}
+    if bc is not None:
+        row["bc_dist"] = round(float(np.mean(bc[-200:])), 5) if bc else ""
+    return row
+
+
+def ramp(start, end, steps, t):
+    """Linear from `start` at t = 0 to `end` at t = `steps`, then `end`."""
+    return end + (start - end) * max(0.0, 1.0 - t / steps)
 
 
 def append_progress(out, row):
@@ -273,6 +319,8 @@ def main():
                     help="chunk length (default run.chunk_minutes; 'inf' trains to sac.total_steps)")
     ap.add_argument("--boxed", default=None)
     ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--export-snapshot", default=None, metavar="ACTOR_PT",
+                    help="export this saved actor (a snapshot) to <out>/policy.onnx, and stop")
     a = ap.parse_args()
     c = load_config(a.config)
     e, s = c["env"], c["sac"]
@@ -285,6 +333,13 @@ def main():
         boxed=a.boxed, threads=a.threads,
     )
     pool = c["net"]["pool"]
+    if a.export_snapshot is not None:
+        actor = Actor(pool)
+        actor.load_state_dict(torch.load(a.export_snapshot, map_location="cpu", weights_only=False)["actor"])
+        export(actor, a.out, env, torch.device("cpu"))
+        print(f"exported {a.export_snapshot} to {os.path.join(a.out, 'policy.onnx')}", flush=True)
+        return 0
+    bc = c.get("bc")
     actor, critic = Actor(pool).to(dev), Critic(pool).to(dev)
     target = Critic(pool).to(dev)
     target.load_state_dict(critic.state_dict())
@@ -320,9 +375,12 @@ def main():
     n = e["num_envs"]
     minutes = a.minutes if a.minutes is not None else c["run"]["chunk_minutes"]
     t0 = last_log = time.time()
-    ep_len, ep_ret = [], []
+    ep_len, ep_ret, bc_dist = [], [], []
     debt = 0.0
     chunk_start, chunk_updates = steps, updates
+    snap_every = c["run"].get("snapshot_every_min")
+    last_snap = time.time()
+    no_label = (np.zeros((n, 3), np.float32), np.zeros(n, bool))
     while steps < s["total_steps"] and time.time() - t0 < minutes * 60:
         if steps - chunk_start < s["learning_starts"] and updates == 0:
             act = np.random.uniform(-1, 1, size=(n, 3)).astype(np.float32)
@@ -330,11 +388,16 @@ def main():
             with torch.no_grad():
                 x = torch.as_tensor(po, device=dev).float() / 255.0
                 act = actor.sample(x)[0].cpu().numpy().astype(np.float32)
+        ea, ev = env.expert_actions() if bc else no_label
+        if bc:
+            p = ramp(bc["expert_act"], 0.0, bc["expert_act_steps"], steps)
+            use = ev & (np.random.random_sample(n) < p)
+            act[use] = ea[use]
         obs2, rew, term, _, info = env.step(act)
         # With same-step autoreset the returned observation of an ended episode is the next
         # episode's first; its value is never bootstrapped (done = 1), so it is stored as is.
         po2 = pool_u8(obs2, pool)
-        buf.add(po, act, rew, po2, term.astype(np.float32))
+        buf.add(po, act, rew, po2, term.astype(np.float32), ea, ev.astype(np.float32))
         po = po2
         steps += n
         for k in np.flatnonzero(term):
@@ -345,18 +408,29 @@ def main():
             debt += n * s["updates_per_step"]
             while debt >= 1.0:
                 debt -= 1.0
-                sac_update(actor, critic, target, log_alpha, (opt_a, opt_c, opt_t),
-                           buf.sample(s["batch_size"], dev), s["gamma"], s["tau"],
-                           s["target_entropy"])
+                w = ramp(bc["weight_start"], bc["weight_end"], bc["decay_steps"], steps) if bc else None
+                d = sac_update(actor, critic, target, log_alpha, (opt_a, opt_c, opt_t),
+                               buf.sample(s["batch_size"], dev), s["gamma"], s["tau"],
+                               s["target_entropy"], w)
+                if d is not None:
+                    bc_dist.append(d)
+                    del bc_dist[:-200]
                 updates += 1
+        if snap_every and time.time() - last_snap >= snap_every * 60:
+            last_snap = time.time()
+            os.makedirs(os.path.join(a.out, "snapshots"), exist_ok=True)
+            torch.save({"actor": actor.state_dict(), "steps": steps, "updates": updates},
+                       os.path.join(a.out, "snapshots", f"actor-{steps}.pt"))
         if time.time() - last_log >= c["run"]["log_every_s"]:
             last_log = time.time()
             el = time.time() - t0
-            row = progress_row(steps, updates, episodes, wall + el, ep_len, ep_ret, dev)
+            row = progress_row(steps, updates, episodes, wall + el, ep_len, ep_ret, dev,
+                               bc_dist if bc else None)
             append_progress(a.out, row)
             print(f"steps {steps} ({(steps - chunk_start) / el:.0f}/s) updates {updates} "
                   f"({(updates - chunk_updates) / max(el, 1e-9):.1f}/s this chunk) episodes {episodes} "
-                  f"len {row['mean_len']} return {row['mean_return']} alpha {log_alpha.exp().item():.4f}",
+                  f"len {row['mean_len']} return {row['mean_return']} alpha {log_alpha.exp().item():.4f}"
+                  f"{' bc_dist ' + str(row['bc_dist']) if bc else ''}",
                   flush=True)
     wall += time.time() - t0
     # Three files under 16 MiB each (the accelerator returns at most 16 MiB per file).
@@ -368,7 +442,7 @@ def main():
     os.replace(ck_a + ".tmp", ck_a)
     os.replace(ck_c + ".tmp", ck_c)
     os.replace(ck_o + ".tmp", ck_o)
-    row = progress_row(steps, updates, episodes, wall, ep_len, ep_ret, dev)
+    row = progress_row(steps, updates, episodes, wall, ep_len, ep_ret, dev, bc_dist if bc else None)
     append_progress(a.out, row)
     export(actor, a.out, env, dev)
     print(json.dumps(row), flush=True)

@@ -9,13 +9,19 @@
 //! environment whose episode ended starts the next one in the same step (its returned
 //! observation is the new episode's first).
 //!
+//! [`VecEnv::expert_actions`] labels every environment's current state with the BLBF
+//! heuristic's action (the daemon's `Blbf`, the same code the `blbf` rows of Table I run), for
+//! demonstration-guided training.
+//!
 //! The Gymnasium classes are in the Python package (`herb_sim/__init__.py`).
 
+use herb_daemon::Blbf;
 use herb_daemon::sequence::{SequenceModel, beam3};
 use herb_sim::paths::{self, MeshSource};
+use herb_sim::observation::placement_to_action;
 use herb_sim::{Catalog, ObsLayout, PackingEnv, RewardMode, SharedCatalog, TypeIdx, WorldConfig};
-use numpy::ndarray::{Array1, Array4};
-use numpy::{IntoPyArray, PyArray1, PyArray4, PyReadonlyArray2};
+use numpy::ndarray::{Array1, Array2, Array4};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray4, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -68,6 +74,8 @@ struct Slot {
     running: bool,
     ret: f32,
     len: u32,
+    /// The expert for [`VecEnv::expert_actions`] (its search scratch).
+    blbf: Blbf,
 }
 
 /// Results of one environment's step.
@@ -203,6 +211,7 @@ impl VecEnv {
                     running: false,
                     ret: 0.0,
                     len: 0,
+                    blbf: Blbf::new(),
                 })
             })
             .collect::<PyResult<Vec<_>>>()?;
@@ -258,6 +267,36 @@ impl VecEnv {
         })
         .map_err(PyRuntimeError::new_err)?;
         self.observations(py)
+    }
+
+    /// The BLBF heuristic's action for each environment's next object, from the current
+    /// heightmap: `(actions [N, 3], valid [N])`. `valid[i]` is false (and its action 0) where
+    /// the object fits between the walls in neither yaw, or the environment's episode has
+    /// ended (without autoreset).
+    fn expert_actions<'py>(
+        &mut self,
+        py: Python<'py>,
+    ) -> (Bound<'py, PyArray2<f32>>, Bound<'py, PyArray1<bool>>) {
+        let (slots, pool) = (&mut self.slots, &self.pool);
+        let labels: Vec<Option<[f32; 3]>> = py.detach(|| {
+            pool.install(|| {
+                slots
+                    .par_iter_mut()
+                    .map(|s| {
+                        let object = s.env.next_object()?;
+                        let world = s.env.world();
+                        let shape = world.catalog().shape(object);
+                        let (x, y, theta, _) = s.blbf.best(world.heightmap(), shape)?;
+                        Some(placement_to_action(x, y, theta).map(|v| v.clamp(-1.0, 1.0)))
+                    })
+                    .collect()
+            })
+        });
+        let acts = Array2::from_shape_fn((labels.len(), 3), |(i, k)| {
+            labels[i].map_or(0.0, |a| a[k])
+        });
+        let valid = Array1::from_iter(labels.iter().map(Option::is_some));
+        (acts.into_pyarray(py), valid.into_pyarray(py))
     }
 
     /// Places each environment's next object at `actions[i]` (`[N, 3]`, clipped to

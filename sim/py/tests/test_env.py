@@ -99,3 +99,36 @@ def test_bad_actions_are_rejected():
     single = herb_sim.VecEnv(1, autoreset=False, **FAST)
     with pytest.raises(RuntimeError, match="reset"):
         single.step(np.zeros((1, 3), dtype=np.float32))
+
+
+def test_expert_actions_are_blbf_placements_that_stay_inside():
+    v = herb_sim.HerbVectorEnv(3, reward="simple", seed=11, threads=2, **FAST)
+    v.reset(seed=11)
+    a, valid = v.expert_actions()
+    assert a.shape == (3, 3) and a.dtype == np.float32 and valid.shape == (3,) and valid.all()
+    assert np.all(np.abs(a) <= 1.0)
+    # Empty box: BLBF takes the bottom-left corner (lowest top, then smallest x, then y) in
+    # yaw 0 or 90 degrees (action theta 0 or 0.5).
+    assert np.all(a[:, 0] < 0.0) and np.all(a[:, 1] < 0.0)
+    assert set(np.round(a[:, 2], 6)) <= {0.0, 0.5}
+    # Following the labels, every placement in these small episodes stays inside the box.
+    ended = 0
+    for _ in range(12):
+        a, valid = v.expert_actions()
+        assert valid.all()
+        _, rew, term, _, info = v.step(a)
+        assert np.all(rew == 1.0)
+        ended += int(term.sum())
+        assert info["success"][term].all()
+    assert ended > 0
+
+
+def test_expert_actions_of_an_ended_episode_are_invalid():
+    single = herb_sim.VecEnv(1, autoreset=False, meshes=False, min_objects=1, max_objects=1)
+    single.reset(seed=2)
+    a, valid = single.expert_actions()
+    assert valid.all()
+    _, _, term, _ = single.step(a)
+    assert term.all()
+    a, valid = single.expert_actions()
+    assert not valid.any() and np.all(a == 0.0)

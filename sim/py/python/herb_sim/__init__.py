@@ -73,6 +73,11 @@ class HerbVectorEnv(gym.vector.VectorEnv):
             seed = seed[0]
         return self._env.reset(seed=seed), {}
 
+    def expert_actions(self):
+        """The BLBF heuristic's action for every environment's current state:
+        ``(actions [N, 3] float32, valid [N] bool)``; see ``VecEnv.expert_actions``."""
+        return self._env.expert_actions()
+
     def step(self, actions):
         a = np.ascontiguousarray(actions, dtype=np.float32).reshape(self.num_envs, 3)
         obs, reward, terminated, info = self._env.step(a)
