@@ -17,8 +17,8 @@
 
 use herb_daemon::Blbf;
 use herb_daemon::sequence::{SequenceModel, beam3};
-use herb_sim::paths::{self, MeshSource};
 use herb_sim::observation::placement_to_action;
+use herb_sim::paths::{self, MeshSource};
 use herb_sim::{Catalog, ObsLayout, PackingEnv, RewardMode, SharedCatalog, TypeIdx, WorldConfig};
 use numpy::ndarray::{Array1, Array2, Array4};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray4, PyReadonlyArray2};
@@ -292,9 +292,8 @@ impl VecEnv {
                     .collect()
             })
         });
-        let acts = Array2::from_shape_fn((labels.len(), 3), |(i, k)| {
-            labels[i].map_or(0.0, |a| a[k])
-        });
+        let acts =
+            Array2::from_shape_fn((labels.len(), 3), |(i, k)| labels[i].map_or(0.0, |a| a[k]));
         let valid = Array1::from_iter(labels.iter().map(Option::is_some));
         (acts.into_pyarray(py), valid.into_pyarray(py))
     }
