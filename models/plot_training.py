@@ -24,6 +24,7 @@ LABELS = {
     "c": "C, Beam-3",
     "simple": "Simple, Beam-3",
     "cs06-random": "CS0.6, random order",
+    "cs06-bc": "CS0.6, Beam-3, BLBF-guided (expert actions mixed in to 60k steps)",
 }
 
 
