@@ -38,6 +38,7 @@ import csv
 import json
 import math
 import os
+import pickle
 import random
 import sys
 import time
@@ -335,7 +336,11 @@ def main():
     pool = c["net"]["pool"]
     if a.export_snapshot is not None:
         actor = Actor(pool)
-        actor.load_state_dict(torch.load(a.export_snapshot, map_location="cpu", weights_only=False)["actor"])
+        try:
+            actor.load_state_dict(torch.load(a.export_snapshot, map_location="cpu", weights_only=False)["actor"])
+        except (OSError, KeyError, ValueError, EOFError, RuntimeError, pickle.UnpicklingError) as err:
+            raise SystemExit(f"{a.export_snapshot}: not an actor snapshot of a {NETS[pool]} run "
+                             f"(net.pool = {pool} in {a.config}): {err}")
         export(actor, a.out, env, torch.device("cpu"))
         print(f"exported {a.export_snapshot} to {os.path.join(a.out, 'policy.onnx')}", flush=True)
         return 0
