@@ -15,9 +15,8 @@
 //!
 //! The Gymnasium classes are in the Python package (`herb_sim/__init__.py`).
 
-use herb_daemon::Blbf;
 use herb_daemon::sequence::{SequenceModel, beam3};
-use herb_sim::observation::placement_to_action;
+use herb_daemon::{Blbf, DecisionInput, Policy};
 use herb_sim::paths::{self, MeshSource};
 use herb_sim::{Catalog, ObsLayout, PackingEnv, RewardMode, SharedCatalog, TypeIdx, WorldConfig};
 use numpy::ndarray::{Array1, Array2, Array4};
@@ -271,8 +270,8 @@ impl VecEnv {
 
     /// The BLBF heuristic's action for each environment's next object, from the current
     /// heightmap: `(actions [N, 3], valid [N])`. `valid[i]` is false (and its action 0) where
-    /// the object fits between the walls in neither yaw, or the environment's episode has
-    /// ended (without autoreset).
+    /// BLBF rejects the state (the object fits between the walls in neither yaw), or the
+    /// environment's episode has ended (without autoreset).
     fn expert_actions<'py>(
         &mut self,
         py: Python<'py>,
@@ -285,9 +284,16 @@ impl VecEnv {
                     .map(|s| {
                         let object = s.env.next_object()?;
                         let world = s.env.world();
-                        let shape = world.catalog().shape(object);
-                        let (x, y, theta, _) = s.blbf.best(world.heightmap(), shape)?;
-                        Some(placement_to_action(x, y, theta).map(|v| v.clamp(-1.0, 1.0)))
+                        // The daemon's decision itself (`Policy::decide`): the labels are the
+                        // actions the `blbf` rows of Table I send.
+                        let input = DecisionInput {
+                            observation: s.env.observation(),
+                            heightmap: world.heightmap(),
+                            object,
+                            shape: world.catalog().shape(object),
+                            step: s.len as usize,
+                        };
+                        s.blbf.decide(&input).ok()
                     })
                     .collect()
             })
