@@ -39,11 +39,13 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import herb_sim  # noqa: E402
 from train import Actor, pool_u8  # noqa: E402
 
-BOX_HALF_X, BOX_HALF_Y = 0.17306, 0.11382
+BOX_HALF_X, BOX_HALF_Y = herb_sim.BOX_HALF_X, herb_sim.BOX_HALF_Y  # the sim's frames
 GRID = 28
-CELL = 0.35 / GRID  # the observation spans 0.35 m; 12.5 mm cells
+SPAN = herb_sim.OBS_CELL_M * 224  # the observation's side (0.35 m)
+CELL = SPAN / GRID  # 12.5 mm
 
 
 class Spatial(nn.Module):
@@ -63,9 +65,9 @@ class Spatial(nn.Module):
         c = (torch.arange(GRID, dtype=torch.float32) + 0.5 - GRID / 2) * CELL
         self.register_buffer("gx", (c / BOX_HALF_X).view(1, GRID).expand(GRID, GRID).reshape(-1).clone())
         self.register_buffer("gy", (-c / BOX_HALF_Y).view(GRID, 1).expand(GRID, GRID).reshape(-1).clone())
-        # Coordinate channels at the input's 56 x 56 (nearest of the 28 x 28 cell centres, / 0.175 m).
-        xx = (c / 0.175).view(1, GRID).expand(GRID, GRID)
-        yy = (-c / 0.175).view(GRID, 1).expand(GRID, GRID)
+        # Coordinate channels at the input's 56 x 56 (nearest of the 28 x 28 cell centres, over half the span).
+        xx = (c / (SPAN / 2)).view(1, GRID).expand(GRID, GRID)
+        yy = (-c / (SPAN / 2)).view(GRID, 1).expand(GRID, GRID)
         up = [F.interpolate(v[None, None], 56)[0, 0] for v in (xx, yy)]
         self.register_buffer("coords", torch.stack(up)[None])
         self.last_maps = None
@@ -95,8 +97,8 @@ def cell_loss(net, a):
     """Cross-entropy on the teacher's cell and yaw, plus the offset's squared error there."""
     n = len(a)
     x, y = a[:, 0] * BOX_HALF_X, a[:, 1] * BOX_HALF_Y
-    col = ((x + 0.175) / CELL).floor().clamp(0, GRID - 1).long()
-    row = ((0.175 - y) / CELL).floor().clamp(0, GRID - 1).long()
+    col = ((x + SPAN / 2) / CELL).floor().clamp(0, GRID - 1).long()
+    row = ((SPAN / 2 - y) / CELL).floor().clamp(0, GRID - 1).long()
     yaw = (a[:, 2].abs() > 0.25).long()
     o = net.last_maps
     loss = F.cross_entropy(o[:, :2].reshape(n, -1), yaw * GRID * GRID + row * GRID + col)
@@ -119,8 +121,6 @@ def load_actor(net, path):
 
 
 def collect(actor_path, n, seed, path):
-    import herb_sim
-
     env = herb_sim.HerbVectorEnv(16, reward="cs0.6", sequence="beam3", seed=seed,
                                  min_objects=10, max_objects=25, meshes=True)
     actor = load_actor(Actor(4), actor_path)

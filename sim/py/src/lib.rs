@@ -406,5 +406,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("OBS_LEN", ObsLayout::LEN)?;
     m.add("INPUT_NAME", ObsLayout::INPUT_NAME)?;
     m.add("OUTPUT_NAME", ObsLayout::OUTPUT_NAME)?;
+    m.add("OBS_CELL_M", ObsLayout::CELL_M)?;
+    m.add("BOX_HALF_X", herb_sim::frames::BOX_HALF_X)?;
+    m.add("BOX_HALF_Y", herb_sim::frames::BOX_HALF_Y)?;
     Ok(())
 }

@@ -15,9 +15,9 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
-from ._native import INPUT_NAME, OBS_LEN, OUTPUT_NAME, VecEnv
+from ._native import BOX_HALF_X, BOX_HALF_Y, INPUT_NAME, OBS_CELL_M, OBS_LEN, OUTPUT_NAME, VecEnv
 
-__all__ = ["PackingEnv", "HerbVectorEnv", "VecEnv", "OBS_LEN", "INPUT_NAME", "OUTPUT_NAME"]
+__all__ = ["PackingEnv", "HerbVectorEnv", "VecEnv", "OBS_LEN", "OBS_CELL_M", "BOX_HALF_X", "BOX_HALF_Y", "INPUT_NAME", "OUTPUT_NAME"]
 
 OBS_SHAPE = VecEnv.observation_shape()
 
