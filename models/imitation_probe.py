@@ -7,13 +7,14 @@
     python models/imitation_probe.py fit --net spatial-ce --minutes 6 --lr 1e-3 --out runs/probe
     python models/imitation_probe.py fit --net herblite56 --actor runs/cs06-bc/checkpoint-actor.pt --minutes 0 --out runs/probe
 
-The guided CS0.6 policy places about 3 cm and 25 degrees away from the teacher, and the 1 cm
-wall tolerance makes that the main cause of its failures. This probe separates the network
-from the RL: ``collect`` records states of training-distribution episodes (``herb_sim``,
-CS0.6 world, Beam-3 order) in which each environment acts, with probability 1/2 per step,
-with the teacher's label, else with the given actor's deterministic action (so the states
-look like the ones the actor meets), and stores each state's pooled observation and BLBF
-label (``VecEnv.expert_actions``); a training set (seed 11) and a held-out set (seed 99).
+The guided CS0.6 policy places about 3 cm and 25 degrees away from its teacher, and fails
+where the teacher would not. This probe separates the network from the RL: ``collect``
+records states of training-distribution episodes (the ``[env]`` of ``--config``, default
+``configs/cs06-bc.toml``: CS0.6 world, Beam-3 order, 16 environments) in which each
+environment acts, with probability 1/2 per step, with the teacher's label, else with the
+given actor's deterministic action (so the states look like the ones the actor meets), and
+stores each state's pooled observation and BLBF label (``VecEnv.expert_actions``); a
+training set (seed 11) and a held-out set (seed 99).
 ``fit`` trains one network on the labels alone for a fixed wall time and prints the
 held-out error: mean |dx|, |dy| (cm), the share of states with both under 1 cm, and the
 yaw error (degrees). With ``--actor`` and ``--minutes 0`` it only measures a saved actor.
@@ -40,7 +41,7 @@ import torch.nn.functional as F
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import herb_sim  # noqa: E402
-from train import Actor, pool_u8  # noqa: E402
+from train import Actor, load_config, make_env, pool_u8  # noqa: E402
 
 BOX_HALF_X, BOX_HALF_Y = herb_sim.BOX_HALF_X, herb_sim.BOX_HALF_Y  # the sim's frames
 GRID = 28
@@ -120,9 +121,9 @@ def load_actor(net, path):
     return net
 
 
-def collect(actor_path, n, seed, path):
-    env = herb_sim.HerbVectorEnv(16, reward="cs0.6", sequence="beam3", seed=seed,
-                                 min_objects=10, max_objects=25, meshes=True)
+def collect(config, actor_path, n, seed, path):
+    env = make_env(config, seed)
+    n_envs = config["env"]["num_envs"]
     actor = load_actor(Actor(4), actor_path)
     actor.eval()
     rng = np.random.default_rng(seed)
@@ -137,7 +138,7 @@ def collect(actor_path, n, seed, path):
         xs.append(po[ev])
         labels.append(ea[ev])
         have += int(ev.sum())
-        use = ev & (rng.random(16) < 0.5)
+        use = ev & (rng.random(n_envs) < 0.5)
         act[use] = ea[use]
         obs = env.step(act)[0]
     np.savez(path, X=np.concatenate(xs)[:n], A=np.concatenate(labels)[:n])
@@ -193,6 +194,8 @@ def main():
     ap.add_argument("what", choices=["collect", "fit"])
     ap.add_argument("--out", required=True, help="folder of train.npz and val.npz")
     ap.add_argument("--actor", help="collect: the actor whose states to visit; fit: start from it")
+    ap.add_argument("--config", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "configs", "cs06-bc.toml"),
+                    help="collect: the training config whose [env] the episodes follow")
     ap.add_argument("--train-states", type=int, default=24_000)
     ap.add_argument("--val-states", type=int, default=3_000)
     ap.add_argument("--net", choices=["herblite56", "spatial", "spatial-ce"], default="herblite56")
@@ -206,8 +209,9 @@ def main():
         if not a.actor:
             raise SystemExit("collect needs --actor (e.g. runs/cs06-bc/checkpoint-actor.pt)")
         os.makedirs(a.out, exist_ok=True)
-        collect(a.actor, a.train_states, 11, os.path.join(a.out, "train.npz"))
-        collect(a.actor, a.val_states, 99, os.path.join(a.out, "val.npz"))
+        c = load_config(a.config)
+        collect(c, a.actor, a.train_states, 11, os.path.join(a.out, "train.npz"))
+        collect(c, a.actor, a.val_states, 99, os.path.join(a.out, "val.npz"))
     else:
         fit(a)
     return 0

@@ -57,8 +57,11 @@ CONTRACT = dict(input="obs", input_shape=[1, 2, 224, 224], output="action", outp
 
 
 def load_config(path):
-    with open(path, "rb") as f:
-        c = tomllib.load(f)
+    try:
+        with open(path, "rb") as f:
+            c = tomllib.load(f)
+    except (OSError, tomllib.TOMLDecodeError) as err:
+        raise SystemExit(f"{path}: cannot read the config: {err}")
     for key in ("name", "seed", "env", "sac", "run"):
         if key not in c:
             raise SystemExit(f"{path}: missing '{key}'")
@@ -84,6 +87,16 @@ def load_config(path):
     if pool not in NETS:
         raise SystemExit(f"{path}: net.pool must be one of {sorted(NETS)} (got {pool!r})")
     return c
+
+
+def make_env(c, seed, boxed=None, threads=None):
+    """The vectorised environment of config `c`'s ``[env]`` table."""
+    e = c["env"]
+    return herb_sim.HerbVectorEnv(
+        e["num_envs"], reward=e["reward"], sequence=e["sequence"], seed=seed,
+        min_objects=e["min_objects"], max_objects=e["max_objects"], meshes=e["meshes"],
+        boxed=boxed, threads=threads,
+    )
 
 
 def pooled_shape(pool):
@@ -328,11 +341,7 @@ def main():
     os.makedirs(a.out, exist_ok=True)
     dev = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     seed = int(c["seed"])
-    env = herb_sim.HerbVectorEnv(
-        e["num_envs"], reward=e["reward"], sequence=e["sequence"], seed=seed,
-        min_objects=e["min_objects"], max_objects=e["max_objects"], meshes=e["meshes"],
-        boxed=a.boxed, threads=a.threads,
-    )
+    env = make_env(c, seed, a.boxed, a.threads)
     pool = c["net"]["pool"]
     if a.export_snapshot is not None:
         actor = Actor(pool)
