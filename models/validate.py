@@ -2,29 +2,42 @@
 """Validation of exported policies on training-distribution episodes, not on BoxED.
 
     python models/validate.py --policy runs/cs09/policy.onnx --policy runs/cs09-bc/policy.onnx
+    python models/validate.py --rule blbf --rule lattice-blbf --rule lookahead --k 8
 
-Each policy packs the same ``--episodes`` episodes sampled as in training (``herb_sim``: 10 to 25
+Each policy (or rule) packs the same ``--episodes`` episodes sampled as in training (``herb_sim``: 10 to 25
 random catalog objects, Beam-3 order, seed ``--seed``), acting deterministically through
 onnxruntime on the shipped ONNX contract. Prints success rate and mean objects packed per
 policy. Used to choose between training runs without looking at the BoxED test episodes
-(Table I). Needs onnxruntime.
+(Table I). Needs onnxruntime for
+``--policy``. ``--rule`` runs a decision rule in Rust instead: ``blbf`` (the daemon's BLBF
+heuristic, through the same action mapping as a policy), ``lattice-blbf`` (BLBF restricted to the
+placement lattice) or ``lookahead`` (the teacher, ``--k`` candidates).
 """
 
 import argparse
 import sys
+import time
 
 import numpy as np
 
 import herb_sim
 
 
-def validate(path, episodes, seed, reward, boxed):
+def onnx_actor(path):
+    """A function from observations [N, 2, 224, 224] to actions [N, 3] through onnxruntime."""
     import onnxruntime as ort
 
     try:
         sess = ort.InferenceSession(path, providers=["CPUExecutionProvider"])
     except Exception as err:  # onnxruntime raises its own exception types
         raise SystemExit(f"{path}: cannot load the policy: {err}")
+    return lambda obs: np.stack([sess.run(None, {herb_sim.INPUT_NAME: obs[k:k + 1]})[0][0]
+                                 for k in range(len(obs))]).astype(np.float32)
+
+
+def validate(act, episodes, seed, reward, boxed, rule=None, k=8):
+    """Success rate and mean objects packed of ``act`` (observations to actions) or, with
+    ``rule``, of a lattice rule stepped in Rust, on the validation episodes."""
     # One environment per episode; each counts its first episode only (autoreset keeps the
     # finished ones stepping, their later episodes are ignored), so short episodes are not
     # over-represented.
@@ -34,9 +47,15 @@ def validate(path, episodes, seed, reward, boxed):
     packed = np.zeros(episodes, int)
     success = np.zeros(episodes, bool)
     while not done.all():
-        act = np.stack([sess.run(None, {herb_sim.INPUT_NAME: obs[k:k + 1]})[0][0]
-                        for k in range(episodes)]).astype(np.float32)
-        obs, _, term, _, info = env.step(act)
+        if rule is not None:
+            obs, _, term, _, info = env.step_rule(rule, k)
+        elif act is not None:
+            obs, _, term, _, info = env.step(act(obs))
+        else:
+            labels, valid = env.expert_actions()
+            if not valid[~done].all():
+                raise SystemExit("blbf: an object fits between the walls in neither yaw")
+            obs, _, term, _, info = env.step(labels)
         first = term & ~done
         packed[first] = info["packed"][first]
         success[first] = info["success"][first]
@@ -46,7 +65,10 @@ def validate(path, episodes, seed, reward, boxed):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--policy", action="append", required=True, help="ONNX policy (repeat)")
+    ap.add_argument("--policy", action="append", default=[], help="ONNX policy (repeat)")
+    ap.add_argument("--rule", action="append", default=[],
+                    choices=["blbf", "lattice-blbf", "lookahead"], help="decision rule (repeat)")
+    ap.add_argument("--k", type=int, default=8, help="candidates of the lookahead rule")
     ap.add_argument("--episodes", type=int, default=256)
     ap.add_argument("--seed", type=int, default=777)
     ap.add_argument("--reward", default="cs0.6", help="reward mode (does not change the episodes)")
@@ -54,10 +76,19 @@ def main():
     a = ap.parse_args()
     if not 1 <= a.episodes <= 4096:
         raise SystemExit(f"--episodes {a.episodes}: need 1 to 4096")
+    if not a.policy and not a.rule:
+        raise SystemExit("give at least one --policy or --rule")
     print(f"{a.episodes} training-distribution episodes, seed {a.seed}")
     for p in a.policy:
-        s, n = validate(p, a.episodes, a.seed, a.reward, a.boxed)
+        s, n = validate(onnx_actor(p), a.episodes, a.seed, a.reward, a.boxed)
         print(f"{p}: success {100 * s:.2f} %, objects packed {n:.2f}", flush=True)
+    for r in a.rule:
+        t = time.perf_counter()
+        s, n = validate(None, a.episodes, a.seed, a.reward, a.boxed,
+                        rule=None if r == "blbf" else r, k=a.k)
+        label = f"{r} (k = {a.k})" if r == "lookahead" else r
+        print(f"{label}: success {100 * s:.2f} %, objects packed {n:.2f} "
+              f"({time.perf_counter() - t:.0f} s)", flush=True)
     return 0
 
 

@@ -120,7 +120,7 @@ impl Blbf {
             Some(c) if *c.spec() == spec => c,
             slot => slot.insert(Heightmap::new(spec)),
         };
-        max_pool_into(hm, coarse);
+        hm.max_pool_into(coarse);
         let mut best: Option<(f32, f32, f32, f32)> = None;
         for theta in [0.0f32, std::f32::consts::FRAC_PI_2] {
             let rot = Rotation::from_rotation_z(theta);
@@ -156,25 +156,6 @@ impl Blbf {
             }
         }
         best
-    }
-}
-
-/// `dst` (a coarser grid over the box) gets, per cell, the highest value of the `src` cells
-/// whose centres fall inside it.
-fn max_pool_into(src: &Heightmap, dst: &mut Heightmap) {
-    let (ss, ds) = (*src.spec(), *dst.spec());
-    let data = dst.data_mut();
-    data.fill(0.0);
-    for row in 0..ss.ny {
-        for col in 0..ss.nx {
-            let (x, y) = ss.cell_centre(col, row);
-            let (u, v) = ds.to_pixel(x, y);
-            let (c, r) = (u.floor(), v.floor());
-            if c >= 0.0 && r >= 0.0 && (c as usize) < ds.nx && (r as usize) < ds.ny {
-                let d = &mut data[r as usize * ds.nx + c as usize];
-                *d = d.max(src.data()[row * ss.nx + col]);
-            }
-        }
     }
 }
 

@@ -252,6 +252,15 @@ impl PackingEnv {
         self.running.then(|| self.sequence[self.next])
     }
 
+    /// The objects still to place, the next one first (empty once the episode is over).
+    pub fn remaining(&self) -> &[TypeIdx] {
+        if self.running {
+            &self.sequence[self.next..]
+        } else {
+            &[]
+        }
+    }
+
     /// The underlying world.
     pub fn world(&self) -> &PackingWorld {
         &self.world

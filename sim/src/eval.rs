@@ -64,6 +64,9 @@ pub struct EpisodeResult {
     pub failure: Option<Failure>,
 }
 
+/// The failure bound recorded when a decision found no feasible placement.
+pub const NO_FEASIBLE_PLACEMENT: &str = "no feasible placement";
+
 /// The cause of a failed episode.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Failure {
@@ -78,6 +81,9 @@ pub struct Failure {
 impl Failure {
     /// A short label such as `floor (placed)` or `+x wall (earlier)`.
     pub fn label(&self) -> String {
+        if self.bound == NO_FEASIBLE_PLACEMENT {
+            return self.bound.to_owned();
+        }
         format!(
             "{} ({})",
             self.bound,
@@ -124,6 +130,16 @@ impl EpisodeResult {
             });
         }
         step.terminated
+    }
+
+    /// Records that the next object had no feasible placement: the episode ends failed.
+    pub fn record_no_feasible_placement(&mut self) {
+        self.success = false;
+        self.failure = Some(Failure {
+            bound: NO_FEASIBLE_PLACEMENT,
+            by_m: 0.0,
+            earlier_object: false,
+        });
     }
 
     /// C after the last placement (0 if none).

@@ -174,6 +174,47 @@ impl Heightmap {
         self.get(u.floor() as isize, v.floor() as isize)
     }
 
+    /// Writes into `dst` (a grid over the box, usually coarser) the highest value of the cells
+    /// of `self` whose centres fall inside each of its cells (0 where none does). Used by the
+    /// BLBF heuristic and the placement lattice.
+    pub fn max_pool_into(&self, dst: &mut Heightmap) {
+        let (ss, ds) = (self.spec, dst.spec);
+        dst.data.fill(0.0);
+        // Each source column's destination column (the same for every row), computed once
+        // with the same arithmetic as the cell-by-cell definition.
+        const MAX_COLS: usize = 1024;
+        let dst_col = |col: usize| {
+            let (x, y) = ss.cell_centre(col, 0);
+            let u = ds.to_pixel(x, y).0.floor();
+            (u >= 0.0 && (u as usize) < ds.nx).then_some(u as usize)
+        };
+        let mut cols = [usize::MAX; MAX_COLS];
+        if ss.nx <= MAX_COLS {
+            for (col, c) in cols.iter_mut().enumerate().take(ss.nx) {
+                *c = dst_col(col).unwrap_or(usize::MAX);
+            }
+        }
+        for row in 0..ss.ny {
+            let (x, y) = ss.cell_centre(0, row);
+            let v = ds.to_pixel(x, y).1.floor();
+            if v < 0.0 || v as usize >= ds.ny {
+                continue;
+            }
+            let drow = &mut dst.data[v as usize * ds.nx..(v as usize + 1) * ds.nx];
+            let srow = &self.data[row * ss.nx..(row + 1) * ss.nx];
+            for (col, &h) in srow.iter().enumerate() {
+                let c = if ss.nx <= MAX_COLS {
+                    cols[col]
+                } else {
+                    dst_col(col).unwrap_or(usize::MAX)
+                };
+                if let Some(d) = drow.get_mut(c) {
+                    *d = d.max(h);
+                }
+            }
+        }
+    }
+
     /// Highest value.
     pub fn max(&self) -> f32 {
         self.data.iter().copied().fold(0.0, f32::max)

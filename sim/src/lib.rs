@@ -21,9 +21,11 @@ pub mod eval;
 pub mod frames;
 pub mod heightmap;
 pub mod image;
+pub mod lattice;
 pub mod mesh;
 pub mod observation;
 pub mod paths;
+pub mod teacher;
 pub mod world;
 pub mod zestimate;
 

@@ -25,6 +25,9 @@ use crate::zestimate::{ZScratch, estimate_z_rotated};
 use rapier3d::math::{Pose, Rotation, Vector};
 use rapier3d::prelude::*;
 
+/// The default widening of the success volume for contact penetration (m).
+pub const INSIDE_TOLERANCE_M: f32 = 0.01;
+
 /// Settings of the packing world. Defaults are the values used for training and evaluation.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WorldConfig {
@@ -62,7 +65,7 @@ impl Default for WorldConfig {
             time_until_sleep_s: 0.2,
             sleep_speed_mps: 0.01,
             friction: 0.6,
-            inside_tolerance_m: 0.01,
+            inside_tolerance_m: INSIDE_TOLERANCE_M,
             stability_tilt_deg: 10.0,
             early_out_m: 0.05,
             max_corrective_speed_mps: 3.0,
@@ -151,6 +154,42 @@ impl std::fmt::Debug for PackingWorld {
             .field("cfg", &self.cfg)
             .field("placed", &self.placed)
             .finish()
+    }
+}
+
+/// A clone steps exactly as the original: given the same calls, both reach bit-identical
+/// states (tested). rapier's `PhysicsWorld` is not `Clone`, but everything in it that carries
+/// state between steps is (bodies, colliders, joints, islands, broad and narrow phase with
+/// their contact manifolds and warm-start impulses); the pipelines hold per-step workspaces
+/// only and start fresh. The teacher ([`crate::teacher`]) clones a world per candidate
+/// placement to simulate what would follow it.
+impl Clone for PackingWorld {
+    fn clone(&self) -> Self {
+        let p = &self.phys;
+        let phys = PhysicsWorld {
+            gravity: p.gravity,
+            integration_parameters: p.integration_parameters,
+            physics_pipeline: PhysicsPipeline::new(),
+            collision_pipeline: CollisionPipeline::new(),
+            islands: p.islands.clone(),
+            broad_phase: p.broad_phase.clone(),
+            narrow_phase: p.narrow_phase.clone(),
+            bodies: p.bodies.clone(),
+            colliders: p.colliders.clone(),
+            impulse_joints: p.impulse_joints.clone(),
+            multibody_joints: p.multibody_joints.clone(),
+            soft_bodies: p.soft_bodies.clone(),
+            ccd_solver: p.ccd_solver.clone(),
+        };
+        Self {
+            cfg: self.cfg.clone(),
+            catalog: self.catalog.clone(),
+            phys,
+            placed: self.placed.clone(),
+            heightmap: self.heightmap.clone(),
+            verts: Vec::with_capacity(self.verts.capacity()),
+            zscratch: self.zscratch.clone(),
+        }
     }
 }
 

@@ -150,15 +150,161 @@ pub fn bottom_footprint(
 pub fn rest_height(hm: &Heightmap, scratch: &ZScratch, dcol: isize, drow: isize) -> Option<f32> {
     let win = scratch.win?;
     let mut z = f32::MIN;
-    for r in 0..win.h {
-        let row = &scratch.buf[r * win.w..(r + 1) * win.w];
-        let gr = win.row0 + drow + r as isize;
-        for (c, &bottom) in row.iter().enumerate() {
-            if bottom.is_finite() {
-                let ground = hm.get(win.col0 + dcol + c as isize, gr);
-                z = z.max(ground - bottom);
+    if let Some((c0, r0)) = inside_grid(hm, win, dcol, drow) {
+        // Fast path, the window within the grid: cells off the footprint hold +inf, so
+        // `ground - bottom` is -inf there and never the maximum.
+        let nx = hm.spec().nx;
+        for r in 0..win.h {
+            let fp = &scratch.buf[r * win.w..(r + 1) * win.w];
+            let start = (r0 + r) * nx + c0;
+            let ground = &hm.data()[start..start + win.w];
+            for (&g, &b) in ground.iter().zip(fp) {
+                let d = g - b;
+                z = if d > z { d } else { z };
+            }
+        }
+    } else {
+        for r in 0..win.h {
+            let row = &scratch.buf[r * win.w..(r + 1) * win.w];
+            let gr = win.row0 + drow + r as isize;
+            for (c, &bottom) in row.iter().enumerate() {
+                if bottom.is_finite() {
+                    let ground = hm.get(win.col0 + dcol + c as isize, gr);
+                    z = z.max(ground - bottom);
+                }
             }
         }
     }
-    (z != f32::MIN).then_some(z)
+    (z != f32::MIN && z.is_finite()).then_some(z)
+}
+
+/// The first column and row of `win` moved by `(dcol, drow)`, if the moved window lies
+/// entirely within `hm`'s grid.
+#[inline]
+fn inside_grid(hm: &Heightmap, win: Window, dcol: isize, drow: isize) -> Option<(usize, usize)> {
+    let (c0, r0) = (win.col0 + dcol, win.row0 + drow);
+    let s = hm.spec();
+    (c0 >= 0 && r0 >= 0 && c0 as usize + win.w <= s.nx && r0 as usize + win.h <= s.ny)
+        .then_some((c0 as usize, r0 as usize))
+}
+
+/// The share of the footprint last rasterised into `scratch`, moved by `dcol` columns and
+/// `drow` rows, whose bottom lies within `tol` of `hm` when the origin is at height `z`
+/// (usually [`rest_height`]'s): 1 for a flat bottom on a flat surface. 0 when no cell centre
+/// lies under the footprint.
+pub fn support_fraction(
+    hm: &Heightmap,
+    scratch: &ZScratch,
+    dcol: isize,
+    drow: isize,
+    z: f32,
+    tol: f32,
+) -> f32 {
+    let Some(win) = scratch.win else {
+        return 0.0;
+    };
+    let (mut cells, mut touching) = (0u32, 0u32);
+    if let Some((c0, r0)) = inside_grid(hm, win, dcol, drow) {
+        let nx = hm.spec().nx;
+        for r in 0..win.h {
+            let fp = &scratch.buf[r * win.w..(r + 1) * win.w];
+            let start = (r0 + r) * nx + c0;
+            let ground = &hm.data()[start..start + win.w];
+            for (&g, &b) in ground.iter().zip(fp) {
+                // Off the footprint b = +inf: neither a cell nor touching.
+                cells += (b < f32::INFINITY) as u32;
+                touching += (z + b - g <= tol) as u32;
+            }
+        }
+    } else {
+        for r in 0..win.h {
+            let row = &scratch.buf[r * win.w..(r + 1) * win.w];
+            let gr = win.row0 + drow + r as isize;
+            for (c, &bottom) in row.iter().enumerate() {
+                if bottom.is_finite() {
+                    cells += 1;
+                    let ground = hm.get(win.col0 + dcol + c as isize, gr);
+                    touching += (z + bottom - ground <= tol) as u32;
+                }
+            }
+        }
+    }
+    if cells == 0 {
+        0.0
+    } else {
+        touching as f32 / cells as f32
+    }
+}
+
+/// Min-pools the footprint last rasterised into `src` on grid `src_spec` into `dst` on the
+/// grid `dst_spec` (usually coarser): each `dst` cell gets the lowest bottom of the `src`
+/// cells whose centres fall inside it. With a heightmap max-pooled the same way
+/// ([`Heightmap::max_pool_into`]) and grids whose cell edges align, [`rest_height`] over the
+/// pooled pair is never below the estimate at full resolution: every full-resolution cell's
+/// `H - bottom` is bounded by its pooled cell's `max H - min bottom`. `shift` moves the source
+/// footprint by whole source cells first (the object moved by as many cell sides).
+pub fn pool_footprint(
+    src_spec: &GridSpec,
+    src: &ZScratch,
+    shift: (isize, isize),
+    dst_spec: &GridSpec,
+    dst: &mut ZScratch,
+) {
+    dst.lowest = src.lowest;
+    dst.top = src.top;
+    dst.verts.clear();
+    let Some(mut win) = src.win else {
+        dst.win = None;
+        return;
+    };
+    win.col0 += shift.0;
+    win.row0 += shift.1;
+    // Destination column of a source column and row of a source row (signed: the window may
+    // overhang the grid).
+    let dst_col = |col: isize| {
+        let x = src_spec.x_min() + (col as f32 + 0.5) * src_spec.cell;
+        dst_spec.to_pixel(x, 0.0).0.floor() as isize
+    };
+    let dst_row = |row: isize| {
+        let y = src_spec.y_max() - (row as f32 + 0.5) * src_spec.cell;
+        dst_spec.to_pixel(0.0, y).1.floor() as isize
+    };
+    const MAX: usize = 512;
+    let mut cols = [0isize; MAX];
+    let direct = win.w <= MAX;
+    if direct {
+        for (c, d) in cols.iter_mut().enumerate().take(win.w) {
+            *d = dst_col(win.col0 + c as isize);
+        }
+    }
+    let (c_lo, r_lo) = (dst_col(win.col0), dst_row(win.row0));
+    let (c_hi, r_hi) = (
+        dst_col(win.col0 + win.w as isize - 1),
+        dst_row(win.row0 + win.h as isize - 1),
+    );
+    let out = Window {
+        col0: c_lo,
+        row0: r_lo,
+        w: (c_hi - c_lo + 1) as usize,
+        h: (r_hi - r_lo + 1) as usize,
+    };
+    dst.buf.clear();
+    dst.buf.resize(out.w * out.h, f32::INFINITY);
+    for r in 0..win.h {
+        let dr = (dst_row(win.row0 + r as isize) - r_lo) as usize;
+        let row = &src.buf[r * win.w..(r + 1) * win.w];
+        let drow = &mut dst.buf[dr * out.w..(dr + 1) * out.w];
+        for (c, &b) in row.iter().enumerate() {
+            if b < f32::INFINITY {
+                let dc = if direct {
+                    cols[c]
+                } else {
+                    dst_col(win.col0 + c as isize)
+                };
+                let d = &mut drow[(dc - c_lo) as usize];
+                *d = d.min(b);
+            }
+        }
+    }
+    dst.win = Some(out);
 }

@@ -4,7 +4,9 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use herb_sim::boxed::{self, Episode};
 use herb_sim::catalog::{Catalog, fit_canonical};
 use herb_sim::eval::{self, Method};
+use herb_sim::lattice::Lattice;
 use herb_sim::paths::{self, MeshSource};
+use herb_sim::teacher::{LatticeRule, Lookahead, run_lattice_episode};
 use herb_sim::{PackingEnv, RewardMode, SharedCatalog, WorldConfig};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -79,6 +81,11 @@ enum EvalMethod {
     HumanPose,
     /// Human order, uniform random actions.
     Random,
+    /// The BLBF rule restricted to the placement lattice (largest first by default).
+    LatticeBlbf,
+    /// The lookahead teacher: the best of --lookahead-k lattice candidates by the return of a
+    /// lattice-BLBF rollout to the episode's end (Beam-3 order by default).
+    Lookahead,
 }
 
 impl EvalMethod {
@@ -89,6 +96,8 @@ impl EvalMethod {
             Self::Human => "human",
             Self::HumanPose => "human-pose",
             Self::Random => "random",
+            Self::LatticeBlbf => "lattice-blbf",
+            Self::Lookahead => "lookahead",
         }
     }
 
@@ -97,7 +106,7 @@ impl EvalMethod {
             Self::Human => Some(Method::Human),
             Self::HumanPose => Some(Method::HumanPose),
             Self::Random => Some(Method::Random),
-            Self::Herb | Self::Blbf => None,
+            Self::Herb | Self::Blbf | Self::LatticeBlbf | Self::Lookahead => None,
         }
     }
 }
@@ -139,6 +148,12 @@ enum Cmd {
         /// The sequence model for Beam-3.
         #[arg(long, default_value = "models/sequence.json")]
         sequence_model: PathBuf,
+        /// Candidates the lookahead teacher simulates per decision.
+        #[arg(long, default_value_t = 8)]
+        lookahead_k: usize,
+        /// Reward whose return the lookahead teacher maximises (simple, c, cs<alpha>).
+        #[arg(long, default_value = "cs0.6")]
+        lookahead_reward: String,
         /// Base seed (episode i uses seed + i).
         #[arg(long, default_value_t = 0)]
         seed: u64,
@@ -317,6 +332,8 @@ fn run(cli: Cli) -> AnyResult<()> {
             sequence,
             policy,
             sequence_model,
+            lookahead_k,
+            lookahead_reward,
             seed,
             jobs,
             limit,
@@ -352,7 +369,16 @@ fn run(cli: Cli) -> AnyResult<()> {
             if let Some(n) = limit {
                 episodes.truncate(n);
             }
+            let lookahead_reward = RewardMode::parse(&lookahead_reward)?;
+            if !(1..=herb_sim::lattice::MAX_CANDIDATES).contains(&lookahead_k) {
+                return Err(format!(
+                    "--lookahead-k {lookahead_k}: need 1 to {}",
+                    herb_sim::lattice::MAX_CANDIDATES
+                )
+                .into());
+            }
             let model = if method.contains(&EvalMethod::Herb)
+                || method.contains(&EvalMethod::Lookahead)
                 || matches!(sequence, Some(SequenceArg::Beam3))
             {
                 Some(SequenceModel::load(&sequence_model, &catalog)?)
@@ -393,20 +419,48 @@ fn run(cli: Cli) -> AnyResult<()> {
                     None => {
                         let mode: SequenceMode = match (sequence, m) {
                             (Some(s), _) => s.into(),
-                            (None, EvalMethod::Blbf) => SequenceMode::Largest,
+                            (None, EvalMethod::Blbf | EvalMethod::LatticeBlbf) => {
+                                SequenceMode::Largest
+                            }
                             (None, _) => SequenceMode::Beam3,
                         };
-                        let results = run_policy_method(
-                            &catalog,
-                            &cfg,
-                            &episodes,
-                            m,
-                            mode,
-                            model.as_ref(),
-                            policy,
-                            seed,
-                            jobs,
-                        )?;
+                        let results = match m {
+                            EvalMethod::LatticeBlbf | EvalMethod::Lookahead => {
+                                let rule = match m {
+                                    EvalMethod::Lookahead => LatticeRule::Lookahead(
+                                        Lookahead::new(&catalog, lookahead_k, lookahead_reward),
+                                    ),
+                                    _ => LatticeRule::Blbf(Lattice::new(&catalog)),
+                                };
+                                run_lattice_method(
+                                    &catalog,
+                                    &cfg,
+                                    &episodes,
+                                    &rule,
+                                    mode,
+                                    model.as_ref(),
+                                    seed,
+                                    jobs,
+                                )?
+                            }
+                            _ => run_policy_method(
+                                &catalog,
+                                &cfg,
+                                &episodes,
+                                m,
+                                mode,
+                                model.as_ref(),
+                                policy,
+                                seed,
+                                jobs,
+                            )?,
+                        };
+                        let name = match m {
+                            EvalMethod::Lookahead => {
+                                format!("lookahead (teacher, k = {lookahead_k})")
+                            }
+                            _ => name.clone(),
+                        };
                         (format!("{name} ({})", mode.name()), mode.name(), results)
                     }
                 };
@@ -543,6 +597,31 @@ fn run_policy_method(
                 .order(env.world().catalog(), model, &ep.objects, s)
                 .map_err(|e| e.to_string())?;
             run_policy_episode(env, ep, &order, policy.as_mut(), s).map_err(|e| e.to_string())
+        })
+    };
+    Ok(eval::run_all_with(catalog, cfg, episodes, jobs, make)?)
+}
+
+/// Runs a lattice rule over `episodes`, one copy of the rule per worker thread.
+#[allow(clippy::too_many_arguments)]
+fn run_lattice_method(
+    catalog: &SharedCatalog,
+    cfg: &WorldConfig,
+    episodes: &[Episode],
+    rule: &LatticeRule,
+    mode: SequenceMode,
+    model: Option<&SequenceModel>,
+    seed: u64,
+    jobs: usize,
+) -> AnyResult<Vec<Result<eval::EpisodeResult, String>>> {
+    let make = || -> Result<_, String> {
+        let mut rule = rule.clone();
+        Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
+            let s = seed.wrapping_add(i as u64);
+            let order = mode
+                .order(env.world().catalog(), model, &ep.objects, s)
+                .map_err(|e| e.to_string())?;
+            run_lattice_episode(env, &ep.name, &order, &mut rule, s).map_err(|e| e.to_string())
         })
     };
     Ok(eval::run_all_with(catalog, cfg, episodes, jobs, make)?)

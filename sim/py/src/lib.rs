@@ -17,7 +17,9 @@
 
 use herb_daemon::sequence::{SequenceModel, beam3};
 use herb_daemon::{Blbf, DecisionInput, Policy};
+use herb_sim::lattice::{Lattice, MAX_CANDIDATES};
 use herb_sim::paths::{self, MeshSource};
+use herb_sim::teacher::{LatticeRule, Lookahead};
 use herb_sim::{Catalog, ObsLayout, PackingEnv, RewardMode, SharedCatalog, TypeIdx, WorldConfig};
 use numpy::ndarray::{Array1, Array2, Array4};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray4, PyReadonlyArray2};
@@ -75,6 +77,8 @@ struct Slot {
     len: u32,
     /// The expert for [`VecEnv::expert_actions`] (its search scratch).
     blbf: Blbf,
+    /// The lattice rule of [`VecEnv::step_rule`], made on first use.
+    rule: Option<LatticeRule>,
 }
 
 /// Results of one environment's step.
@@ -211,6 +215,7 @@ impl VecEnv {
                     ret: 0.0,
                     len: 0,
                     blbf: Blbf::new(),
+                    rule: None,
                 })
             })
             .collect::<PyResult<Vec<_>>>()?;
@@ -351,28 +356,143 @@ impl VecEnv {
                     .zip(acts.par_iter())
                     .map(|(s, act)| {
                         let r = s.env.step(*act).map_err(|e| e.to_string())?;
-                        let mut o = Out {
+                        let o = Out {
                             reward: r.reward,
                             terminated: r.terminated,
                             packed: r.info.packed as u32,
                             success: r.info.success,
                             ..Out::default()
                         };
-                        s.ret += r.reward;
-                        s.len += 1;
-                        if o.terminated {
-                            o.ep_return = s.ret;
-                            o.ep_len = s.len;
-                            s.running = false;
-                            if autoreset {
-                                Self::reset_slot(sampler, s)?;
-                            }
-                        }
-                        Ok(o)
+                        Self::finish_step(sampler, s, o, autoreset)
                     })
                     .collect()
             })
         });
+        self.step_result(py, outs)
+    }
+
+    /// Places each environment's next object with a lattice rule decided in Rust: `rule` is
+    /// `lattice-blbf` (the BLBF rule restricted to the placement lattice) or `lookahead` (the
+    /// teacher: the best of the first `k` lattice candidates by the return, under this
+    /// environment's reward, of a lattice-BLBF rollout to the episode's end). An object
+    /// without a feasible placement ends its episode, failed, with reward -1. Returns as
+    /// [`VecEnv::step`].
+    #[allow(clippy::type_complexity)]
+    #[pyo3(signature = (rule, k=8))]
+    fn step_rule<'py>(
+        &mut self,
+        py: Python<'py>,
+        rule: &str,
+        k: usize,
+    ) -> PyResult<(
+        Bound<'py, PyArray4<f32>>,
+        Bound<'py, PyArray1<f32>>,
+        Bound<'py, PyArray1<bool>>,
+        Bound<'py, PyDict>,
+    )> {
+        if !(1..=MAX_CANDIDATES).contains(&k) {
+            return Err(value_err(format!("k {k} outside 1..={MAX_CANDIDATES}")));
+        }
+        if rule != "lattice-blbf" && rule != "lookahead" {
+            return Err(value_err(format!(
+                "rule {rule:?}: expected lattice-blbf or lookahead"
+            )));
+        }
+        if let Some(i) = self.slots.iter().position(|s| !s.running) {
+            return Err(PyRuntimeError::new_err(format!(
+                "environment {i} has ended its episode: call reset()"
+            )));
+        }
+        let catalog = self.catalog.clone();
+        let (slots, sampler, pool, autoreset) =
+            (&mut self.slots, &self.sampler, &self.pool, self.autoreset);
+        let outs: Result<Vec<Out>, String> = py.detach(|| {
+            pool.install(|| {
+                slots
+                    .par_iter_mut()
+                    .map(|s| {
+                        let fits = match &s.rule {
+                            Some(LatticeRule::Blbf(_)) => rule == "lattice-blbf",
+                            Some(LatticeRule::Lookahead(t)) => rule == "lookahead" && t.k() == k,
+                            None => false,
+                        };
+                        if !fits {
+                            s.rule = Some(if rule == "lookahead" {
+                                LatticeRule::Lookahead(Lookahead::new(
+                                    &catalog,
+                                    k,
+                                    s.env.reward_mode(),
+                                ))
+                            } else {
+                                LatticeRule::Blbf(Lattice::new(&catalog))
+                            });
+                        }
+                        let r = s.rule.as_mut().expect("set above");
+                        let o = match r.decide(&s.env).map_err(|e| e.to_string())? {
+                            Some(p) => {
+                                let r = s
+                                    .env
+                                    .step_placement(p.x, p.y, p.theta())
+                                    .map_err(|e| e.to_string())?;
+                                Out {
+                                    reward: r.reward,
+                                    terminated: r.terminated,
+                                    packed: r.info.packed as u32,
+                                    success: r.info.success,
+                                    ..Out::default()
+                                }
+                            }
+                            None => Out {
+                                reward: -1.0,
+                                terminated: true,
+                                packed: s.env.world().placed().len() as u32,
+                                success: false,
+                                ..Out::default()
+                            },
+                        };
+                        Self::finish_step(sampler, s, o, autoreset)
+                    })
+                    .collect()
+            })
+        });
+        self.step_result(py, outs)
+    }
+}
+
+impl VecEnv {
+    /// Books a step's reward and, when the episode ended, its return and length, and resets
+    /// the slot under autoreset.
+    fn finish_step(
+        sampler: &Sampler,
+        s: &mut Slot,
+        mut o: Out,
+        autoreset: bool,
+    ) -> Result<Out, String> {
+        s.ret += o.reward;
+        s.len += 1;
+        if o.terminated {
+            o.ep_return = s.ret;
+            o.ep_len = s.len;
+            s.running = false;
+            if autoreset {
+                Self::reset_slot(sampler, s)?;
+            }
+        }
+        Ok(o)
+    }
+
+    /// The Python return value of a step.
+    #[allow(clippy::type_complexity)]
+    fn step_result<'py>(
+        &self,
+        py: Python<'py>,
+        outs: Result<Vec<Out>, String>,
+    ) -> PyResult<(
+        Bound<'py, PyArray4<f32>>,
+        Bound<'py, PyArray1<f32>>,
+        Bound<'py, PyArray1<bool>>,
+        Bound<'py, PyDict>,
+    )> {
         let outs = outs.map_err(PyRuntimeError::new_err)?;
         let obs = self.observations(py)?;
         let col = |f: &dyn Fn(&Out) -> f32| Array1::from_iter(outs.iter().map(f)).into_pyarray(py);

@@ -83,3 +83,10 @@ class HerbVectorEnv(gym.vector.VectorEnv):
         obs, reward, terminated, info = self._env.step(a)
         truncated = np.zeros(self.num_envs, dtype=bool)
         return obs, reward, terminated, truncated, info
+
+    def step_rule(self, rule, k=8):
+        """Steps every environment with a lattice rule decided in Rust (``lattice-blbf`` or
+        ``lookahead`` with ``k`` candidates); returns as ``step``. See ``VecEnv.step_rule``."""
+        obs, reward, terminated, info = self._env.step_rule(rule, k)
+        truncated = np.zeros(self.num_envs, dtype=bool)
+        return obs, reward, terminated, truncated, info

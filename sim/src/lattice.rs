@@ -1,0 +1,441 @@
+//! The placement lattice: every upright placement of the next object on a grid of positions
+//! over the box and four yaws, with its resting height and top from the shared z estimate and
+//! its feasibility, and the candidate placements derived from it.
+//!
+//! This is the one implementation of the geometry planes: the training bindings, the
+//! evaluation, the teacher ([`crate::teacher`]) and the daemon's policy at run time all call
+//! it, and the decision bench times it.
+//!
+//! # Lattice
+//!
+//! - **Positions**: the cell centres of the [`LATTICE_CELL_M`] (12.5 mm) grid over the box
+//!   interior ([`GridSpec::for_box`]: 28 x 19), with the object's canonical origin there.
+//! - **Yaws**: [`YAWS`], 0, 90, 180 and 270 degrees about z, the object upright (canonical
+//!   resting orientation). The box's 180-degree turn about z maps yaw `k` at `(x, y)` to yaw
+//!   `(k + 2) % 4` at `(-x, -y)` exactly.
+//! - **Resting height** (`rest_z`, origin z, no clearance) from the shared z estimate
+//!   ([`crate::zestimate`]) over the box heightmap max-pooled to the lattice cell, with the
+//!   object's bottom rasterised at the heightmap's resolution and min-pooled to the same
+//!   cells ([`crate::zestimate::pool_footprint`]): conservative, never below the estimate at
+//!   full resolution at the same position (the lattice's cell edges fall on the observation
+//!   grid's). Nodes whose footprint crosses a wall are not estimated (`rest_z` and `top`
+//!   infinite).
+//! - **Top**: `rest_z` plus the object's highest point above its origin.
+//! - **Flags** ([`INSIDE`], [`BELOW_LIMIT`], [`FEASIBLE`]): the footprint lies inside the
+//!   walls; the top is at most [`HEIGHT_LIMIT_M`], the success volume's top; both.
+//! - **Support**: the share of the footprint's cells whose bottom, at `rest_z`, is within
+//!   [`SUPPORT_TOL_M`] of the heightmap below: 1 on a flat floor, small when the object rests
+//!   on a ridge.
+//!
+//! # Candidates
+//!
+//! A small set of feasible placements ([`Lattice::candidates`]), each refined to the best of
+//! the nine [`FINE_CELL_M`] (6.25 mm, the BLBF grid) positions around its lattice node on the
+//! heightmap max-pooled to that cell: per yaw, the lowest-top node nearest each of the four
+//! corners, with x or with y as the first tie-break (up to 32, duplicates removed). Candidate 0
+//! is the lowest top, then the smallest x, then the smallest y over all of them: the
+//! deep-bottom-left-back rule of the BLBF heuristic restricted to the lattice
+//! ([`Lattice::blbf`]).
+//!
+//! Allocation happens in [`Lattice::new`] only.
+
+use crate::catalog::{Catalog, ObjectShape};
+use crate::frames::{BOX_HALF_X, BOX_HALF_Y, SUCCESS_TOP_Z};
+use crate::heightmap::{GridSpec, Heightmap};
+use crate::zestimate::{ZScratch, bottom_footprint, pool_footprint, rest_height, support_fraction};
+use rapier3d::math::{Rotation, Vector};
+use std::f32::consts::{FRAC_PI_2, PI};
+
+/// Side of a lattice cell (m).
+pub const LATTICE_CELL_M: f32 = 0.0125;
+/// Side of the refinement grid's cell (m): the BLBF search grid for the observation heightmap.
+pub const FINE_CELL_M: f32 = 0.00625;
+/// The yaws of the lattice (rad), index `k` is `k * 90` degrees.
+pub const YAWS: [f32; 4] = [0.0, FRAC_PI_2, PI, -FRAC_PI_2];
+/// Number of yaws.
+pub const NUM_YAWS: usize = YAWS.len();
+/// The height limit (m): a feasible placement's estimated top is at most the success volume's
+/// top, [`SUCCESS_TOP_Z`] widened by the world's contact tolerance
+/// ([`crate::world::INSIDE_TOLERANCE_M`]): resting as estimated, it would count as inside.
+pub const HEIGHT_LIMIT_M: f32 = SUCCESS_TOP_Z + crate::world::INSIDE_TOLERANCE_M;
+/// A footprint cell counts as supported when its bottom is within this of the surface (m).
+pub const SUPPORT_TOL_M: f32 = 0.005;
+/// Tolerance of the inside-the-walls test (m), as the BLBF heuristic.
+pub const WALL_TOL_M: f32 = 1e-4;
+/// Most candidates [`Lattice::candidates`] returns.
+pub const MAX_CANDIDATES: usize = 64;
+/// Cell of the heightmap the lattice expects (the observation's); others work, with the
+/// conservative bound then approximate.
+const FULL_CELL_M: f32 = crate::observation::ObsLayout::CELL_M;
+/// Most refinement-grid steps a tight candidate slides along each axis.
+const MAX_PUSH_STEPS: usize = 4;
+
+/// Flag: the footprint lies inside the walls.
+pub const INSIDE: u8 = 1;
+/// Flag: the estimated top is at most [`HEIGHT_LIMIT_M`].
+pub const BELOW_LIMIT: u8 = 2;
+/// Both flags: the placement is feasible.
+pub const FEASIBLE: u8 = INSIDE | BELOW_LIMIT;
+
+/// One upright placement of the next object.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Placement {
+    /// B x of the canonical origin (m).
+    pub x: f32,
+    /// B y of the canonical origin (m).
+    pub y: f32,
+    /// Index into [`YAWS`].
+    pub yaw: u8,
+    /// Origin height at rest, without clearance (m).
+    pub rest_z: f32,
+    /// Highest point of the object at rest (m).
+    pub top: f32,
+    /// Supported share of the footprint (0 to 1).
+    pub support: f32,
+    /// Lattice column and row of the node it was refined from.
+    pub node: (u16, u16),
+    /// Slid against its neighbours (see [`Lattice::candidates`]), not kept at the lattice's
+    /// conservative distance.
+    pub tight: bool,
+}
+
+impl Placement {
+    /// The yaw (rad).
+    pub fn theta(&self) -> f32 {
+        YAWS[self.yaw as usize]
+    }
+
+    /// The BLBF order: lower top first, then smaller x, then smaller y, then lower yaw index.
+    pub fn blbf_cmp(&self, o: &Self) -> std::cmp::Ordering {
+        (self.top, self.x, self.y, self.yaw)
+            .partial_cmp(&(o.top, o.x, o.y, o.yaw))
+            .unwrap_or(std::cmp::Ordering::Equal)
+    }
+}
+
+/// The lattice planes and candidate generator for one object over one heightmap. Reused
+/// across decisions: [`Lattice::compute`] overwrites everything.
+#[derive(Debug, Clone)]
+pub struct Lattice {
+    spec: GridSpec,
+    fine_spec: GridSpec,
+    coarse: Heightmap,
+    fine: Heightmap,
+    full_fp: ZScratch,
+    coarse_fp: [ZScratch; NUM_YAWS],
+    fine_fp: [ZScratch; NUM_YAWS],
+    tight_fp: [ZScratch; NUM_YAWS],
+    bounds: [(Vector, Vector); NUM_YAWS],
+    top_above_origin: [f32; NUM_YAWS],
+    rest_z: Vec<f32>,
+    top: Vec<f32>,
+    support: Vec<f32>,
+    flags: Vec<u8>,
+    candidates: Vec<Placement>,
+}
+
+impl Lattice {
+    /// A lattice with buffers sized for every shape of `catalog`.
+    pub fn new(catalog: &Catalog) -> Self {
+        let spec = GridSpec::for_box(LATTICE_CELL_M).expect("lattice cell within GridSpec range");
+        let fine_spec = GridSpec::for_box(FINE_CELL_M).expect("fine cell within GridSpec range");
+        let n = NUM_YAWS * spec.len();
+        Self {
+            spec,
+            fine_spec,
+            coarse: Heightmap::new(spec),
+            fine: Heightmap::new(fine_spec),
+            full_fp: ZScratch::for_catalog(catalog, FULL_CELL_M),
+            coarse_fp: std::array::from_fn(|_| ZScratch::for_catalog(catalog, LATTICE_CELL_M)),
+            fine_fp: std::array::from_fn(|_| ZScratch::for_catalog(catalog, FINE_CELL_M)),
+            tight_fp: std::array::from_fn(|_| ZScratch::for_catalog(catalog, FINE_CELL_M)),
+            bounds: [(Vector::ZERO, Vector::ZERO); NUM_YAWS],
+            top_above_origin: [0.0; NUM_YAWS],
+            rest_z: vec![0.0; n],
+            top: vec![0.0; n],
+            support: vec![0.0; n],
+            flags: vec![0; n],
+            candidates: Vec::with_capacity(4 * MAX_CANDIDATES),
+        }
+    }
+
+    /// The lattice grid (positions are its cell centres).
+    pub fn spec(&self) -> &GridSpec {
+        &self.spec
+    }
+
+    /// Index of yaw `k`, column `col`, row `row` in the planes.
+    #[inline]
+    pub fn index(&self, k: usize, col: usize, row: usize) -> usize {
+        (k * self.spec.ny + row) * self.spec.nx + col
+    }
+
+    /// Resting heights `[yaw][row][col]` (m, origin z, no clearance).
+    pub fn rest_z(&self) -> &[f32] {
+        &self.rest_z
+    }
+
+    /// Tops `[yaw][row][col]` (m).
+    pub fn top(&self) -> &[f32] {
+        &self.top
+    }
+
+    /// Supported footprint shares `[yaw][row][col]`.
+    pub fn support(&self) -> &[f32] {
+        &self.support
+    }
+
+    /// Flags `[yaw][row][col]` ([`INSIDE`], [`BELOW_LIMIT`]).
+    pub fn flags(&self) -> &[u8] {
+        &self.flags
+    }
+
+    /// Number of feasible placements on the lattice.
+    pub fn feasible_count(&self) -> usize {
+        self.flags.iter().filter(|&&f| f == FEASIBLE).count()
+    }
+
+    /// Fills the planes for `shape` over `hm` (any grid covering the box; validated by the
+    /// caller). Clears the candidates.
+    pub fn compute(&mut self, hm: &Heightmap, shape: &ObjectShape) {
+        hm.max_pool_into(&mut self.coarse);
+        hm.max_pool_into(&mut self.fine);
+        self.candidates.clear();
+        let spec = self.spec;
+        let limit = HEIGHT_LIMIT_M;
+        for (k, &theta) in YAWS.iter().enumerate() {
+            let rot = Rotation::from_rotation_z(theta);
+            let hs = *hm.spec();
+            // Footprints at the heightmap's resolution, min-pooled to the lattice and the
+            // refinement grids (conservative), and sampled at the refinement grid's cell
+            // centres as the BLBF heuristic does (for the tight candidates).
+            let (x0, y0) = spec.cell_centre(0, 0);
+            bottom_footprint(&hs, shape, x0, y0, rot, &mut self.full_fp);
+            pool_footprint(&hs, &self.full_fp, (0, 0), &spec, &mut self.coarse_fp[k]);
+            // The refinement grid's first cell centre, in whole heightmap cells from the
+            // lattice's (exact for the observation grid: 2 cells in -x, 0 in y).
+            let (fx0, fy0) = self.fine_spec.cell_centre(0, 0);
+            let shift = (
+                ((fx0 - x0) / hs.cell).round() as isize,
+                ((y0 - fy0) / hs.cell).round() as isize,
+            );
+            pool_footprint(
+                &hs,
+                &self.full_fp,
+                shift,
+                &self.fine_spec,
+                &mut self.fine_fp[k],
+            );
+            bottom_footprint(&self.fine_spec, shape, fx0, fy0, rot, &mut self.tight_fp[k]);
+            let fp = &self.coarse_fp[k];
+            let (lo, hi) = shape.rotated_bounds(rot);
+            self.bounds[k] = (lo, hi);
+            self.top_above_origin[k] = fp.top();
+            for row in 0..spec.ny {
+                for col in 0..spec.nx {
+                    let i = (k * spec.ny + row) * spec.nx + col;
+                    let (x, y) = spec.cell_centre(col, row);
+                    let inside = inside_walls(x, y, lo, hi);
+                    if !inside {
+                        // Across a wall: not estimated.
+                        self.rest_z[i] = f32::INFINITY;
+                        self.top[i] = f32::INFINITY;
+                        self.support[i] = 0.0;
+                        self.flags[i] = 0;
+                        continue;
+                    }
+                    let (dc, dr) = (col as isize, row as isize);
+                    let z = rest_height(&self.coarse, fp, dc, dr)
+                        // No cell centre under the footprint: the estimate's own fallback.
+                        .unwrap_or_else(|| self.coarse.sample(x, y) - fp.lowest());
+                    let top = z + fp.top();
+                    let below = top <= limit;
+                    self.rest_z[i] = z;
+                    self.top[i] = top;
+                    // Support only where the placement is feasible (0 elsewhere).
+                    self.support[i] = if below {
+                        support_fraction(&self.coarse, fp, dc, dr, z, SUPPORT_TOL_M)
+                    } else {
+                        0.0
+                    };
+                    self.flags[i] = INSIDE | if below { BELOW_LIMIT } else { 0 };
+                }
+            }
+        }
+    }
+
+    /// The candidate placements (see the module docs), candidate 0 first; empty when no
+    /// lattice placement is feasible. Call after [`Lattice::compute`].
+    pub fn candidates(&mut self) -> &[Placement] {
+        if !self.candidates.is_empty() {
+            return &self.candidates;
+        }
+        let spec = self.spec;
+        let limit = HEIGHT_LIMIT_M;
+        for k in 0..NUM_YAWS {
+            for (sx, sy) in [(1.0f32, 1.0f32), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)] {
+                for x_first in [true, false] {
+                    // Lowest top, then nearest the corner (-sx, -sy) along the first axis.
+                    let mut best: Option<(usize, usize, (f32, f32, f32))> = None;
+                    for row in 0..spec.ny {
+                        for col in 0..spec.nx {
+                            let i = (k * spec.ny + row) * spec.nx + col;
+                            // Inside the walls suffices here: the coarse top is conservative,
+                            // the refined top decides the height limit below.
+                            if self.flags[i] & INSIDE == 0 {
+                                continue;
+                            }
+                            let (x, y) = spec.cell_centre(col, row);
+                            let key = if x_first {
+                                (self.top[i], sx * x, sy * y)
+                            } else {
+                                (self.top[i], sy * y, sx * x)
+                            };
+                            if best.is_none_or(|(_, _, b)| key < b) {
+                                best = Some((col, row, key));
+                            }
+                        }
+                    }
+                    let Some((col, row, _)) = best else { continue };
+                    if self
+                        .candidates
+                        .iter()
+                        .any(|c| c.yaw as usize == k && c.node == (col as u16, row as u16))
+                    {
+                        continue;
+                    }
+                    let Some(loose) = self.refine(k, col, row) else {
+                        continue;
+                    };
+                    if loose.top <= limit {
+                        self.candidates.push(loose);
+                    }
+                    if let Some(t) = self.push(loose, sx, sy, x_first)
+                        && t.top <= limit
+                    {
+                        self.candidates.push(t);
+                    }
+                }
+            }
+        }
+        self.candidates.sort_by(Placement::blbf_cmp);
+        // Keep one of each position and yaw (sorted, so duplicates are adjacent unless their
+        // estimates differ, loose and tight at the same spot: keep both then).
+        self.candidates
+            .dedup_by(|a, b| a.yaw == b.yaw && a.x == b.x && a.y == b.y && a.tight == b.tight);
+        self.candidates.truncate(MAX_CANDIDATES);
+        &self.candidates
+    }
+
+    /// The BLBF rule restricted to the lattice: candidate 0, or `None` when nothing is
+    /// feasible.
+    pub fn blbf(&mut self) -> Option<Placement> {
+        self.candidates().first().copied()
+    }
+
+    /// `from` slid on the refinement grid towards the corner `(-sx, -sy)`, along x then y
+    /// (or y then x), by up to [`MAX_PUSH_STEPS`] cells per axis while it stays inside the
+    /// walls and its top, from the footprint sampled at the grid's cell centres as the BLBF
+    /// heuristic does, does not rise: against its neighbours. A candidate that cannot move is
+    /// only re-estimated with that footprint. `None` when `from` is not on the grid.
+    fn push(&self, from: Placement, sx: f32, sy: f32, x_first: bool) -> Option<Placement> {
+        let fs = self.fine_spec;
+        let k = from.yaw as usize;
+        let fp = &self.tight_fp[k];
+        let (lo, hi) = self.bounds[k];
+        let (u, v) = fs.to_pixel(from.x, from.y);
+        let (mut c, mut r) = (u.floor() as isize, v.floor() as isize);
+        let top_at = |c: isize, r: isize| -> Option<(f32, f32, f32)> {
+            if c < 0 || r < 0 || c as usize >= fs.nx || r as usize >= fs.ny {
+                return None;
+            }
+            let (x, y) = fs.cell_centre(c as usize, r as usize);
+            if !inside_walls(x, y, lo, hi) {
+                return None;
+            }
+            let z = rest_height(&self.fine, fp, c, r)?;
+            Some((x, y, z))
+        };
+        let (_, _, z0) = top_at(c, r)?;
+        let mut z = z0;
+        // +x is +column, +y is -row: towards -sx in x, towards -sy in y.
+        let (dc, dr) = (-sx as isize, sy as isize);
+        let axes = if x_first {
+            [(dc, 0), (0, dr)]
+        } else {
+            [(0, dr), (dc, 0)]
+        };
+        for (ac, ar) in axes {
+            for _ in 0..MAX_PUSH_STEPS {
+                match top_at(c + ac, r + ar) {
+                    Some((_, _, zn)) if zn <= z + 1e-4 => {
+                        c += ac;
+                        r += ar;
+                        z = zn;
+                    }
+                    _ => break,
+                }
+            }
+        }
+        let (x, y, z) = top_at(c, r)?;
+        Some(Placement {
+            x,
+            y,
+            yaw: from.yaw,
+            rest_z: z,
+            top: z + fp.top(),
+            support: support_fraction(&self.fine, fp, c, r, z, SUPPORT_TOL_M),
+            node: from.node,
+            tight: true,
+        })
+    }
+
+    /// The best (BLBF order) inside-the-walls position of the fine grid among the nine around
+    /// lattice node `(col, row)` at yaw `k`.
+    fn refine(&self, k: usize, col: usize, row: usize) -> Option<Placement> {
+        let (x, y) = self.spec.cell_centre(col, row);
+        let fs = self.fine_spec;
+        let (u, v) = fs.to_pixel(x, y);
+        let (c0, r0) = (u.floor() as isize, v.floor() as isize);
+        let (lo, hi) = self.bounds[k];
+        let fp = &self.fine_fp[k];
+        let mut best: Option<Placement> = None;
+        for r in r0 - 1..=r0 + 1 {
+            for c in c0 - 1..=c0 + 1 {
+                if c < 0 || r < 0 || c as usize >= fs.nx || r as usize >= fs.ny {
+                    continue;
+                }
+                let (fx, fy) = fs.cell_centre(c as usize, r as usize);
+                if !inside_walls(fx, fy, lo, hi) {
+                    continue;
+                }
+                let Some(z) = rest_height(&self.fine, fp, c, r) else {
+                    continue;
+                };
+                let p = Placement {
+                    x: fx,
+                    y: fy,
+                    yaw: k as u8,
+                    rest_z: z,
+                    top: z + fp.top(),
+                    support: support_fraction(&self.fine, fp, c, r, z, SUPPORT_TOL_M),
+                    node: (col as u16, row as u16),
+                    tight: false,
+                };
+                if best.is_none_or(|b| p.blbf_cmp(&b).is_lt()) {
+                    best = Some(p);
+                }
+            }
+        }
+        best
+    }
+}
+
+/// The footprint with bounds `(lo, hi)` around its origin at `(x, y)` lies inside the walls.
+#[inline]
+fn inside_walls(x: f32, y: f32, lo: Vector, hi: Vector) -> bool {
+    x + lo.x >= -BOX_HALF_X - WALL_TOL_M
+        && x + hi.x <= BOX_HALF_X + WALL_TOL_M
+        && y + lo.y >= -BOX_HALF_Y - WALL_TOL_M
+        && y + hi.y <= BOX_HALF_Y + WALL_TOL_M
+}

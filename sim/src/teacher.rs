@@ -1,0 +1,221 @@
+//! The lookahead teacher: one step of policy improvement over the lattice BLBF rule.
+//!
+//! For the next object, the teacher takes the first `k` candidates of the placement lattice
+//! ([`Lattice::candidates`], candidate 0 being the lattice BLBF choice), and for each one
+//! simulates, on a clone of the world ([`PackingWorld`] is `Clone` and a clone steps
+//! bit-identically), that placement followed by the lattice BLBF rule for every remaining
+//! object of the sequence, to the episode's end. It keeps the candidate with the highest
+//! return (sum of the rewards of the simulated placements, [`RewardMode::reward`], a failed
+//! placement or an object without a feasible placement scoring -1 and ending the rollout);
+//! ties go to the earlier candidate.
+//!
+//! Because candidate 0's rollout is exactly what the lattice BLBF rule would do from the same
+//! state, and the physics is deterministic, the teacher's episode return is never below the
+//! lattice BLBF rule's on the same sequence. It knows the objects still to come, which a policy
+//! that only sees the next object does not; its value as prior data is the simulated outcome
+//! of every candidate ([`CandidateOutcome`]).
+
+use crate::catalog::TypeIdx;
+use crate::env::{PackingEnv, RewardMode};
+use crate::error::Result;
+use crate::eval::EpisodeResult;
+use crate::lattice::{Lattice, Placement};
+use crate::world::PackingWorld;
+use rapier3d::math::Rotation;
+use std::time::Instant;
+
+/// What the rollout after one candidate placement achieved.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CandidateOutcome {
+    /// The candidate placement.
+    pub placement: Placement,
+    /// Reward of the candidate's own placement.
+    pub reward: f32,
+    /// Return of the rollout: the candidate's reward plus those of the lattice BLBF placements
+    /// that followed it.
+    pub ret: f32,
+    /// Objects of the remaining sequence placed inside, the candidate's included.
+    pub packed: usize,
+    /// Every remaining object was placed inside.
+    pub success: bool,
+}
+
+/// The lookahead teacher (see the module docs). Holds its lattices and outcome buffer.
+#[derive(Debug, Clone)]
+pub struct Lookahead {
+    k: usize,
+    reward: RewardMode,
+    lattice: Lattice,
+    rollout: Lattice,
+    outcomes: Vec<CandidateOutcome>,
+}
+
+impl Lookahead {
+    /// A teacher simulating the first `k` (at least 1) candidates, scoring with `reward`.
+    pub fn new(catalog: &crate::Catalog, k: usize, reward: RewardMode) -> Self {
+        Self {
+            k: k.max(1),
+            reward,
+            lattice: Lattice::new(catalog),
+            rollout: Lattice::new(catalog),
+            outcomes: Vec::with_capacity(k.max(1)),
+        }
+    }
+
+    /// Candidates simulated per decision.
+    pub fn k(&self) -> usize {
+        self.k
+    }
+
+    /// The teacher's placement for `remaining[0]` in `world`, or `None` when the lattice holds
+    /// no feasible placement (or `remaining` is empty). [`Lookahead::outcomes`] then holds the
+    /// simulated outcome of every candidate tried, in candidate order.
+    pub fn decide(
+        &mut self,
+        world: &PackingWorld,
+        remaining: &[TypeIdx],
+    ) -> Result<Option<Placement>> {
+        self.outcomes.clear();
+        let Some(&next) = remaining.first() else {
+            return Ok(None);
+        };
+        self.lattice
+            .compute(world.heightmap(), world.catalog().shape(next));
+        let n = self.lattice.candidates().len().min(self.k);
+        for c in 0..n {
+            let first = self.lattice.candidates()[c];
+            let o = rollout(&mut self.rollout, self.reward, world, remaining, first)?;
+            self.outcomes.push(o);
+        }
+        let best =
+            self.outcomes
+                .iter()
+                .enumerate()
+                .fold(None::<(usize, f32)>, |b, (i, o)| match b {
+                    Some((_, r)) if r >= o.ret => b,
+                    _ => Some((i, o.ret)),
+                });
+        Ok(best.map(|(i, _)| self.outcomes[i].placement))
+    }
+
+    /// The simulated outcomes of the last decision's candidates.
+    pub fn outcomes(&self) -> &[CandidateOutcome] {
+        &self.outcomes
+    }
+}
+
+/// Simulates `first` for `remaining[0]` on a clone of `world`, then the lattice BLBF rule for
+/// the rest of `remaining`, until an object ends outside, has no feasible placement, or all
+/// are placed.
+pub fn rollout(
+    lattice: &mut Lattice,
+    reward: RewardMode,
+    world: &PackingWorld,
+    remaining: &[TypeIdx],
+    first: Placement,
+) -> Result<CandidateOutcome> {
+    let mut w = world.clone();
+    let mut out = CandidateOutcome {
+        placement: first,
+        reward: 0.0,
+        ret: 0.0,
+        packed: 0,
+        success: false,
+    };
+    for (i, &ty) in remaining.iter().enumerate() {
+        let p = if i == 0 {
+            first
+        } else {
+            lattice.compute(w.heightmap(), w.catalog().shape(ty));
+            match lattice.blbf() {
+                Some(p) => p,
+                None => {
+                    out.ret -= 1.0;
+                    return Ok(out);
+                }
+            }
+        };
+        let o = w.place(ty, p.x, p.y, p.theta())?;
+        let r = reward.reward(&o);
+        if i == 0 {
+            out.reward = r;
+        }
+        out.ret += r;
+        if !o.inside {
+            return Ok(out);
+        }
+        out.packed += 1;
+    }
+    out.success = true;
+    Ok(out)
+}
+
+/// A decision rule over the placement lattice, for evaluation and data collection.
+#[derive(Debug, Clone)]
+pub enum LatticeRule {
+    /// The BLBF rule restricted to the lattice ([`Lattice::blbf`]).
+    Blbf(Lattice),
+
+    /// The lookahead teacher.
+    Lookahead(Lookahead),
+}
+
+impl LatticeRule {
+    /// Short name for tables.
+    pub fn name(&self) -> String {
+        match self {
+            Self::Blbf(_) => "lattice-blbf".into(),
+
+            Self::Lookahead(t) => format!("lookahead (teacher, k = {})", t.k()),
+        }
+    }
+
+    /// The placement for the environment's next object, `None` when the lattice holds no
+    /// feasible placement or the episode is over.
+    pub fn decide(&mut self, env: &PackingEnv) -> Result<Option<Placement>> {
+        let remaining = env.remaining();
+        let Some(&next) = remaining.first() else {
+            return Ok(None);
+        };
+        match self {
+            Self::Blbf(l) => {
+                let w = env.world();
+                l.compute(w.heightmap(), w.catalog().shape(next));
+                Ok(l.blbf())
+            }
+
+            Self::Lookahead(t) => t.decide(env.world(), remaining),
+        }
+    }
+}
+
+/// Runs one episode: `order` placed by `rule`, timing each decision (the rule plus the z
+/// estimate of the release pose). An object without a feasible placement ends the episode as
+/// a failure ("no feasible placement").
+pub fn run_lattice_episode(
+    env: &mut PackingEnv,
+    name: &str,
+    order: &[TypeIdx],
+    rule: &mut LatticeRule,
+    seed: u64,
+) -> Result<EpisodeResult> {
+    env.reset(order, seed)?;
+    let mut r = EpisodeResult::new(name, order.len());
+    while let Some(object) = env.next_object() {
+        let t0 = Instant::now();
+        let Some(p) = rule.decide(env)? else {
+            r.decision_ns.push(t0.elapsed().as_nanos() as u64);
+            r.record_no_feasible_placement();
+            break;
+        };
+        let pose =
+            env.world_mut()
+                .release_pose(object, p.x, p.y, Rotation::from_rotation_z(p.theta()));
+        r.decision_ns.push(t0.elapsed().as_nanos() as u64);
+        let res = env.step_pose(pose)?;
+        if r.record(&res) {
+            break;
+        }
+    }
+    Ok(r)
+}
