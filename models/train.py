@@ -1,36 +1,39 @@
 #!/usr/bin/env python3
-"""SAC training of HERB's placement policy in our packing world (herb_sim), in chunks.
+"""Discrete SAC over the placement lattice's candidates, with the lookahead teacher's prior data.
 
-    python models/train.py --config models/configs/cs06.toml --out runs/cs06 [--minutes 8]
+    python models/train.py --config models/configs/cs06.toml --out runs/cs06          # start
+    python models/train.py --config models/configs/cs06.toml --out runs/cs06 --resume # go on
 
-One call is one chunk: it resumes from ``<out>/checkpoint-{actor,critic}.pt`` when present, trains for
-``run.chunk_minutes`` (or ``--minutes``), then saves the checkpoint, exports the deterministic
-actor to ``<out>/policy.onnx`` (only if it passes the ONNX contract check and matches PyTorch
-within 1e-4 in onnxruntime; a failing export never replaces a good one), writes parity samples
-(``policy.parity.bin`` + ``.json``) for the tract test, and appends progress to
-``<out>/progress.csv``. The checkpoint is three files, each under 16 MiB (the accelerator
-returns at most 8 files of 16 MiB per call): actor (with its and the temperature's Adam
-state), critic and target, and the critic's Adam state. The replay buffer is not saved: it
-restarts with every chunk.
+The recipe of issue 13 (the continuous-action recipe it replaces is ``models/continuous/``).
+A policy here does not regress a placement: for each decision, Rust (``herb_sim.features``)
+lists up to 64 feasible candidate placements of the next object from the placement lattice
+(``herb_sim`` ``sim/src/lattice.rs``), each described by a row of features, plus a context
+vector (the pooled heightmap, the next object, the rest of the job); the actor scores the
+candidates (one shared network per candidate, so weights are shared across positions) and
+the critic gives each a Q value. Infeasible placements are never candidates: they are masked,
+not penalised.
 
-Networks (``[net] pool`` in the config): ``herbnet112`` (pool = 2, chosen by the decision-latency
-benchmark): 2 x 2 average pool of the [2, 224, 224] observation, convolutions 16@8s4, 32@4s2,
-32@3s1 (ReLU); ``herblite56`` (pool = 4, the CPU recipe): 4 x 4 average pool, convolutions
-16@5s2, 32@3s2, 32@3s2. Both continue with an MLP 256-256-256 (ReLU), then a Gaussian head
-(actor) or two Q values (twin critic heads on one shared extractor, trained by the critic loss
-only; the actor's loss reads it without gradient, as in DrQ).
-Observations are stored pooled and quantised to uint8 (1/255 of the 0.30 m height scale,
-1.2 mm) to fit the buffer in memory; the exported actor takes the full-resolution float input.
+Phases, in order, each resumable (one run folder holds everything):
 
-Guidance by the BLBF heuristic (optional ``[bc]`` table; without it, plain SAC as in the
-paper): every stored state is labelled with the BLBF action (``VecEnv.expert_actions``, the
-daemon's ``Blbf``); for the first ``bc.expert_act_steps`` steps each environment acts with
-that label with a probability falling linearly from ``bc.expert_act`` to 0 (off-policy
-demonstrations), and the actor's loss is the SAC loss divided by the batch's mean |Q| plus
-``w`` times the squared distance of its mean action to the label, ``w`` falling linearly from
-``bc.weight_start`` to ``bc.weight_end`` over ``bc.decay_steps`` (as in TD3+BC).
-``run.snapshot_every_min`` saves the actor to ``<out>/snapshots/actor-<steps>.pt``;
-``--export-snapshot`` exports one of them instead of training.
+1. ``collect``: the lookahead teacher (``VecEnv.teacher``: the first ``teacher.k``
+   candidates each simulated to the episode's end with the lattice BLBF rule after it) acts
+   in ``teacher.episodes`` training episodes. Every state is stored with the teacher's
+   choice and the simulated return of each candidate it tried: the prior data.
+2. ``offline``: ``offline.updates`` updates on the prior data alone: the critic regresses
+   both TD targets and the simulated returns of all tried candidates (dense, counterfactual
+   supervision), the actor imitates the teacher (cross-entropy) beside the SAC loss.
+3. ``online``: discrete SAC (Christodoulou 2019: exact expectations over candidates; twin
+   critics with LayerNorm, min of targets, a modest entropy target), acting with its own
+   policy in ``env.num_envs`` environments, each batch half prior and half online data
+   (RLPD, Ball et al. 2023), the imitation weight decaying to ``sac.bc_weight_end``.
+
+Every batch is augmented with the box's half turn (``herb_sim.half_turn_*``) with probability
+1/2: exact for the box. At every chunk end (``run.chunk_minutes``, ``--minutes``) and on
+SIGTERM the run saves its checkpoint **and its replay buffer** atomically (write, then
+rename) and exports ``policy.onnx`` (the candidate contract: inputs ``context``,
+``candidates``, ``mask``; output ``logits``) with parity samples; ``progress.csv`` grows by a
+row every ``run.log_every_s``. ``--resume`` continues exactly where the last save stopped; a
+missing or corrupt checkpoint or buffer is an error naming the file, never a silent restart.
 """
 
 import argparse
@@ -38,8 +41,7 @@ import csv
 import json
 import math
 import os
-import pickle
-import random
+import signal
 import sys
 import time
 import tomllib
@@ -52,40 +54,45 @@ import torch.nn.functional as F
 
 import herb_sim
 
-NETS = {2: "herbnet112", 4: "herblite56"}
-CONTRACT = dict(input="obs", input_shape=[1, 2, 224, 224], output="action", output_shape=[1, 3])
+C = herb_sim.MAX_CANDIDATES
+G = herb_sim.CONTEXT_LEN
+FEAT = herb_sim.CANDIDATE_LEN
+NEG = -1e9  # masked logit (finite: exported graphs stay NaN-free)
+PHASES = ("collect", "offline", "online", "done")
 
 
 def load_config(path):
+    """The run configuration; a clear error names what is missing or wrong."""
     try:
         with open(path, "rb") as f:
             c = tomllib.load(f)
     except (OSError, tomllib.TOMLDecodeError) as err:
         raise SystemExit(f"{path}: cannot read the config: {err}")
-    for key in ("name", "seed", "env", "sac", "run"):
-        if key not in c:
-            raise SystemExit(f"{path}: missing '{key}'")
-    s = c["sac"]
-    for key in ("total_steps", "learning_starts", "buffer_size", "batch_size"):
-        if not (isinstance(s.get(key), int) and s[key] > 0):
-            raise SystemExit(f"{path}: sac.{key} must be a positive integer")
-    for key in ("updates_per_step", "gamma", "tau", "lr"):
-        if not (isinstance(s.get(key), (int, float)) and s[key] > 0):
-            raise SystemExit(f"{path}: sac.{key} must be a positive number")
-    b = c.get("bc")
-    if b is not None:
-        for key in ("expert_act", "weight_start", "weight_end"):
-            v = b.get(key)
-            if not (isinstance(v, (int, float)) and v >= 0):
-                raise SystemExit(f"{path}: bc.{key} must be a number >= 0")
-        if b["expert_act"] > 1:
-            raise SystemExit(f"{path}: bc.expert_act is a probability, in [0, 1]")
-        for key in ("expert_act_steps", "decay_steps"):
-            if not (isinstance(b.get(key), int) and b[key] > 0):
-                raise SystemExit(f"{path}: bc.{key} must be a positive integer")
-    pool = c.setdefault("net", {}).setdefault("pool", 2)
-    if pool not in NETS:
-        raise SystemExit(f"{path}: net.pool must be one of {sorted(NETS)} (got {pool!r})")
+    need = {
+        "env": ("reward", "sequence", "num_envs", "min_objects", "max_objects"),
+        "teacher": ("k", "episodes"),
+        "offline": ("updates",),
+        "sac": ("total_steps", "batch_size", "updates_per_step", "gamma", "tau", "lr",
+                "entropy_frac", "bc_weight_start", "bc_weight_end", "bc_decay_steps",
+                "mc_weight", "buffer_size"),
+        "run": ("chunk_minutes", "log_every_s"),
+    }
+    for table, keys in need.items():
+        if table not in c:
+            raise SystemExit(f"{path}: missing table [{table}]")
+        for k in keys:
+            if k not in c[table]:
+                raise SystemExit(f"{path}: missing {table}.{k}")
+    for k in ("num_envs", "min_objects", "max_objects"):
+        if not (isinstance(c["env"][k], int) and c["env"][k] > 0):
+            raise SystemExit(f"{path}: env.{k} must be a positive integer")
+    if not 1 <= c["teacher"]["k"] <= C:
+        raise SystemExit(f"{path}: teacher.k must be 1 to {C}")
+    for k in ("total_steps", "batch_size", "buffer_size"):
+        if not (isinstance(c["sac"][k], int) and c["sac"][k] > 0):
+            raise SystemExit(f"{path}: sac.{k} must be a positive integer")
+    if "seed" not in c or "name" not in c:
+        raise SystemExit(f"{path}: missing 'name' or 'seed'")
     return c
 
 
@@ -94,225 +101,263 @@ def make_env(c, seed, boxed=None, threads=None):
     e = c["env"]
     return herb_sim.HerbVectorEnv(
         e["num_envs"], reward=e["reward"], sequence=e["sequence"], seed=seed,
-        min_objects=e["min_objects"], max_objects=e["max_objects"], meshes=e["meshes"],
+        min_objects=e["min_objects"], max_objects=e["max_objects"], meshes=e.get("meshes", True),
         boxed=boxed, threads=threads,
     )
 
 
-def pooled_shape(pool):
-    """Shape of one stored (pooled) observation."""
-    return (2, 224 // pool, 224 // pool)
+class Scorer(nn.Module):
+    """Scores every candidate of a decision: a context encoder, one MLP shared by all
+    candidates (their row plus the context code), and a second layer that also sees the mean
+    code of the decision's candidates. ``heads`` outputs per candidate."""
 
+    def __init__(self, heads, width=64):
+        super().__init__()
+        self.ctx = nn.Sequential(nn.Linear(G, 128), nn.LayerNorm(128), nn.ReLU(),
+                                 nn.Linear(128, width), nn.ReLU())
+        self.cand = nn.Sequential(nn.Linear(FEAT + width, width), nn.LayerNorm(width), nn.ReLU(),
+                                  nn.Linear(width, width), nn.ReLU())
+        self.out = nn.Sequential(nn.Linear(2 * width, width), nn.LayerNorm(width), nn.ReLU(),
+                                 nn.Linear(width, heads))
 
-def extractor(pool):
-    """Convolutional features of a pooled observation; returns (module, feature count)."""
-    if pool == 2:
-        convs = [nn.Conv2d(2, 16, 8, stride=4), nn.ReLU(), nn.Conv2d(16, 32, 4, stride=2), nn.ReLU()]
-        side = 10
-        last = nn.Conv2d(32, 32, 3, stride=1)
-    else:
-        convs = [nn.Conv2d(2, 16, 5, stride=2), nn.ReLU(), nn.Conv2d(16, 32, 3, stride=2), nn.ReLU()]
-        side = 5
-        last = nn.Conv2d(32, 32, 3, stride=2)
-    return nn.Sequential(*convs, last, nn.ReLU(), nn.Flatten()), 32 * side * side
-
-
-def mlp(n_in, n_out):
-    return nn.Sequential(
-        nn.Linear(n_in, 256), nn.ReLU(),
-        nn.Linear(256, 256), nn.ReLU(),
-        nn.Linear(256, 256), nn.ReLU(),
-        nn.Linear(256, n_out),
-    )
+    def forward(self, ctx, cand, mask):
+        g = self.ctx(ctx)
+        h = self.cand(torch.cat([cand, g[:, None, :].expand(-1, cand.shape[1], -1)], -1))
+        m = mask[..., None]
+        pooled = (h * m).sum(1) / m.sum(1).clamp(min=1.0)
+        return self.out(torch.cat([h, pooled[:, None, :].expand(-1, cand.shape[1], -1)], -1))
 
 
 class Actor(nn.Module):
-    """Gaussian policy on pooled observations; tanh-squashed actions in (-1, 1)."""
+    """Masked logits over candidates."""
 
-    def __init__(self, pool=2):
+    def __init__(self):
         super().__init__()
-        self.pool = pool
-        self.features, n = extractor(pool)
-        self.body = mlp(n, 6)
+        self.net = Scorer(1)
 
-    def forward(self, x):
-        mu, log_std = self.body(self.features(x)).chunk(2, dim=-1)
-        return mu, log_std.clamp(-20.0, 2.0)
+    def forward(self, ctx, cand, mask):
+        logits = self.net(ctx, cand, mask)[..., 0]
+        return torch.where(mask > 0, logits, torch.full_like(logits, NEG))
 
-    def sample(self, x):
-        """A sampled action, its log-probability and the deterministic action tanh(mean)."""
-        mu, log_std = self(x)
-        std = log_std.exp()
-        u = mu + std * torch.randn_like(mu)
-        a = torch.tanh(u)
-        logp = (-0.5 * ((u - mu) / std) ** 2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
-        logp = logp - (2 * (math.log(2) - u - F.softplus(-2 * u))).sum(-1)
-        return a, logp, torch.tanh(mu)
+
+class Critic(nn.Module):
+    """Twin Q values per candidate, two separate networks: ``[B, C, 2]``."""
+
+    def __init__(self):
+        super().__init__()
+        self.q1, self.q2 = Scorer(1), Scorer(1)
+
+    def forward(self, ctx, cand, mask):
+        return torch.cat([self.q1(ctx, cand, mask), self.q2(ctx, cand, mask)], -1)
+
+
+class Replay:
+    """States stored once, linked to their successors (episodic storage), in float16.
+
+    Row ``i`` holds a decision state (context, candidate rows, candidate count), the action
+    taken (-1: none, the state had no candidate), the reward, whether the episode ended, the
+    row of the next state (-1 at the end), whether the row is prior (teacher) data, and the
+    teacher's simulated return of each candidate it tried (NaN elsewhere)."""
+
+    FIELDS = ("ctx", "cand", "count", "act", "rew", "done", "nxt", "prior", "mc")
+
+    def __init__(self, cap):
+        self.cap, self.n = cap, 0
+        self.ctx = np.zeros((cap, G), np.float16)
+        self.cand = np.zeros((cap, C, FEAT), np.float16)
+        self.count = np.zeros(cap, np.uint8)
+        self.act = np.full(cap, -1, np.int16)
+        self.rew = np.zeros(cap, np.float32)
+        self.done = np.zeros(cap, bool)
+        self.nxt = np.full(cap, -1, np.int64)
+        self.prior = np.zeros(cap, bool)
+        self.mc = np.full((cap, C), np.nan, np.float16)
+
+    def add(self, ctx, cand, mask, prior, mc=None):
+        """Stores states (a batch), returns their rows."""
+        k = len(ctx)
+        if self.n + k > self.cap:
+            raise SystemExit(f"replay buffer full ({self.cap} states): raise sac.buffer_size")
+        rows = np.arange(self.n, self.n + k)
+        self.ctx[rows], self.cand[rows] = ctx, cand
+        self.count[rows] = mask.sum(1).astype(np.uint8)
+        self.prior[rows] = prior
+        if mc is not None:
+            self.mc[rows] = mc
+        self.n += k
+        return rows
+
+    def save(self, path):
+        tmp = path + ".tmp"
+        with open(tmp, "wb") as f:
+            np.savez(f, n=np.int64(self.n), cap=np.int64(self.cap),
+                     **{k: getattr(self, k)[: self.n] for k in self.FIELDS})
+        os.replace(tmp, path)
+
+    @classmethod
+    def load(cls, path, cap):
+        try:
+            z = np.load(path)
+            n = int(z["n"])
+            r = cls(max(cap, n))
+            for k in cls.FIELDS:
+                a = z[k]
+                want = getattr(r, k)
+                if a.shape[1:] != want.shape[1:] or a.dtype != want.dtype or len(a) != n:
+                    raise ValueError(f"field {k}: {a.dtype} {a.shape}, expected {want.dtype} "
+                                     f"(n, {', '.join(map(str, want.shape[1:]))}) with n = {n}")
+                want[:n] = a
+            r.n = n
+        except (OSError, KeyError, ValueError, EOFError) as err:
+            raise SystemExit(f"{path}: corrupt or truncated replay buffer ({err}); "
+                             "the run does not go on from an empty one")
+        return r
+
+    def sample(self, rng, k, prior):
+        """`k` rows with an action, from the prior or the online part."""
+        pool = np.flatnonzero((self.act[: self.n] >= 0) & (self.prior[: self.n] == prior))
+        if len(pool) == 0:
+            return None
+        return pool[rng.integers(0, len(pool), k)]
+
+
+def masks(count):
+    return (np.arange(C)[None, :] < count[:, None]).astype(np.float32)
+
+
+def batch_tensors(rb, rows, rng, dev):
+    """The tensors of an update for `rows`, half-turned with probability 1/2 (the whole batch
+    at once: the same rows turned are the same decision)."""
+    nxt = rb.nxt[rows]
+    has_next = nxt >= 0
+    nrows = np.where(has_next, nxt, rows)
+    ctx, cand = rb.ctx[rows].astype(np.float32), rb.cand[rows].astype(np.float32)
+    nctx, ncand = rb.ctx[nrows].astype(np.float32), rb.cand[nrows].astype(np.float32)
+    if rng.random() < 0.5:
+        ctx, nctx = herb_sim.half_turn_context(ctx), herb_sim.half_turn_context(nctx)
+        cand, ncand = herb_sim.half_turn_candidates(cand), herb_sim.half_turn_candidates(ncand)
+    t = lambda a, dt=torch.float32: torch.as_tensor(np.ascontiguousarray(a), dtype=dt, device=dev)
+    return dict(
+        ctx=t(ctx), cand=t(cand), mask=t(masks(rb.count[rows])),
+        act=t(rb.act[rows], torch.int64), rew=t(rb.rew[rows]),
+        # The episode ended, or the next state had no candidate (a forced failure, value -1).
+        end=t(rb.done[rows] | ~has_next), nctx=t(nctx), ncand=t(ncand),
+        nmask=t(masks(rb.count[nrows])), nempty=t(has_next & (rb.count[nrows] == 0)),
+        mc=t(rb.mc[rows].astype(np.float32)), prior=t(rb.prior[rows]),
+    )
+
+
+def update(m, b, c, bc_weight, mc_weight):
+    """One discrete-SAC update (critic, actor, temperature, targets); returns the losses."""
+    s = c["sac"]
+    actor, critic, target, log_alpha = m["actor"], m["critic"], m["target"], m["log_alpha"]
+    alpha = log_alpha.exp().detach()
+    with torch.no_grad():
+        nl = actor(b["nctx"], b["ncand"], b["nmask"])
+        nlogp = F.log_softmax(nl, -1)
+        qn = target(b["nctx"], b["ncand"], b["nmask"]).min(-1).values
+        v = (nlogp.exp() * (qn - alpha * nlogp) * b["nmask"]).sum(-1)
+        v = torch.where(b["nempty"] > 0, torch.full_like(v, -1.0), v)
+        y = b["rew"] + s["gamma"] * (1.0 - b["end"]) * v
+    q = critic(b["ctx"], b["cand"], b["mask"])
+    qa = q.gather(1, b["act"][:, None, None].expand(-1, 1, 2))[:, 0]
+    loss_td = F.mse_loss(qa, y[:, None].expand(-1, 2))
+    # The teacher's simulated returns of every candidate it tried (prior rows only).
+    known = ~torch.isnan(b["mc"])
+    if known.any():
+        mc = torch.nan_to_num(b["mc"])[..., None].expand(-1, -1, 2)
+        kk = known[..., None].expand(-1, -1, 2)
+        loss_mc = ((q - mc) ** 2)[kk].mean()
+    else:
+        loss_mc = torch.zeros((), device=q.device)
+    loss_q = loss_td + mc_weight * loss_mc
+    m["opt_q"].zero_grad()
+    loss_q.backward()
+    m["opt_q"].step()
+
+    logits = actor(b["ctx"], b["cand"], b["mask"])
+    logp = F.log_softmax(logits, -1)
+    p = logp.exp()
+    with torch.no_grad():
+        qmin = critic(b["ctx"], b["cand"], b["mask"]).min(-1).values
+    loss_sac = (p * (alpha * logp - qmin) * b["mask"]).sum(-1).mean()
+    pr = b["prior"] > 0
+    loss_bc = F.nll_loss(logp[pr], b["act"][pr]) if pr.any() else torch.zeros((), device=q.device)
+    loss_pi = loss_sac + bc_weight * loss_bc
+    m["opt_pi"].zero_grad()
+    loss_pi.backward()
+    m["opt_pi"].step()
+
+    # Temperature: entropy target a fraction of the uniform entropy over each decision's
+    # candidates.
+    ent = -(p * logp * b["mask"]).sum(-1).detach()
+    target_ent = s["entropy_frac"] * torch.log(b["mask"].sum(-1).clamp(min=1.0))
+    loss_a = (log_alpha * (ent - target_ent)).mean()
+    m["opt_a"].zero_grad()
+    loss_a.backward()
+    m["opt_a"].step()
+    with torch.no_grad():
+        for tp, cp in zip(target.parameters(), critic.parameters()):
+            tp.lerp_(cp, s["tau"])
+    return float(loss_td), float(loss_mc), float(loss_bc), float(ent.mean()), float(alpha)
 
 
 class Deployed(nn.Module):
-    """What ships: full observation in, deterministic action (tanh of the mean) out."""
+    """The exported graph: masked logits (padding at -1e9)."""
 
     def __init__(self, actor):
         super().__init__()
         self.actor = actor
 
-    def forward(self, obs):
-        mu, _ = self.actor(F.avg_pool2d(obs, self.actor.pool))
-        return torch.tanh(mu)
+    def forward(self, context, candidates, mask):
+        return self.actor(context, candidates, mask)
 
 
-class Critic(nn.Module):
-    """Twin Q heads on one extractor."""
-
-    def __init__(self, pool=2):
-        super().__init__()
-        self.features, n = extractor(pool)
-        self.q1, self.q2 = mlp(n + 3, 1), mlp(n + 3, 1)
-
-    def heads(self, h, a):
-        """Both Q values from extracted features `h` and actions `a`."""
-        ha = torch.cat([h, a], -1)
-        return self.q1(ha).squeeze(-1), self.q2(ha).squeeze(-1)
-
-    def forward(self, x, a):
-        return self.heads(self.features(x), a)
-
-
-def pool_u8(obs, pool):
-    """[N, 2, 224, 224] float in [0, 1] -> [N, 2, 224/pool, 224/pool] uint8."""
-    n, m = obs.shape[0], 224 // pool
-    p = obs.reshape(n, 2, m, pool, m, pool).mean(axis=(3, 5))
-    return np.rint(p * 255.0).astype(np.uint8)
-
-
-class Replay:
-    """Transitions, each with the expert's label of its state (zero and invalid without one)."""
-
-    def __init__(self, size, shape):
-        self.obs = np.zeros((size, *shape), np.uint8)
-        self.next = np.zeros((size, *shape), np.uint8)
-        self.act = np.zeros((size, 3), np.float32)
-        self.rew = np.zeros(size, np.float32)
-        self.done = np.zeros(size, np.float32)
-        self.expert = np.zeros((size, 3), np.float32)
-        self.valid = np.zeros(size, np.float32)
-        self.size, self.n, self.i = size, 0, 0
-
-    def add(self, o, a, r, o2, d, ea, ev):
-        for k in range(len(a)):
-            j = self.i
-            self.obs[j], self.next[j], self.act[j], self.rew[j], self.done[j] = o[k], o2[k], a[k], r[k], d[k]
-            self.expert[j], self.valid[j] = ea[k], ev[k]
-            self.i = (self.i + 1) % self.size
-            self.n = min(self.n + 1, self.size)
-
-    def sample(self, b, dev):
-        """(obs, action, reward, next obs, done, expert action, expert valid) tensors."""
-        idx = np.random.randint(0, self.n, size=b)
-        f = lambda x: torch.as_tensor(x[idx], device=dev)
-        return (f(self.obs).float() / 255.0, f(self.act), f(self.rew),
-                f(self.next).float() / 255.0, f(self.done), f(self.expert), f(self.valid))
-
-
-def sac_update(actor, critic, target, log_alpha, opts, batch, gamma, tau, target_entropy, bc_weight=None):
-    """One SAC update: twin critics on the soft Bellman target, then the actor, then the
-    entropy temperature, then a Polyak step of the target critics. `opts` = (actor, critic,
-    temperature) optimisers; `batch` = (obs, action, reward, next obs, done, expert action,
-    expert valid). With `bc_weight` (a number), the actor's loss is normalised by the mean |Q|
-    and adds that weight times the squared distance of the mean action to the expert's; returns
-    that distance (mean over labelled states), else None."""
-    opt_a, opt_c, opt_t = opts
-    o, ac, r, o2, d, ea, ev = batch
-    alpha = log_alpha.exp().detach()
-    with torch.no_grad():
-        a2, logp2, _ = actor.sample(o2)
-        q1t, q2t = target(o2, a2)
-        y = r + gamma * (1 - d) * (torch.min(q1t, q2t) - alpha * logp2)
-    q1, q2 = critic(o, ac)
-    loss_c = F.mse_loss(q1, y) + F.mse_loss(q2, y)
-    opt_c.zero_grad(set_to_none=True)
-    loss_c.backward()
-    opt_c.step()
-    an, logp, mean_a = actor.sample(o)
-    with torch.no_grad():
-        h = critic.features(o)
-    qn = torch.min(*critic.heads(h, an))
-    loss_a = (alpha * logp - qn).mean()
-    bc = None
-    if bc_weight is not None:
-        dist = ((mean_a - ea) ** 2).sum(-1)
-        bc = (dist * ev).sum() / ev.sum().clamp(min=1.0)
-        loss_a = loss_a / qn.detach().abs().mean().clamp(min=1e-3) + bc_weight * bc
-    opt_a.zero_grad(set_to_none=True)
-    loss_a.backward()
-    opt_a.step()
-    loss_t = -(log_alpha * (logp.detach() + target_entropy)).mean()
-    opt_t.zero_grad(set_to_none=True)
-    loss_t.backward()
-    opt_t.step()
-    with torch.no_grad():
-        for p, pt in zip(critic.parameters(), target.parameters()):
-            pt.mul_(1 - tau).add_(tau * p)
-    return None if bc is None else bc.item()
-
-
-def export(actor, out, env, dev):
-    """Exports the deterministic actor; replaces out/policy.onnx only if it passes the checks."""
+def export(actor, out, env):
+    """Exports the actor with the candidate contract; replaces out/policy.onnx only if it
+    passes the checks, with parity samples for the tract test."""
     import onnx
     import onnxruntime as ort
 
     model = Deployed(actor).to("cpu").eval()
     tmp = os.path.join(out, "policy.onnx.tmp")
-    dummy = torch.zeros(*CONTRACT["input_shape"])
+    names = ["context", "candidates", "mask"]
+    shapes = [[1, G], [1, C, FEAT], [1, C]]
+    dummy = tuple(torch.zeros(*s) for s in shapes)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DeprecationWarning)
-        torch.onnx.export(model, dummy, tmp, input_names=[CONTRACT["input"]],
-                          output_names=[CONTRACT["output"]], opset_version=17, dynamo=False)
-    m = onnx.load(tmp)
-    onnx.checker.check_model(m)
+        warnings.simplefilter("ignore")
+        torch.onnx.export(model, dummy, tmp, input_names=names, output_names=["logits"],
+                          opset_version=17, dynamo=False)
+    mdl = onnx.load(tmp)
+    onnx.checker.check_model(mdl)
     dims = lambda v: [d.dim_value for d in v.type.tensor_type.shape.dim]
-    ins, outs = m.graph.input, m.graph.output
-    ok = (len(ins) == 1 and ins[0].name == CONTRACT["input"] and dims(ins[0]) == CONTRACT["input_shape"]
-          and len(outs) == 1 and outs[0].name == CONTRACT["output"] and dims(outs[0]) == CONTRACT["output_shape"])
+    ins, outs = mdl.graph.input, mdl.graph.output
+    ok = ([i.name for i in ins] == names and [dims(i) for i in ins] == shapes
+          and len(outs) == 1 and outs[0].name == "logits" and dims(outs[0]) == [1, C])
     if not ok:
         os.remove(tmp)
         raise RuntimeError("exported model breaks the I/O contract; the shipped one is kept")
-    # Parity samples: real observations from the environment.
-    obs = env.reset(seed=12345)[0][:4]
+    env.reset(seed=12345)
+    ctx, cand, mask = env.candidates()
     sess = ort.InferenceSession(tmp, providers=["CPUExecutionProvider"])
     expect = []
-    for k in range(len(obs)):
-        x = obs[k:k + 1].astype(np.float32)
+    for k in range(min(4, len(ctx))):
+        x = (ctx[k:k + 1], cand[k:k + 1], mask[k:k + 1])
         with torch.no_grad():
-            t = model(torch.as_tensor(x)).numpy()
-        o = sess.run(None, {CONTRACT["input"]: x})[0]
-        if not np.allclose(t, o, atol=1e-4):
+            want = model(*(torch.as_tensor(a) for a in x)).numpy()
+        got = sess.run(None, dict(zip(names, x)))[0]
+        if not np.allclose(want, got, atol=1e-4, rtol=1e-4):
             os.remove(tmp)
-            raise RuntimeError(f"onnxruntime differs from PyTorch: {t} vs {o}")
-        expect.append(t[0].tolist())
+            raise RuntimeError("onnxruntime differs from PyTorch")
+        expect.append(want[0].tolist())
     os.replace(tmp, os.path.join(out, "policy.onnx"))
-    obs.astype("<f4").tofile(os.path.join(out, "policy.parity.bin"))
+    with open(os.path.join(out, "policy.parity.bin"), "wb") as f:
+        for k in range(len(expect)):
+            for a in (ctx[k], cand[k], mask[k]):
+                f.write(a.astype("<f4").tobytes())
     with open(os.path.join(out, "policy.parity.json"), "w") as f:
-        json.dump({"samples": len(expect), "shape": CONTRACT["input_shape"], "actions": expect}, f)
-
-
-def progress_row(steps, updates, episodes, wall, ep_len, ep_ret, dev, bc=None):
-    """One line of progress.csv: totals so far, the mean length (objects packed) and return
-    of the last 200 episodes that ended, and with BLBF guidance the actor's last mean squared
-    distance to the expert's action (`bc_dist`, over the last 200 updates)."""
-    row = {"steps": steps, "updates": updates, "episodes": episodes, "wall_s": round(wall, 1),
-           "mean_len": round(float(np.mean(ep_len[-200:])), 3) if ep_len else "",
-           "mean_return": round(float(np.mean(ep_ret[-200:])), 4) if ep_ret else "",
-           "device": str(dev)}
-    if bc is not None:
-        row["bc_dist"] = round(float(np.mean(bc[-200:])), 5) if bc else ""
-    return row
-
-
-def ramp(start, end, steps, t):
-    """Linear from `start` at t = 0 to `end` at t = `steps`, then `end`."""
-    return end + (start - end) * max(0.0, 1.0 - t / steps)
+        json.dump({"samples": len(expect), "inputs": names, "shapes": shapes,
+                   "logits": expect}, f)
 
 
 def append_progress(out, row):
@@ -325,141 +370,177 @@ def append_progress(out, row):
         w.writerow(row)
 
 
+def save(out, m, st, rb):
+    """Checkpoint and buffer, each written then renamed."""
+    ck = {k: m[k].state_dict() for k in ("actor", "critic", "target", "opt_q", "opt_pi", "opt_a")}
+    ck["log_alpha"] = m["log_alpha"].detach().cpu()
+    ck["state"] = st
+    ck["rng"] = (np.random.get_state(), torch.get_rng_state())
+    tmp = os.path.join(out, "checkpoint.pt.tmp")
+    torch.save(ck, tmp)
+    rb.save(os.path.join(out, "replay.npz"))
+    os.replace(tmp, os.path.join(out, "checkpoint.pt"))
+
+
+def load(out, m):
+    path = os.path.join(out, "checkpoint.pt")
+    try:
+        ck = torch.load(path, weights_only=False)
+        for k in ("actor", "critic", "target", "opt_q", "opt_pi", "opt_a"):
+            m[k].load_state_dict(ck[k])
+        with torch.no_grad():
+            m["log_alpha"].copy_(ck["log_alpha"])
+        np.random.set_state(ck["rng"][0])
+        torch.set_rng_state(ck["rng"][1])
+        return ck["state"]
+    except (OSError, KeyError, RuntimeError, EOFError, ValueError) as err:
+        raise SystemExit(f"{path}: cannot resume from this checkpoint ({err})")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--config", required=True)
     ap.add_argument("--out", required=True)
-    ap.add_argument("--minutes", type=float, default=None,
-                    help="chunk length (default run.chunk_minutes; 'inf' trains to sac.total_steps)")
+    ap.add_argument("--resume", action="store_true", help="go on from <out>/checkpoint.pt")
+    ap.add_argument("--minutes", type=float, default=None, help="this chunk's length (inf: to the end)")
+    ap.add_argument("--threads", type=int, default=2, help="torch and environment threads")
     ap.add_argument("--boxed", default=None)
-    ap.add_argument("--threads", type=int, default=None)
-    ap.add_argument("--export-snapshot", default=None, metavar="ACTOR_PT",
-                    help="export this saved actor (a snapshot) to <out>/policy.onnx, and stop")
     a = ap.parse_args()
     c = load_config(a.config)
-    e, s = c["env"], c["sac"]
     os.makedirs(a.out, exist_ok=True)
-    dev = torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    seed = int(c["seed"])
-    env = make_env(c, seed, a.boxed, a.threads)
-    pool = c["net"]["pool"]
-    if a.export_snapshot is not None:
-        actor = Actor(pool)
-        try:
-            actor.load_state_dict(torch.load(a.export_snapshot, map_location="cpu", weights_only=False)["actor"])
-        except (OSError, KeyError, ValueError, EOFError, RuntimeError, pickle.UnpicklingError) as err:
-            raise SystemExit(f"{a.export_snapshot}: not an actor snapshot of a {NETS[pool]} run "
-                             f"(net.pool = {pool} in {a.config}): {err}")
-        export(actor, a.out, env, torch.device("cpu"))
-        print(f"exported {a.export_snapshot} to {os.path.join(a.out, 'policy.onnx')}", flush=True)
-        return 0
-    bc = c.get("bc")
-    actor, critic = Actor(pool).to(dev), Critic(pool).to(dev)
-    target = Critic(pool).to(dev)
-    target.load_state_dict(critic.state_dict())
-    log_alpha = torch.zeros((), device=dev, requires_grad=True)
-    opt_a = torch.optim.Adam(actor.parameters(), lr=s["lr"])
-    opt_c = torch.optim.Adam(critic.parameters(), lr=s["lr"])
-    opt_t = torch.optim.Adam([log_alpha], lr=s["lr"])
-    steps, updates, episodes, wall = 0, 0, 0, 0.0
-    ck_a = os.path.join(a.out, "checkpoint-actor.pt")
-    ck_c = os.path.join(a.out, "checkpoint-critic.pt")
-    ck_o = os.path.join(a.out, "checkpoint-critic-adam.pt")
-    if os.path.exists(ck_a) and os.path.exists(ck_c):
-        st = torch.load(ck_a, map_location=dev, weights_only=False)
-        sc = torch.load(ck_c, map_location=dev, weights_only=False)
-        actor.load_state_dict(st["actor"])
-        opt_a.load_state_dict(st["opt_a"])
-        opt_t.load_state_dict(st["opt_t"])
-        critic.load_state_dict(sc["critic"])
-        target.load_state_dict(sc["target"])
-        if os.path.exists(ck_o):  # absent in checkpoints from before it was saved
-            opt_c.load_state_dict(torch.load(ck_o, map_location=dev, weights_only=False))
-        with torch.no_grad():
-            log_alpha.copy_(st["log_alpha"])
-        steps, updates, episodes, wall = st["steps"], st["updates"], st["episodes"], st["wall_s"]
-        seed = seed + steps  # a fresh stream of episodes per chunk
-        print(f"resumed at {steps} steps, {updates} updates", flush=True)
-    torch.manual_seed(seed)
-    np.random.seed(seed % 2**32)
-    random.seed(seed)
-    buf = Replay(s["buffer_size"], pooled_shape(pool))
-    obs = env.reset(seed=seed)[0]
-    po = pool_u8(obs, pool)
-    n = e["num_envs"]
+    torch.set_num_threads(a.threads)
+    torch.manual_seed(c["seed"])
+    np.random.seed(c["seed"])
+    s = c["sac"]
+    m = dict(actor=Actor(), critic=Critic(), target=Critic())
+    m["target"].load_state_dict(m["critic"].state_dict())
+    m["log_alpha"] = torch.zeros((), requires_grad=True)
+    m["opt_q"] = torch.optim.Adam(m["critic"].parameters(), lr=s["lr"])
+    m["opt_pi"] = torch.optim.Adam(m["actor"].parameters(), lr=s["lr"])
+    m["opt_a"] = torch.optim.Adam([m["log_alpha"]], lr=s["lr"])
+    ck_path = os.path.join(a.out, "checkpoint.pt")
+    if a.resume:
+        if not os.path.exists(ck_path):
+            raise SystemExit(f"--resume: {ck_path} does not exist")
+        st = load(a.out, m)
+        rb = Replay.load(os.path.join(a.out, "replay.npz"), s["buffer_size"])
+        print(f"resumed {a.out}: phase {st['phase']}, {rb.n} states, {st['steps']} online steps, "
+              f"{st['updates']} updates", flush=True)
+    else:
+        if os.path.exists(ck_path):
+            raise SystemExit(f"{ck_path} exists: pass --resume to go on, or choose another --out")
+        st = dict(phase="collect", teacher_episodes=0, teacher_steps=0, offline_updates=0,
+                  steps=0, updates=0, episodes=0, wall=0.0, cpu=0.0, env_seed=int(c["seed"]),
+                  ep_len=[], ep_ret=[], ep_success=[])
+        rb = Replay(s["buffer_size"])
+    rng = np.random.default_rng(c["seed"] + st["updates"] + st["steps"])
     minutes = a.minutes if a.minutes is not None else c["run"]["chunk_minutes"]
-    t0 = last_log = time.time()
-    ep_len, ep_ret, bc_dist = [], [], []
-    debt = 0.0
-    chunk_start, chunk_updates = steps, updates
-    snap_every = c["run"].get("snapshot_every_min")
-    last_snap = time.time()
-    no_label = (np.zeros((n, 3), np.float32), np.zeros(n, bool))
-    while steps < s["total_steps"] and time.time() - t0 < minutes * 60:
-        if steps - chunk_start < s["learning_starts"] and updates == 0:
-            act = np.random.uniform(-1, 1, size=(n, 3)).astype(np.float32)
+    stop = {"now": False}
+    signal.signal(signal.SIGTERM, lambda *_: stop.update(now=True))
+    t0, cpu0, last_log = time.time(), time.process_time(), time.time()
+    deadline = t0 + minutes * 60.0
+    # Each chunk opens its environments with a fresh seed (recorded): episodes differ from
+    # the last chunk's, and a resumed run never repeats them.
+    env = make_env(c, st["env_seed"], a.boxed, a.threads)
+    st["env_seed"] += 1
+    env.reset(seed=st["env_seed"])
+    n_env = c["env"]["num_envs"]
+    prev = np.full(n_env, -1)
+    stats = []
+
+    def log(extra):
+        row = dict(phase=st["phase"], teacher_episodes=st["teacher_episodes"],
+                   offline_updates=st["offline_updates"], steps=st["steps"],
+                   updates=st["updates"], episodes=st["episodes"],
+                   wall_s=round(st["wall"] + time.time() - t0, 1),
+                   cpu_s=round(st["cpu"] + time.process_time() - cpu0, 1),
+                   mean_len=round(float(np.mean(st["ep_len"][-200:])), 3) if st["ep_len"] else "",
+                   success=round(float(np.mean(st["ep_success"][-200:])), 4) if st["ep_success"] else "",
+                   mean_return=round(float(np.mean(st["ep_ret"][-200:])), 4) if st["ep_ret"] else "")
+        row.update(extra)
+        append_progress(a.out, row)
+        print(", ".join(f"{k} {v}" for k, v in row.items()), flush=True)
+
+    def truncate():
+        # Episodes still running when a phase or a chunk ends are cut: their last state keeps
+        # no action (it still serves as the previous state's successor).
+        open_rows = prev[prev >= 0]
+        rb.act[open_rows] = -1
+        prev[:] = -1
+
+    def step_and_store(ctx, cand, mask, act, prior, mc=None):
+        rows = rb.add(ctx, cand, mask, prior, mc)
+        ok = prev >= 0
+        rb.nxt[prev[ok]] = rows[ok]
+        rew, term, info = env.step_candidates(np.maximum(act, 0))
+        rb.act[rows] = np.where(mask.sum(1) > 0, act, -1)
+        rb.rew[rows], rb.done[rows] = rew, term
+        prev[:] = np.where(term, -1, rows)
+        ended = np.flatnonzero(term)
+        st["ep_len"] += info["episode_length"][ended].tolist()
+        st["ep_ret"] += info["episode_return"][ended].tolist()
+        st["ep_success"] += info["success"][ended].astype(float).tolist()
+        del st["ep_len"][:-1000], st["ep_ret"][:-1000], st["ep_success"][:-1000]
+        return len(ended)
+
+    while time.time() < deadline and not stop["now"] and st["phase"] != "done":
+        if st["phase"] == "collect":
+            if st["teacher_episodes"] >= c["teacher"]["episodes"]:
+                truncate()
+                st["phase"] = "offline"
+                continue
+            ctx, cand, mask, rets, _, choice = env.teacher(c["teacher"]["k"])
+            st["teacher_episodes"] += step_and_store(ctx, cand, mask, choice, True, rets)
+            st["teacher_steps"] += n_env
+        elif st["phase"] == "offline":
+            if st["offline_updates"] >= c["offline"]["updates"]:
+                st["phase"] = "online"
+                env.reset(seed=st["env_seed"] + 1000)
+                prev[:] = -1
+                continue
+            rows = rb.sample(rng, s["batch_size"], True)
+            stats.append(update(m, batch_tensors(rb, rows, rng, "cpu"), c, s["bc_weight_start"],
+                                s["mc_weight"]))
+            st["offline_updates"] += 1
+            st["updates"] += 1
         else:
+            if st["steps"] >= s["total_steps"]:
+                st["phase"] = "done"
+                continue
+            ctx, cand, mask = env.candidates()
             with torch.no_grad():
-                x = torch.as_tensor(po, device=dev).float() / 255.0
-                act = actor.sample(x)[0].cpu().numpy().astype(np.float32)
-        ea, ev = env.expert_actions() if bc else no_label
-        if bc:
-            p = ramp(bc["expert_act"], 0.0, bc["expert_act_steps"], steps)
-            use = ev & (np.random.random_sample(n) < p)
-            act[use] = ea[use]
-        obs2, rew, term, _, info = env.step(act)
-        # With same-step autoreset the returned observation of an ended episode is the next
-        # episode's first; its value is never bootstrapped (done = 1), so it is stored as is.
-        po2 = pool_u8(obs2, pool)
-        buf.add(po, act, rew, po2, term.astype(np.float32), ea, ev.astype(np.float32))
-        po = po2
-        steps += n
-        for k in np.flatnonzero(term):
-            episodes += 1
-            ep_len.append(int(info["episode_length"][k]))
-            ep_ret.append(float(info["episode_return"][k]))
-        if buf.n >= max(s["batch_size"], s["learning_starts"]):
-            debt += n * s["updates_per_step"]
-            while debt >= 1.0:
-                debt -= 1.0
-                w = ramp(bc["weight_start"], bc["weight_end"], bc["decay_steps"], steps) if bc else None
-                d = sac_update(actor, critic, target, log_alpha, (opt_a, opt_c, opt_t),
-                               buf.sample(s["batch_size"], dev), s["gamma"], s["tau"],
-                               s["target_entropy"], w)
-                if d is not None:
-                    bc_dist.append(d)
-                    del bc_dist[:-200]
-                updates += 1
-        if snap_every and time.time() - last_snap >= snap_every * 60:
-            last_snap = time.time()
-            os.makedirs(os.path.join(a.out, "snapshots"), exist_ok=True)
-            torch.save({"actor": actor.state_dict(), "steps": steps, "updates": updates},
-                       os.path.join(a.out, "snapshots", f"actor-{steps}.pt"))
+                logits = m["actor"](torch.as_tensor(ctx), torch.as_tensor(cand), torch.as_tensor(mask))
+                act = torch.distributions.Categorical(logits=logits).sample().numpy()
+            st["episodes"] += step_and_store(ctx, cand, mask, act, False)
+            st["steps"] += n_env
+            want = int(st["steps"] * s["updates_per_step"])
+            bc = s["bc_weight_end"] + (s["bc_weight_start"] - s["bc_weight_end"]) * max(
+                0.0, 1.0 - st["steps"] / s["bc_decay_steps"])
+            while st["updates"] - st["offline_updates"] < want:
+                half = s["batch_size"] // 2
+                on = rb.sample(rng, half, False)
+                pr = rb.sample(rng, s["batch_size"] - half if on is not None else s["batch_size"], True)
+                rows = pr if on is None else np.concatenate([pr, on])
+                stats.append(update(m, batch_tensors(rb, rows, rng, "cpu"), c, bc, s["mc_weight"]))
+                st["updates"] += 1
         if time.time() - last_log >= c["run"]["log_every_s"]:
             last_log = time.time()
-            el = time.time() - t0
-            row = progress_row(steps, updates, episodes, wall + el, ep_len, ep_ret, dev,
-                               bc_dist if bc else None)
-            append_progress(a.out, row)
-            print(f"steps {steps} ({(steps - chunk_start) / el:.0f}/s) updates {updates} "
-                  f"({(updates - chunk_updates) / max(el, 1e-9):.1f}/s this chunk) episodes {episodes} "
-                  f"len {row['mean_len']} return {row['mean_return']} alpha {log_alpha.exp().item():.4f}"
-                  f"{' bc_dist ' + str(row['bc_dist']) if bc else ''}",
-                  flush=True)
-    wall += time.time() - t0
-    # Three files under 16 MiB each (the accelerator returns at most 16 MiB per file).
-    meta = {"steps": steps, "updates": updates, "episodes": episodes, "wall_s": wall, "config": c}
-    torch.save({"actor": actor.state_dict(), "opt_a": opt_a.state_dict(), "opt_t": opt_t.state_dict(),
-                "log_alpha": log_alpha.detach(), **meta}, ck_a + ".tmp")
-    torch.save({"critic": critic.state_dict(), "target": target.state_dict()}, ck_c + ".tmp")
-    torch.save(opt_c.state_dict(), ck_o + ".tmp")
-    os.replace(ck_a + ".tmp", ck_a)
-    os.replace(ck_c + ".tmp", ck_c)
-    os.replace(ck_o + ".tmp", ck_o)
-    row = progress_row(steps, updates, episodes, wall, ep_len, ep_ret, dev, bc_dist if bc else None)
-    append_progress(a.out, row)
-    export(actor, a.out, env, dev)
-    print(json.dumps(row), flush=True)
+            extra = {}
+            if stats:
+                v = np.mean(stats[-200:], axis=0)
+                extra = dict(loss_td=round(v[0], 4), loss_mc=round(v[1], 4), loss_bc=round(v[2], 4),
+                             entropy=round(v[3], 3), alpha=round(v[4], 5))
+            log(extra)
+    truncate()
+    st["wall"] += time.time() - t0
+    st["cpu"] += time.process_time() - cpu0
+    save(a.out, m, st, rb)
+    try:
+        export(m["actor"], a.out, env)
+    except RuntimeError as err:
+        print(f"export not replaced: {err}", file=sys.stderr)
+    log({})
+    print(f"saved {a.out}: phase {st['phase']}, {rb.n} states", flush=True)
     return 0
 
 

@@ -24,19 +24,34 @@ import herb_sim
 
 
 def onnx_actor(path):
-    """A function from observations [N, 2, 224, 224] to actions [N, 3] through onnxruntime."""
+    """The policy at `path` through onnxruntime: ``("obs", f)`` with f from observations
+    [N, 2, 224, 224] to actions [N, 3] (the observation contract), or ``("candidates", f)``
+    with f from (context, candidates, mask) to candidate indices [N] (the candidate
+    contract, ``models/train.py``)."""
     import onnxruntime as ort
 
     try:
         sess = ort.InferenceSession(path, providers=["CPUExecutionProvider"])
     except Exception as err:  # onnxruntime raises its own exception types
         raise SystemExit(f"{path}: cannot load the policy: {err}")
-    return lambda obs: np.stack([sess.run(None, {herb_sim.INPUT_NAME: obs[k:k + 1]})[0][0]
-                                 for k in range(len(obs))]).astype(np.float32)
+    names = [i.name for i in sess.get_inputs()]
+    if names == ["context", "candidates", "mask"]:
+        def pick(ctx, cand, mask):
+            idx = []
+            for k in range(len(ctx)):
+                logits = sess.run(None, {"context": ctx[k:k + 1], "candidates": cand[k:k + 1],
+                                         "mask": mask[k:k + 1]})[0][0]
+                idx.append(int(np.argmax(np.where(mask[k] > 0, logits, -np.inf))))
+            return np.array(idx, np.int64)
+        return "candidates", pick
+    if names != [herb_sim.INPUT_NAME]:
+        raise SystemExit(f"{path}: inputs {names} follow neither policy contract")
+    return "obs", lambda obs: np.stack([sess.run(None, {herb_sim.INPUT_NAME: obs[k:k + 1]})[0][0]
+                                        for k in range(len(obs))]).astype(np.float32)
 
 
 def validate(act, episodes, seed, reward, boxed, rule=None, k=8):
-    """Success rate and mean objects packed of ``act`` (observations to actions) or, with
+    """Success rate and mean objects packed of ``act`` (a policy from ``onnx_actor``) or, with
     ``rule``, of a lattice rule stepped in Rust, on the validation episodes."""
     # One environment per episode; each counts its first episode only (autoreset keeps the
     # finished ones stepping, their later episodes are ignored), so short episodes are not
@@ -48,9 +63,12 @@ def validate(act, episodes, seed, reward, boxed, rule=None, k=8):
     success = np.zeros(episodes, bool)
     while not done.all():
         if rule is not None:
-            obs, _, term, _, info = env.step_rule(rule, k)
+            # Only environments still in their first episode: the teacher is costly.
+            obs, _, term, _, info = env.step_rule(rule, k, active=~done)
+        elif act is not None and act[0] == "candidates":
+            _, term, info = env.step_candidates(act[1](*env.candidates()))
         elif act is not None:
-            obs, _, term, _, info = env.step(act(obs))
+            obs, _, term, _, info = env.step(act[1](obs))
         else:
             labels, valid = env.expert_actions()
             if not valid[~done].all():

@@ -1,6 +1,8 @@
 //! Decision latency (issue 3): observation build + policy inference + z estimate, on one core,
 //! for each ONNX network in `$HERB_BENCH_MODELS` (default `target/onnx-bench`, written by
-//! `python3 models/make_fixtures.py --bench target/onnx-bench`), plus the BLBF baseline.
+//! `python3 models/make_fixtures.py --bench target/onnx-bench`; candidate-contract policies,
+//! issue 13, include the placement lattice and features in their decision), plus the BLBF
+//! baseline.
 //!
 //! `cargo bench -p herb-daemon --bench decision`. Every timed decision is recorded in a
 //! histogram; p50/p99 are printed with the network's FLOPs (2 x FMA, tract's cost model) and
@@ -9,7 +11,7 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use hdrhistogram::Histogram;
 use herb_daemon::policy::{DecisionInput, Policy};
-use herb_daemon::{Blbf, OnnxPolicy};
+use herb_daemon::{Blbf, CandidatePolicy, OnnxPolicy};
 use herb_sim::observation::{Projections, action_to_placement};
 use herb_sim::{Catalog, ObsLayout, PackingWorld, SharedCatalog, TypeIdx, WorldConfig};
 use std::path::PathBuf;
@@ -82,6 +84,8 @@ fn bench_policy(
                         object: next,
                         shape: catalog.shape(next),
                         step: 5,
+                        catalog: &catalog,
+                        after: &[],
                     })
                     .expect("decision");
                 let (x, y, theta) = action_to_placement(a).expect("action");
@@ -125,19 +129,25 @@ fn benches(c: &mut Criterion) {
             .and_then(|s| s.to_str())
             .unwrap_or("model")
             .to_owned();
-        let mut p = match OnnxPolicy::load(&f) {
+        // Either contract: the observation one (OnnxPolicy) or the candidate one.
+        let mut p = match herb_daemon::load_policy(&f.to_string_lossy(), &catalog) {
             Ok(p) => p,
             Err(e) => {
                 eprintln!("skipping {}: {e}", f.display());
                 continue;
             }
         };
+        let fma = OnnxPolicy::load(&f)
+            .map(|o| o.fma())
+            .or_else(|_| CandidatePolicy::load(&f, &catalog).map(|c| c.fma()))
+            .unwrap_or(-1);
+        let bytes = std::fs::metadata(&f).map(|m| m.len()).unwrap_or(0);
         let extra = format!(
             "; {:.1} MFLOP, {:.2} MB ONNX",
-            2.0 * p.fma() as f64 / 1e6,
-            p.file_bytes() as f64 / 1e6
+            2.0 * fma as f64 / 1e6,
+            bytes as f64 / 1e6
         );
-        bench_policy(c, &name, &mut p, &catalog, &extra);
+        bench_policy(c, &name, p.as_mut(), &catalog, &extra);
     }
     bench_policy(
         c,

@@ -46,6 +46,10 @@ pub enum DecideError {
         /// Why.
         reason: String,
     },
+    /// The placement lattice holds no feasible placement for the object: nothing fits
+    /// between the walls below the height limit.
+    #[error("no feasible placement")]
+    NoFeasiblePlacement,
     /// An error from the packing world.
     #[error(transparent)]
     Sim(#[from] herb_sim::SimError),

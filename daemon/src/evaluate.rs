@@ -81,6 +81,7 @@ impl SequenceMode {
 
 /// Runs one episode: `order` placed by `policy`. Each decision's latency (policy plus the z
 /// estimate for the chosen placement) is recorded, and the object is released at that pose.
+/// A decision without a feasible placement ends the episode as a failure with that reason.
 pub fn run_policy_episode(
     env: &mut PackingEnv,
     ep: &Episode,
@@ -101,9 +102,18 @@ pub fn run_policy_episode(
                 object,
                 shape: catalog.shape(object),
                 step,
+                catalog: &catalog,
+                after: &order[step + 1..],
             };
-            let a = policy.decide(&input)?;
-            check_action(policy.name(), a)?
+            match policy.decide(&input) {
+                Ok(a) => check_action(policy.name(), a)?,
+                Err(DecideError::NoFeasiblePlacement) => {
+                    r.decision_ns.push(t0.elapsed().as_nanos() as u64);
+                    r.record_no_feasible_placement();
+                    break;
+                }
+                Err(e) => return Err(e),
+            }
         };
         let (x, y, theta) = action_to_placement(action)?;
         let pose = env

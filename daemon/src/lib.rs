@@ -8,6 +8,7 @@
 
 #![warn(missing_docs)]
 
+pub mod candidate;
 pub mod cell;
 pub mod config;
 pub mod controller;
@@ -21,6 +22,27 @@ pub mod policy;
 pub mod sequence;
 
 pub use error::{DecideError, Result};
+pub use candidate::CandidatePolicy;
 pub use onnx::OnnxPolicy;
+
+/// The placement policy named by `spec`: `blbf`, or the path of an ONNX model, loaded as a
+/// [`CandidatePolicy`] when its inputs are the candidate contract's and as an [`OnnxPolicy`]
+/// (the observation contract) otherwise; either refuses a model that breaks its contract.
+pub fn load_policy(spec: &str, catalog: &herb_sim::Catalog) -> Result<Box<dyn Policy>> {
+    if spec == "blbf" {
+        return Ok(Box::new(Blbf::new()));
+    }
+    let path = std::path::Path::new(spec);
+    let bytes = std::fs::read(path).map_err(|source| DecideError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    match candidate::input_names(&bytes) {
+        Ok(names) if names == candidate::INPUT_NAMES => Ok(Box::new(
+            CandidatePolicy::from_bytes(path, &bytes, catalog)?,
+        )),
+        _ => Ok(Box::new(OnnxPolicy::load(path)?)),
+    }
+}
 pub use policy::{Blbf, DecisionInput, Policy};
 pub use sequence::{SequenceModel, beam3};

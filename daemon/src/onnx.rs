@@ -196,7 +196,7 @@ fn check_contract(raw: &InferenceModel) -> std::result::Result<(), String> {
 }
 
 /// Multiply-accumulates of a (decluttered) model, from the ops' cost reports.
-fn fma_count(m: &TypedModel) -> TractResult<i64> {
+pub(crate) fn fma_count(m: &TypedModel) -> TractResult<i64> {
     use tract_onnx::tract_core::ops::Cost;
     let mut fma = 0i64;
     for node in m.nodes() {

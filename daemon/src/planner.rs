@@ -11,9 +11,9 @@ use crate::cell::{CellConfig, lift_to, plan_waypoints};
 use crate::config::Config;
 use crate::kinematics::{Arm, DOF, IkOptions};
 use crate::motion::{MotionPlanner, Setpoint, Setpoints};
-use crate::policy::{Blbf, DecisionInput, Policy, check_action};
+use crate::policy::{DecisionInput, Policy, check_action};
 use crate::sequence::{SequenceModel, beam3};
-use crate::{DecideError, OnnxPolicy};
+use crate::DecideError;
 use herb_ipc::bus::{Bus, Sub};
 use herb_ipc::{Fault, GripperAction, HeightmapFrame, MAX_JOB_OBJECTS, Services};
 use herb_sim::observation::{Projections, action_to_placement};
@@ -213,11 +213,7 @@ impl Decider {
         catalog: SharedCatalog,
         clearance_m: f64,
     ) -> Result<Self, DecideError> {
-        let policy: Box<dyn Policy> = if policy == "blbf" {
-            Box::new(Blbf::new())
-        } else {
-            Box::new(OnnxPolicy::load(std::path::Path::new(policy))?)
-        };
+        let policy = crate::load_policy(policy, &catalog)?;
         Ok(Self {
             policy,
             projections: Projections::new(&catalog),
@@ -234,23 +230,28 @@ impl Decider {
         self.policy.name()
     }
 
-    /// The placement of `object` (step `step` of the episode) on `frame`: B x, y, z of the
-    /// canonical origin at release, and yaw.
+    /// The placement of `object` (step `step` of the episode, `after` the objects still to
+    /// come) on `frame`: B x, y, z of the canonical origin at release, and yaw.
     pub fn decide(
         &mut self,
         frame: &HeightmapFrame,
         object: TypeIdx,
         step: usize,
-    ) -> Result<[f32; 4], String> {
+        after: &[TypeIdx],
+    ) -> Result<[f32; 4], DecideError> {
+        let bad = |reason: String| DecideError::Rejected {
+            policy: "herbd".into(),
+            reason,
+        };
         frame
             .validate()
-            .map_err(|e| format!("heightmap frame: {e}"))?;
-        let spec = GridSpec::for_box(frame.cell_m).map_err(|e| e.to_string())?;
+            .map_err(|e| bad(format!("heightmap frame: {e}")))?;
+        let spec = GridSpec::for_box(frame.cell_m).map_err(|e| bad(e.to_string()))?;
         if (spec.nx, spec.ny) != (frame.nx as usize, frame.ny as usize) {
-            return Err(format!(
+            return Err(bad(format!(
                 "heightmap frame of {} x {} cells of {} m; the box needs {} x {}",
                 frame.nx, frame.ny, frame.cell_m, spec.nx, spec.ny
-            ));
+            )));
         }
         if self.hm.as_ref().map(|h| *h.spec()) != Some(spec) {
             self.hm = Some(Heightmap::new(spec));
@@ -259,8 +260,7 @@ impl Decider {
         // One snapshot of the shared frame (the decision must not change under it).
         hm.data_mut().copy_from_slice(frame.cells());
         let hm = &*hm;
-        ObsLayout::write(hm, Some(self.projections.get(object)), &mut self.obs)
-            .map_err(|e| e.to_string())?;
+        ObsLayout::write(hm, Some(self.projections.get(object)), &mut self.obs)?;
         let shape = self.catalog.shape(object);
         let a = self
             .policy
@@ -270,10 +270,11 @@ impl Decider {
                 object,
                 shape,
                 step,
+                catalog: &self.catalog,
+                after,
             })
-            .and_then(|a| check_action(self.policy.name(), a))
-            .map_err(|e| e.to_string())?;
-        let (x, y, theta) = action_to_placement(a).map_err(|e| e.to_string())?;
+            .and_then(|a| check_action(self.policy.name(), a))?;
+        let (x, y, theta) = action_to_placement(a)?;
         let z = estimate_z_rotated(
             hm,
             shape,
@@ -296,6 +297,8 @@ struct Worker {
     motion: MotionPlanner,
     hm_sub: Sub<HeightmapFrame>,
     latest: Option<Sample<ipc::Service, HeightmapFrame, ()>>,
+    /// The current job's order (from the last `Order` request).
+    job_order: Vec<TypeIdx>,
     _bus: Bus,
 }
 
@@ -324,9 +327,13 @@ impl Worker {
             .is_some_and(|s| s.payload().header.stamp_ns > after)
     }
 
-    fn order(&self, objects: &[u16]) -> Option<Vec<TypeIdx>> {
+    /// Orders a job's objects (Beam-3) and keeps the order for the decisions' lookahead.
+    fn order(&mut self, objects: &[u16]) -> Option<Vec<TypeIdx>> {
         let v: Vec<TypeIdx> = objects.iter().map(|&o| TypeIdx(o)).collect();
-        beam3(&self.sequence, &v).ok()
+        let order = beam3(&self.sequence, &v).ok()?;
+        self.job_order.clear();
+        self.job_order.extend_from_slice(&order);
+        Some(order)
     }
 
     fn plan(
@@ -354,9 +361,16 @@ impl Worker {
                     .as_ref()
                     .expect("refresh_frame found one")
                     .payload();
-                let p = self.decider.decide(frame, ty, index as usize);
+                let after = self
+                    .job_order
+                    .get(index as usize + 1..)
+                    .unwrap_or(&[]);
+                let p = self.decider.decide(frame, ty, index as usize, after);
                 buf.decision_ns = t0.elapsed().as_nanos() as u64;
-                p.map_err(|_| Fault::Decision)?
+                p.map_err(|e| match e {
+                    DecideError::NoFeasiblePlacement => Fault::NoFeasiblePlacement,
+                    _ => Fault::Decision,
+                })?
             }
         };
         buf.pose = pose;
@@ -483,6 +497,7 @@ pub fn spawn(
                     motion: MotionPlanner::new(limits, cfg.period_s()),
                     hm_sub,
                     latest: None,
+                    job_order: Vec::with_capacity(MAX_JOB_OBJECTS),
                     _bus: bus,
                 })
             })();

@@ -10,7 +10,7 @@ use crate::error::{DecideError, Result};
 use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y};
 use herb_sim::observation::placement_to_action;
 use herb_sim::zestimate::{ZScratch, bottom_footprint, rest_height};
-use herb_sim::{GridSpec, Heightmap, ObjectShape, ObsLayout, TypeIdx};
+use herb_sim::{Catalog, GridSpec, Heightmap, ObjectShape, ObsLayout, TypeIdx};
 use rapier3d::math::Rotation;
 
 /// What a policy decides from.
@@ -26,6 +26,10 @@ pub struct DecisionInput<'a> {
     pub shape: &'a ObjectShape,
     /// Its index in the packing sequence.
     pub step: usize,
+    /// The catalog (shapes of every object type).
+    pub catalog: &'a Catalog,
+    /// The objects of the job still to place after this one, in order.
+    pub after: &'a [TypeIdx],
 }
 
 /// A placement policy.

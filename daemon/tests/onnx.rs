@@ -114,6 +114,8 @@ fn decisions_are_finite_and_in_range_or_rejected() {
                 object: t,
                 shape: c.shape(t),
                 step: 0,
+                catalog: &c,
+                after: &[],
             })
             .unwrap();
         assert!(a.iter().all(|v| v.is_finite() && v.abs() <= 1.0), "{a:?}");
@@ -126,6 +128,8 @@ fn decisions_are_finite_and_in_range_or_rejected() {
             object: t,
             shape: c.shape(t),
             step: 0,
+            catalog: &c,
+            after: &[],
         })
         .unwrap_err();
     assert!(matches!(e, DecideError::Rejected { .. }), "{e}");

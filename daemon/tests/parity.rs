@@ -1,6 +1,6 @@
 //! Parity of tract with PyTorch on exported SAC actors: every shipped policy
 //! (`models/policy-*.onnx`) and the export fixture `models/fixtures/sac-smoke.onnx` (an actor
-//! after one minute of CPU training by `models/train.py`: a test of the export path, not a
+//! after one minute of CPU training by `models/continuous/train.py`: a test of the export path, not a
 //! policy) come with observations from the environment and PyTorch's actions for them
 //! (`<name>.parity.bin`, little-endian f32, and `<name>.parity.json`); tract must agree within
 //! 1e-4.

@@ -31,6 +31,8 @@ fn decide(p: &mut Blbf, c: &Catalog, hm: &Heightmap, t: TypeIdx) -> Result<[f32;
         object: t,
         shape: c.shape(t),
         step: 0,
+        catalog: c,
+        after: &[],
     })
 }
 
@@ -153,6 +155,8 @@ fn bad_input_is_rejected_with_a_reason_not_passed_on() {
         object: t,
         shape: c.shape(t),
         step: 0,
+        catalog: &c,
+        after: &[],
     };
     let e = check_input("onnx", &input).unwrap_err().to_string();
     assert!(e.contains("index 7"), "{e}");

@@ -451,6 +451,9 @@ pub enum Fault {
     Stop = 8,
     /// The object was lost from the gripper (e.g. the adapter restarted); it is picked again.
     ObjectLost = 9,
+    /// The placement lattice held no feasible placement for the next object (the box is
+    /// full for it): the job ends, failed, with this reason.
+    NoFeasiblePlacement = 10,
 }
 
 impl Fault {
@@ -468,6 +471,7 @@ impl Fault {
             Motion,
             Stop,
             ObjectLost,
+            NoFeasiblePlacement,
         ]
         .get(c as usize)
         .copied()

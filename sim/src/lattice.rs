@@ -164,6 +164,17 @@ impl Lattice {
         &self.spec
     }
 
+    /// The heightmap max-pooled to the lattice cell, from the last [`Lattice::compute`].
+    pub fn pooled(&self) -> &Heightmap {
+        &self.coarse
+    }
+
+    /// The footprint's bounds `(min, max)` around the origin at yaw `k`, from the last
+    /// [`Lattice::compute`].
+    pub fn bounds(&self, k: usize) -> (Vector, Vector) {
+        self.bounds[k]
+    }
+
     /// Index of yaw `k`, column `col`, row `row` in the planes.
     #[inline]
     pub fn index(&self, k: usize, col: usize, row: usize) -> usize {

@@ -18,6 +18,7 @@ pub mod catalog;
 pub mod env;
 pub mod error;
 pub mod eval;
+pub mod features;
 pub mod frames;
 pub mod heightmap;
 pub mod image;

@@ -38,6 +38,13 @@ pub struct CandidateOutcome {
     pub packed: usize,
     /// Every remaining object was placed inside.
     pub success: bool,
+    /// Sum of C over the rollout's placements that ended inside (to relabel the return for
+    /// another reward: `CS(alpha)` return = `alpha * sum_c + (1 - alpha) * sum_s - failed`).
+    pub sum_c: f32,
+    /// Sum of S (0 or 1) over the rollout's placements that ended inside.
+    pub sum_s: f32,
+    /// The rollout ended with a failure (an object outside, or no feasible placement).
+    pub failed: bool,
 }
 
 /// The lookahead teacher (see the module docs). Holds its lattices and outcome buffer.
@@ -121,6 +128,9 @@ pub fn rollout(
         ret: 0.0,
         packed: 0,
         success: false,
+        sum_c: 0.0,
+        sum_s: 0.0,
+        failed: false,
     };
     for (i, &ty) in remaining.iter().enumerate() {
         let p = if i == 0 {
@@ -131,6 +141,7 @@ pub fn rollout(
                 Some(p) => p,
                 None => {
                     out.ret -= 1.0;
+                    out.failed = true;
                     return Ok(out);
                 }
             }
@@ -142,8 +153,11 @@ pub fn rollout(
         }
         out.ret += r;
         if !o.inside {
+            out.failed = true;
             return Ok(out);
         }
+        out.sum_c += o.compactness;
+        out.sum_s += o.stable as u8 as f32;
         out.packed += 1;
     }
     out.success = true;

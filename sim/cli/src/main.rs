@@ -16,7 +16,7 @@ use std::time::Instant;
 mod plot;
 
 use herb_daemon::evaluate::{SequenceMode, run_policy_episode};
-use herb_daemon::{Blbf, OnnxPolicy, Policy, SequenceModel};
+use herb_daemon::{Blbf, Policy, SequenceModel};
 
 #[derive(Parser)]
 #[command(
@@ -573,21 +573,20 @@ fn run_policy_method(
         (EvalMethod::Herb, None) => return Err("herb needs --policy <model.onnx>".into()),
         // Load once up front: a bad model is one clear error, not one per episode.
         (EvalMethod::Herb, Some(p)) => {
-            let probe = OnnxPolicy::load(p)?;
-            eprintln!(
-                "policy {}: {:.2} MFMA per decision, {:.2} MB",
-                p.display(),
-                probe.fma() as f64 / 1e6,
-                probe.file_bytes() as f64 / 1e6
-            );
+            let spec = p.to_string_lossy();
+            herb_daemon::load_policy(&spec, catalog)?;
+            let bytes = std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
+            eprintln!("policy {}: {:.2} MB", p.display(), bytes as f64 / 1e6);
         }
         _ => {}
     }
+    let env_catalog = catalog.clone();
     let make = || -> Result<_, String> {
         let mut policy: Box<dyn Policy> = match (m, policy_path) {
             (EvalMethod::Blbf, _) => Box::new(Blbf::new()),
             (EvalMethod::Herb, Some(p)) => {
-                Box::new(OnnxPolicy::load(p).map_err(|e| e.to_string())?)
+                herb_daemon::load_policy(&p.to_string_lossy(), env_catalog.as_ref())
+                    .map_err(|e| e.to_string())?
             }
             _ => return Err(format!("{} is not a decision-core policy", m.name())),
         };

@@ -17,12 +17,16 @@
 
 use herb_daemon::sequence::{SequenceModel, beam3};
 use herb_daemon::{Blbf, DecisionInput, Policy};
+use herb_sim::features::{self, CANDIDATE_LEN, CONTEXT_LEN, DecisionFeatures};
 use herb_sim::lattice::{Lattice, MAX_CANDIDATES};
 use herb_sim::paths::{self, MeshSource};
 use herb_sim::teacher::{LatticeRule, Lookahead};
 use herb_sim::{Catalog, ObsLayout, PackingEnv, RewardMode, SharedCatalog, TypeIdx, WorldConfig};
-use numpy::ndarray::{Array1, Array2, Array4};
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray4, PyReadonlyArray2};
+use numpy::ndarray::{Array1, Array2, Array3, Array4};
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyArray3, PyArray4, PyArrayDyn, PyReadonlyArray1,
+    PyReadonlyArray2, PyReadonlyArrayDyn,
+};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -79,6 +83,13 @@ struct Slot {
     blbf: Blbf,
     /// The lattice rule of [`VecEnv::step_rule`], made on first use.
     rule: Option<LatticeRule>,
+    /// The candidate inputs of the current state, once computed.
+    feats: DecisionFeatures,
+    /// `feats` describe the current state.
+    feats_fresh: bool,
+    /// Lattice and teacher for [`VecEnv::candidates`] and [`VecEnv::teacher`], made on first use.
+    lattice: Option<Lattice>,
+    teacher: Option<Lookahead>,
 }
 
 /// Results of one environment's step.
@@ -90,6 +101,9 @@ struct Out {
     success: bool,
     ep_return: f32,
     ep_len: u32,
+    /// The placement's C and S (0 without a placement).
+    compactness: f32,
+    stable: bool,
 }
 
 /// N packing environments stepped together.
@@ -110,7 +124,52 @@ impl VecEnv {
         s.running = true;
         s.ret = 0.0;
         s.len = 0;
+        s.feats_fresh = false;
         Ok(())
+    }
+
+    /// Computes the slot's candidate inputs for its current state.
+    fn slot_features(catalog: &Catalog, s: &mut Slot) {
+        let lattice = s.lattice.get_or_insert_with(|| Lattice::new(catalog));
+        let remaining = s.env.remaining();
+        match remaining.split_first() {
+            Some((&next, after)) => {
+                s.feats
+                    .compute(lattice, catalog, s.env.world().heightmap(), next, after);
+            }
+            None => s.feats.clear(),
+        }
+        s.feats_fresh = true;
+    }
+
+    /// Stacks every slot's candidate inputs: `(context [N, G], candidates [N, C, F], mask
+    /// [N, C])`.
+    #[allow(clippy::type_complexity)]
+    fn stack_features<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(
+        Bound<'py, PyArray2<f32>>,
+        Bound<'py, PyArray3<f32>>,
+        Bound<'py, PyArray2<f32>>,
+    )> {
+        let n = self.slots.len();
+        let ctx = Array2::from_shape_vec(
+            (n, CONTEXT_LEN),
+            self.slots.iter().flat_map(|s| s.feats.context.iter().copied()).collect(),
+        )
+        .map_err(value_err)?;
+        let cands = Array3::from_shape_vec(
+            (n, MAX_CANDIDATES, CANDIDATE_LEN),
+            self.slots.iter().flat_map(|s| s.feats.candidates.iter().copied()).collect(),
+        )
+        .map_err(value_err)?;
+        let mask = Array2::from_shape_vec(
+            (n, MAX_CANDIDATES),
+            self.slots.iter().flat_map(|s| s.feats.mask.iter().copied()).collect(),
+        )
+        .map_err(value_err)?;
+        Ok((ctx.into_pyarray(py), cands.into_pyarray(py), mask.into_pyarray(py)))
     }
 
     fn observations<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray4<f32>>> {
@@ -216,6 +275,10 @@ impl VecEnv {
                     len: 0,
                     blbf: Blbf::new(),
                     rule: None,
+                    feats: DecisionFeatures::default(),
+                    feats_fresh: false,
+                    lattice: None,
+                    teacher: None,
                 })
             })
             .collect::<PyResult<Vec<_>>>()?;
@@ -297,6 +360,8 @@ impl VecEnv {
                             object,
                             shape: world.catalog().shape(object),
                             step: s.len as usize,
+                            catalog: world.catalog(),
+                            after: s.env.remaining().get(1..).unwrap_or(&[]),
                         };
                         s.blbf.decide(&input).ok()
                     })
@@ -361,6 +426,8 @@ impl VecEnv {
                             terminated: r.terminated,
                             packed: r.info.packed as u32,
                             success: r.info.success,
+                            compactness: r.info.outcome.compactness,
+                            stable: r.info.outcome.stable,
                             ..Out::default()
                         };
                         Self::finish_step(sampler, s, o, autoreset)
@@ -371,19 +438,236 @@ impl VecEnv {
         self.step_result(py, outs)
     }
 
+    /// The candidate policy's inputs for every environment's current state (the shared
+    /// layout, `herb_sim::features`): `(context [N, CONTEXT_LEN], candidates [N,
+    /// MAX_CANDIDATES, CANDIDATE_LEN], mask [N, MAX_CANDIDATES])`. An environment with no
+    /// feasible placement (or whose episode ended) has an all-zero mask.
+    #[allow(clippy::type_complexity)]
+    fn candidates<'py>(
+        &mut self,
+        py: Python<'py>,
+    ) -> PyResult<(
+        Bound<'py, PyArray2<f32>>,
+        Bound<'py, PyArray3<f32>>,
+        Bound<'py, PyArray2<f32>>,
+    )> {
+        let (slots, pool, catalog) = (&mut self.slots, &self.pool, &self.catalog);
+        py.detach(|| {
+            pool.install(|| {
+                slots
+                    .par_iter_mut()
+                    .for_each(|s| Self::slot_features(catalog, s))
+            })
+        });
+        self.stack_features(py)
+    }
+
+    /// The lookahead teacher on every environment's current state: computes the candidate
+    /// inputs (as [`VecEnv::candidates`]) and simulates the first `k` candidates, each followed
+    /// by the lattice BLBF rule to the episode's end, under this environment's reward.
+    /// Returns `(context, candidates, mask, returns [N, MAX_CANDIDATES], packed [N,
+    /// MAX_CANDIDATES], choice [N], parts [N, MAX_CANDIDATES, 3])`: each simulated candidate's
+    /// return and objects packed (NaN and -1 where not simulated), the teacher's choice (-1
+    /// without candidates), and the return's parts, sum of C, sum of S and failed (0 or 1), so
+    /// that it can be relabelled for another reward (NaN where not simulated). Step with
+    /// [`VecEnv::step_candidates`].
+    #[allow(clippy::type_complexity)]
+    #[pyo3(signature = (k=8))]
+    fn teacher<'py>(
+        &mut self,
+        py: Python<'py>,
+        k: usize,
+    ) -> PyResult<(
+        Bound<'py, PyArray2<f32>>,
+        Bound<'py, PyArray3<f32>>,
+        Bound<'py, PyArray2<f32>>,
+        Bound<'py, PyArray2<f32>>,
+        Bound<'py, PyArray2<i32>>,
+        Bound<'py, PyArray1<i64>>,
+        Bound<'py, PyArray3<f32>>,
+    )> {
+        if !(1..=MAX_CANDIDATES).contains(&k) {
+            return Err(value_err(format!("k {k} outside 1..={MAX_CANDIDATES}")));
+        }
+        let (slots, pool, catalog) = (&mut self.slots, &self.pool, &self.catalog);
+        type Sim = (Vec<f32>, Vec<i32>, i64, Vec<f32>);
+        let sims: Result<Vec<Sim>, String> = py.detach(|| {
+            pool.install(|| {
+                slots
+                    .par_iter_mut()
+                    .map(|s| {
+                        Self::slot_features(catalog, s);
+                        let mut rets = vec![f32::NAN; MAX_CANDIDATES];
+                        let mut packed = vec![-1i32; MAX_CANDIDATES];
+                        let mut parts = vec![f32::NAN; MAX_CANDIDATES * 3];
+                        if s.feats.placements.is_empty() {
+                            return Ok((rets, packed, -1, parts));
+                        }
+                        let reward = s.env.reward_mode();
+                        let t = s
+                            .teacher
+                            .get_or_insert_with(|| Lookahead::new(catalog, k, reward));
+                        if t.k() != k {
+                            *t = Lookahead::new(catalog, k, reward);
+                        }
+                        let chosen = t
+                            .decide(s.env.world(), s.env.remaining())
+                            .map_err(|e| e.to_string())?;
+                        // The teacher's lattice saw the same state: its candidates are the rows.
+                        for (j, o) in t.outcomes().iter().enumerate() {
+                            debug_assert_eq!(o.placement, s.feats.placements[j]);
+                            rets[j] = o.ret;
+                            packed[j] = o.packed as i32;
+                            parts[3 * j..3 * j + 3].copy_from_slice(&[
+                                o.sum_c,
+                                o.sum_s,
+                                o.failed as u8 as f32,
+                            ]);
+                        }
+                        let choice = chosen
+                            .and_then(|p| s.feats.placements.iter().position(|q| *q == p))
+                            .map_or(-1, |j| j as i64);
+                        Ok((rets, packed, choice, parts))
+                    })
+                    .collect()
+            })
+        });
+        let sims = sims.map_err(PyRuntimeError::new_err)?;
+        let (ctx, cands, mask) = self.stack_features(py)?;
+        let n = sims.len();
+        let rets = Array2::from_shape_vec(
+            (n, MAX_CANDIDATES),
+            sims.iter().flat_map(|x| x.0.iter().copied()).collect(),
+        )
+        .map_err(value_err)?;
+        let packed = Array2::from_shape_vec(
+            (n, MAX_CANDIDATES),
+            sims.iter().flat_map(|x| x.1.iter().copied()).collect(),
+        )
+        .map_err(value_err)?;
+        let choice = Array1::from_iter(sims.iter().map(|x| x.2));
+        let parts = Array3::from_shape_vec(
+            (n, MAX_CANDIDATES, 3),
+            sims.iter().flat_map(|x| x.3.iter().copied()).collect(),
+        )
+        .map_err(value_err)?;
+        Ok((
+            ctx,
+            cands,
+            mask,
+            rets.into_pyarray(py),
+            packed.into_pyarray(py),
+            choice.into_pyarray(py),
+            parts.into_pyarray(py),
+        ))
+    }
+
+    /// Places each environment's next object at its candidate `index[i]` from the last
+    /// [`VecEnv::candidates`] or [`VecEnv::teacher`] call (which must describe the current
+    /// state). An environment without candidates ends its episode, failed, with reward -1
+    /// (its index is ignored); an index that is not a candidate is an error. Returns
+    /// `(rewards, terminated, info)` as [`VecEnv::step`] without the observations; call
+    /// `candidates()` for the next state.
+    #[allow(clippy::type_complexity)]
+    fn step_candidates<'py>(
+        &mut self,
+        py: Python<'py>,
+        index: PyReadonlyArray1<'py, i64>,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<f32>>,
+        Bound<'py, PyArray1<bool>>,
+        Bound<'py, PyDict>,
+    )> {
+        let idx = index.as_array();
+        let n = self.slots.len();
+        if idx.len() != n {
+            return Err(value_err(format!(
+                "{} indices for {n} environments",
+                idx.len()
+            )));
+        }
+        for (i, s) in self.slots.iter().enumerate() {
+            if !s.running {
+                return Err(PyRuntimeError::new_err(format!(
+                    "environment {i} has ended its episode: call reset()"
+                )));
+            }
+            if !s.feats_fresh {
+                return Err(PyRuntimeError::new_err(format!(
+                    "environment {i}: call candidates() or teacher() before step_candidates()"
+                )));
+            }
+            let c = s.feats.placements.len();
+            if c > 0 && !(0..c as i64).contains(&idx[i]) {
+                return Err(value_err(format!(
+                    "index {} of environment {i} is not one of its {c} candidates",
+                    idx[i]
+                )));
+            }
+        }
+        let idx: Vec<i64> = idx.iter().copied().collect();
+        let (slots, sampler, pool, autoreset) =
+            (&mut self.slots, &self.sampler, &self.pool, self.autoreset);
+        let outs: Result<Vec<Out>, String> = py.detach(|| {
+            pool.install(|| {
+                slots
+                    .par_iter_mut()
+                    .zip(idx.par_iter())
+                    .map(|(s, &j)| {
+                        s.feats_fresh = false;
+                        let o = match s.feats.placements.get(j as usize).copied() {
+                            Some(p) => {
+                                let r = s
+                                    .env
+                                    .step_placement(p.x, p.y, p.theta())
+                                    .map_err(|e| e.to_string())?;
+                                Out {
+                                    reward: r.reward,
+                                    terminated: r.terminated,
+                                    packed: r.info.packed as u32,
+                                    success: r.info.success,
+                                    compactness: r.info.outcome.compactness,
+                                    stable: r.info.outcome.stable,
+                                    ..Out::default()
+                                }
+                            }
+                            None => Out {
+                                reward: -1.0,
+                                terminated: true,
+                                packed: s.env.world().placed().len() as u32,
+                                success: false,
+                                ..Out::default()
+                            },
+                        };
+                        Self::finish_step(sampler, s, o, autoreset)
+                    })
+                    .collect()
+            })
+        });
+        let outs = outs.map_err(PyRuntimeError::new_err)?;
+        let info = Self::info_dict(py, &outs)?;
+        Ok((
+            Array1::from_iter(outs.iter().map(|o| o.reward)).into_pyarray(py),
+            Array1::from_iter(outs.iter().map(|o| o.terminated)).into_pyarray(py),
+            info,
+        ))
+    }
+
     /// Places each environment's next object with a lattice rule decided in Rust: `rule` is
     /// `lattice-blbf` (the BLBF rule restricted to the placement lattice) or `lookahead` (the
     /// teacher: the best of the first `k` lattice candidates by the return, under this
     /// environment's reward, of a lattice-BLBF rollout to the episode's end). An object
-    /// without a feasible placement ends its episode, failed, with reward -1. Returns as
-    /// [`VecEnv::step`].
+    /// without a feasible placement ends its episode, failed, with reward -1. With `active`
+    /// (`[N]` bool), only the environments marked true are stepped (the others report reward
+    /// 0, not terminated, and keep their state). Returns as [`VecEnv::step`].
     #[allow(clippy::type_complexity)]
-    #[pyo3(signature = (rule, k=8))]
+    #[pyo3(signature = (rule, k=8, active=None))]
     fn step_rule<'py>(
         &mut self,
         py: Python<'py>,
         rule: &str,
         k: usize,
+        active: Option<PyReadonlyArray1<'py, bool>>,
     ) -> PyResult<(
         Bound<'py, PyArray4<f32>>,
         Bound<'py, PyArray1<f32>>,
@@ -398,6 +682,17 @@ impl VecEnv {
                 "rule {rule:?}: expected lattice-blbf or lookahead"
             )));
         }
+        let n = self.slots.len();
+        let active: Vec<bool> = match active {
+            Some(a) => a.as_array().iter().copied().collect(),
+            None => vec![true; n],
+        };
+        if active.len() != n {
+            return Err(value_err(format!(
+                "active has {} values for {n} environments",
+                active.len()
+            )));
+        }
         if let Some(i) = self.slots.iter().position(|s| !s.running) {
             return Err(PyRuntimeError::new_err(format!(
                 "environment {i} has ended its episode: call reset()"
@@ -410,7 +705,11 @@ impl VecEnv {
             pool.install(|| {
                 slots
                     .par_iter_mut()
-                    .map(|s| {
+                    .zip(active.par_iter())
+                    .map(|(s, &on)| {
+                        if !on {
+                            return Ok(Out::default());
+                        }
                         let fits = match &s.rule {
                             Some(LatticeRule::Blbf(_)) => rule == "lattice-blbf",
                             Some(LatticeRule::Lookahead(t)) => rule == "lookahead" && t.k() == k,
@@ -439,6 +738,8 @@ impl VecEnv {
                                     terminated: r.terminated,
                                     packed: r.info.packed as u32,
                                     success: r.info.success,
+                                    compactness: r.info.outcome.compactness,
+                                    stable: r.info.outcome.stable,
                                     ..Out::default()
                                 }
                             }
@@ -495,7 +796,18 @@ impl VecEnv {
     )> {
         let outs = outs.map_err(PyRuntimeError::new_err)?;
         let obs = self.observations(py)?;
-        let col = |f: &dyn Fn(&Out) -> f32| Array1::from_iter(outs.iter().map(f)).into_pyarray(py);
+        let info = Self::info_dict(py, &outs)?;
+        Ok((
+            obs,
+            Array1::from_iter(outs.iter().map(|o| o.reward)).into_pyarray(py),
+            Array1::from_iter(outs.iter().map(|o| o.terminated)).into_pyarray(py),
+            info,
+        ))
+    }
+
+    /// The `info` dictionary of a step: `packed`, `success`, `episode_return`,
+    /// `episode_length`, and the placement's `compactness` (C) and `stable` (S).
+    fn info_dict<'py>(py: Python<'py>, outs: &[Out]) -> PyResult<Bound<'py, PyDict>> {
         let info = PyDict::new(py);
         info.set_item(
             "packed",
@@ -505,29 +817,81 @@ impl VecEnv {
             "success",
             Array1::from_iter(outs.iter().map(|o| o.success)).into_pyarray(py),
         )?;
-        info.set_item("episode_return", col(&|o| o.ep_return))?;
+        info.set_item(
+            "episode_return",
+            Array1::from_iter(outs.iter().map(|o| o.ep_return)).into_pyarray(py),
+        )?;
         info.set_item(
             "episode_length",
             Array1::from_iter(outs.iter().map(|o| o.ep_len)).into_pyarray(py),
         )?;
-        Ok((
-            obs,
-            col(&|o| o.reward),
-            Array1::from_iter(outs.iter().map(|o| o.terminated)).into_pyarray(py),
-            info,
-        ))
+        info.set_item(
+            "compactness",
+            Array1::from_iter(outs.iter().map(|o| o.compactness)).into_pyarray(py),
+        )?;
+        info.set_item(
+            "stable",
+            Array1::from_iter(outs.iter().map(|o| o.stable)).into_pyarray(py),
+        )?;
+        Ok(info)
     }
+}
+
+/// The box's half turn about z applied to candidate rows (`[..., CANDIDATE_LEN]`, float32):
+/// a turned copy (see `herb_sim::features`).
+#[pyfunction]
+fn half_turn_candidates<'py>(
+    py: Python<'py>,
+    rows: PyReadonlyArrayDyn<'py, f32>,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    turned(py, rows, CANDIDATE_LEN, features::half_turn_candidates)
+}
+
+/// The box's half turn about z applied to context vectors (`[..., CONTEXT_LEN]`, float32): a
+/// turned copy.
+#[pyfunction]
+fn half_turn_context<'py>(
+    py: Python<'py>,
+    contexts: PyReadonlyArrayDyn<'py, f32>,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    turned(py, contexts, CONTEXT_LEN, features::half_turn_context)
+}
+
+fn turned<'py>(
+    py: Python<'py>,
+    a: PyReadonlyArrayDyn<'py, f32>,
+    last: usize,
+    f: fn(&mut [f32]),
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let a = a.as_array();
+    if a.shape().last() != Some(&last) {
+        return Err(value_err(format!(
+            "array of shape {:?}: the last axis must have {last} values",
+            a.shape()
+        )));
+    }
+    let mut out = a.as_standard_layout().into_owned();
+    let data = out
+        .as_slice_mut()
+        .ok_or_else(|| value_err("array is not contiguous"))?;
+    f(data);
+    Ok(out.into_pyarray(py))
 }
 
 /// The native module.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<VecEnv>()?;
+    m.add_function(wrap_pyfunction!(half_turn_candidates, m)?)?;
+    m.add_function(wrap_pyfunction!(half_turn_context, m)?)?;
     m.add("OBS_LEN", ObsLayout::LEN)?;
     m.add("INPUT_NAME", ObsLayout::INPUT_NAME)?;
     m.add("OUTPUT_NAME", ObsLayout::OUTPUT_NAME)?;
     m.add("OBS_CELL_M", ObsLayout::CELL_M)?;
     m.add("BOX_HALF_X", herb_sim::frames::BOX_HALF_X)?;
     m.add("BOX_HALF_Y", herb_sim::frames::BOX_HALF_Y)?;
+    m.add("CONTEXT_LEN", CONTEXT_LEN)?;
+    m.add("CANDIDATE_LEN", CANDIDATE_LEN)?;
+    m.add("MAX_CANDIDATES", MAX_CANDIDATES)?;
     Ok(())
 }

@@ -15,9 +15,12 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
-from ._native import BOX_HALF_X, BOX_HALF_Y, INPUT_NAME, OBS_CELL_M, OBS_LEN, OUTPUT_NAME, VecEnv
+from ._native import (BOX_HALF_X, BOX_HALF_Y, CANDIDATE_LEN, CONTEXT_LEN, INPUT_NAME, MAX_CANDIDATES,
+                      OBS_CELL_M, OBS_LEN, OUTPUT_NAME, VecEnv, half_turn_candidates, half_turn_context)
 
-__all__ = ["PackingEnv", "HerbVectorEnv", "VecEnv", "OBS_LEN", "OBS_CELL_M", "BOX_HALF_X", "BOX_HALF_Y", "INPUT_NAME", "OUTPUT_NAME"]
+__all__ = ["PackingEnv", "HerbVectorEnv", "VecEnv", "OBS_LEN", "OBS_CELL_M", "BOX_HALF_X", "BOX_HALF_Y", "INPUT_NAME",
+           "OUTPUT_NAME", "CONTEXT_LEN", "CANDIDATE_LEN", "MAX_CANDIDATES", "half_turn_candidates",
+           "half_turn_context"]
 
 OBS_SHAPE = VecEnv.observation_shape()
 
@@ -84,9 +87,27 @@ class HerbVectorEnv(gym.vector.VectorEnv):
         truncated = np.zeros(self.num_envs, dtype=bool)
         return obs, reward, terminated, truncated, info
 
-    def step_rule(self, rule, k=8):
-        """Steps every environment with a lattice rule decided in Rust (``lattice-blbf`` or
-        ``lookahead`` with ``k`` candidates); returns as ``step``. See ``VecEnv.step_rule``."""
-        obs, reward, terminated, info = self._env.step_rule(rule, k)
+    def candidates(self):
+        """The candidate policy's inputs for every environment: ``(context [N, CONTEXT_LEN],
+        candidates [N, MAX_CANDIDATES, CANDIDATE_LEN], mask [N, MAX_CANDIDATES])``."""
+        return self._env.candidates()
+
+    def teacher(self, k=8):
+        """The lookahead teacher on every environment: ``(context, candidates, mask, returns,
+        packed, choice, parts)``; see ``VecEnv.teacher``."""
+        return self._env.teacher(k)
+
+    def step_candidates(self, index):
+        """Steps every environment with its candidate ``index[i]`` (from the last
+        ``candidates()`` or ``teacher()``): ``(rewards, terminated, info)``."""
+        return self._env.step_candidates(np.ascontiguousarray(index, dtype=np.int64))
+
+    def step_rule(self, rule, k=8, active=None):
+        """Steps every environment (or those where ``active`` is true) with a lattice rule
+        decided in Rust (``lattice-blbf`` or ``lookahead`` with ``k`` candidates); returns as
+        ``step``. See ``VecEnv.step_rule``."""
+        if active is not None:
+            active = np.ascontiguousarray(active, dtype=bool)
+        obs, reward, terminated, info = self._env.step_rule(rule, k, active)
         truncated = np.zeros(self.num_envs, dtype=bool)
         return obs, reward, terminated, truncated, info

@@ -3,7 +3,7 @@
 # the repository, with .whl, .data and runs/<setting> carried). Installs the wheels into a
 # temporary site dir, unpacks the meshes, trains ~8 minutes from the last checkpoint, and
 # copies the checkpoint, the exported policy and the progress into $OUT.
-# Usage: models/device/chunk.sh <setting> [minutes]   (setting: cs06, cs09, simple, c, cs06-random)
+# Usage: models/continuous/device/chunk.sh <setting> [minutes]   (setting: cs06, cs09, simple, c, cs06-random)
 set -euo pipefail
 SETTING=$1
 MINUTES=${2:-8}
@@ -11,7 +11,7 @@ SITE=$(mktemp -d)
 python3 -m pip install -q --no-index --no-deps --target "$SITE" .whl/*.whl
 export PYTHONPATH="$SITE" PYTHONUNBUFFERED=1
 mkdir -p .data/boxed && tar xzf .data/meshes.tgz -C .data/boxed
-python3 models/train.py --config "models/configs/$SETTING.toml" --out "runs/$SETTING" \
+python3 models/continuous/train.py --config "models/continuous/configs/$SETTING.toml" --out "runs/$SETTING" \
   --boxed .data/boxed --minutes "$MINUTES"
 mkdir -p "$OUT/$SETTING"
 cp runs/"$SETTING"/{checkpoint-actor.pt,checkpoint-critic.pt,checkpoint-critic-adam.pt,policy.onnx,policy.parity.bin,policy.parity.json,progress.csv} "$OUT/$SETTING/"

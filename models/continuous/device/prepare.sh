@@ -6,7 +6,7 @@
 # Both folders are git-ignored; name them in the device tool's `carry` together with the run
 # folder (runs/<setting>) holding the checkpoints.
 set -euo pipefail
-cd "$(dirname "$0")/../.."
+cd "$(dirname "$0")/../../.."
 VENV=${HERB_VENV:-$PWD/.venv}
 [ -x "$VENV/bin/maturin" ] || { python3 -m venv "$VENV"; "$VENV/bin/pip" install -q maturin; }
 rm -rf .whl && mkdir -p .whl .data

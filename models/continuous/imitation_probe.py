@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
 """How closely can an actor network imitate the BLBF teacher? A supervised probe.
 
-    python models/imitation_probe.py collect --actor runs/cs06-bc/checkpoint-actor.pt --out runs/probe
-    python models/imitation_probe.py fit --net herblite56 --minutes 6 --out runs/probe
-    python models/imitation_probe.py fit --net spatial --minutes 6 --lr 1e-3 --out runs/probe
-    python models/imitation_probe.py fit --net spatial-ce --minutes 6 --lr 1e-3 --out runs/probe
-    python models/imitation_probe.py fit --net herblite56 --actor runs/cs06-bc/checkpoint-actor.pt --minutes 0 --out runs/probe
+    python models/continuous/imitation_probe.py collect --actor runs/cs06-bc/checkpoint-actor.pt --out runs/probe
+    python models/continuous/imitation_probe.py fit --net herblite56 --minutes 6 --out runs/probe
+    python models/continuous/imitation_probe.py fit --net spatial --minutes 6 --lr 1e-3 --out runs/probe
+    python models/continuous/imitation_probe.py fit --net spatial-ce --minutes 6 --lr 1e-3 --out runs/probe
+    python models/continuous/imitation_probe.py fit --net herblite56 --actor runs/cs06-bc/checkpoint-actor.pt --minutes 0 --out runs/probe
 
 The guided CS0.6 policy places about 3 cm and 25 degrees away from its teacher, and fails
 where the teacher would not. This probe separates the network from the RL: ``collect``

@@ -2,10 +2,10 @@
 """The sequence and reward ablation: episode length (objects placed before the episode ended)
 over environment steps, one curve per training run, from the runs' ``progress.csv``.
 
-    python models/plot_training.py --out results/ablation.png results/training/*.csv
+    python models/continuous/plot_training.py --out results/ablation.png results/training/*.csv
 
 Each CSV is named after its setting (``cs06.csv`` -> "cs06"); ``mean_len`` is the mean over the
-last 200 episodes that ended when the row was written (models/train.py). Needs matplotlib.
+last 200 episodes that ended when the row was written (models/continuous/train.py). Needs matplotlib.
 """
 
 import argparse

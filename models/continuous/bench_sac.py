@@ -1,7 +1,7 @@
-"""SAC update throughput of models/train.py's networks (herbnet112 or herblite56 actor, twin critics, targets,
+"""SAC update throughput of models/continuous/train.py's networks (herbnet112 or herblite56 actor, twin critics, targets,
 Adam, entropy temperature) on random batches: updates/s and samples/s at a given batch size.
 
-Usage: python models/bench_sac.py [--batch 256] [--updates 20] [--threads N] [--pool 2|4]
+Usage: python models/continuous/bench_sac.py [--batch 256] [--updates 20] [--threads N] [--pool 2|4]
 Prints one JSON line (device, batch, updates_per_s, samples_per_s).
 """
 
