@@ -151,15 +151,31 @@ class Critic(nn.Module):
         return torch.cat([self.q1(ctx, cand, mask), self.q2(ctx, cand, mask)], -1)
 
 
+def parse_reward(text):
+    """``simple``, ``c`` or ``cs<alpha>`` as (alpha for C, alpha for S, constant when inside)."""
+    t = text.lower()
+    if t == "simple":
+        return 0.0, 0.0, 1.0
+    if t == "c":
+        return 1.0, 0.0, 0.0
+    if t.startswith("cs"):
+        a = float(t[2:])
+        return a, 1.0 - a, 0.0
+    raise SystemExit(f"unknown reward {text!r} (simple, c, cs<alpha>)")
+
+
 class Replay:
     """States stored once, linked to their successors (episodic storage), in float16.
 
     Row ``i`` holds a decision state (context, candidate rows, candidate count), the action
-    taken (-1: none, the state had no candidate), the reward, whether the episode ended, the
-    row of the next state (-1 at the end), whether the row is prior (teacher) data, and the
-    teacher's simulated return of each candidate it tried (NaN elsewhere)."""
+    taken (-1: none, the state had no candidate or its episode was cut), the placement's C, S
+    and whether it stayed inside, whether the episode ended, the row of the next state (-1 at
+    the end), whether the row is prior (teacher) data, and for each candidate the teacher
+    tried the parts of its simulated return (sum of C, sum of S, objects packed, failed; NaN
+    elsewhere). Rewards and returns are computed from the parts for the run's reward, so
+    prior data collected under one reward serves every setting."""
 
-    FIELDS = ("ctx", "cand", "count", "act", "rew", "done", "nxt", "prior", "mc")
+    FIELDS = ("ctx", "cand", "count", "act", "c", "s", "inside", "done", "nxt", "prior", "mcp")
 
     def __init__(self, cap):
         self.cap, self.n = cap, 0
@@ -167,13 +183,15 @@ class Replay:
         self.cand = np.zeros((cap, C, FEAT), np.float16)
         self.count = np.zeros(cap, np.uint8)
         self.act = np.full(cap, -1, np.int16)
-        self.rew = np.zeros(cap, np.float32)
+        self.c = np.zeros(cap, np.float32)
+        self.s = np.zeros(cap, np.float32)
+        self.inside = np.zeros(cap, bool)
         self.done = np.zeros(cap, bool)
         self.nxt = np.full(cap, -1, np.int64)
         self.prior = np.zeros(cap, bool)
-        self.mc = np.full((cap, C), np.nan, np.float16)
+        self.mcp = np.full((cap, C, 4), np.nan, np.float16)
 
-    def add(self, ctx, cand, mask, prior, mc=None):
+    def add(self, ctx, cand, mask, prior, mcp=None):
         """Stores states (a batch), returns their rows."""
         k = len(ctx)
         if self.n + k > self.cap:
@@ -182,8 +200,8 @@ class Replay:
         self.ctx[rows], self.cand[rows] = ctx, cand
         self.count[rows] = mask.sum(1).astype(np.uint8)
         self.prior[rows] = prior
-        if mc is not None:
-            self.mc[rows] = mc
+        if mcp is not None:
+            self.mcp[rows] = mcp
         self.n += k
         return rows
 
@@ -213,6 +231,27 @@ class Replay:
                              "the run does not go on from an empty one")
         return r
 
+    def rewards(self, rows, reward):
+        """The rewards of `rows` under `reward` (``parse_reward``)."""
+        wc, ws, k = reward
+        r = wc * self.c[rows] + ws * self.s[rows] + k
+        return np.where(self.inside[rows], r, -1.0).astype(np.float32)
+
+    def returns(self, rows, reward):
+        """The teacher's simulated returns of `rows`' candidates under `reward` (NaN where
+        not simulated)."""
+        wc, ws, k = reward
+        p = self.mcp[rows].astype(np.float32)
+        return wc * p[..., 0] + ws * p[..., 1] + k * p[..., 2] - p[..., 3]
+
+    def keep_prior(self):
+        """Drops everything but the prior rows (which come first)."""
+        n = int(self.prior[: self.n].sum())
+        if not self.prior[:n].all():
+            raise SystemExit("prior rows are not the buffer's first rows")
+        self.n = n
+        self.nxt[:n][self.nxt[:n] >= n] = -1
+
     def sample(self, rng, k, prior):
         """`k` rows with an action, from the prior or the online part."""
         pool = np.flatnonzero((self.act[: self.n] >= 0) & (self.prior[: self.n] == prior))
@@ -225,7 +264,7 @@ def masks(count):
     return (np.arange(C)[None, :] < count[:, None]).astype(np.float32)
 
 
-def batch_tensors(rb, rows, rng, dev):
+def batch_tensors(rb, rows, rng, dev, reward):
     """The tensors of an update for `rows`, half-turned with probability 1/2 (the whole batch
     at once: the same rows turned are the same decision)."""
     nxt = rb.nxt[rows]
@@ -236,14 +275,17 @@ def batch_tensors(rb, rows, rng, dev):
     if rng.random() < 0.5:
         ctx, nctx = herb_sim.half_turn_context(ctx), herb_sim.half_turn_context(nctx)
         cand, ncand = herb_sim.half_turn_candidates(cand), herb_sim.half_turn_candidates(ncand)
+    mc = rb.returns(rows, reward)
+    # The teacher's choice under this run's reward: the best simulated return (first of equals).
+    teacher = np.argmax(np.where(np.isnan(mc), -np.inf, mc), axis=1)
     t = lambda a, dt=torch.float32: torch.as_tensor(np.ascontiguousarray(a), dtype=dt, device=dev)
     return dict(
         ctx=t(ctx), cand=t(cand), mask=t(masks(rb.count[rows])),
-        act=t(rb.act[rows], torch.int64), rew=t(rb.rew[rows]),
+        act=t(rb.act[rows], torch.int64), rew=t(rb.rewards(rows, reward)),
         # The episode ended, or the next state had no candidate (a forced failure, value -1).
         end=t(rb.done[rows] | ~has_next), nctx=t(nctx), ncand=t(ncand),
         nmask=t(masks(rb.count[nrows])), nempty=t(has_next & (rb.count[nrows] == 0)),
-        mc=t(rb.mc[rows].astype(np.float32)), prior=t(rb.prior[rows]),
+        mc=t(mc), teacher=t(teacher, torch.int64), prior=t(rb.prior[rows]),
     )
 
 
@@ -282,7 +324,7 @@ def update(m, b, c, bc_weight, mc_weight):
         qmin = critic(b["ctx"], b["cand"], b["mask"]).min(-1).values
     loss_sac = (p * (alpha * logp - qmin) * b["mask"]).sum(-1).mean()
     pr = b["prior"] > 0
-    loss_bc = F.nll_loss(logp[pr], b["act"][pr]) if pr.any() else torch.zeros((), device=q.device)
+    loss_bc = F.nll_loss(logp[pr], b["teacher"][pr]) if pr.any() else torch.zeros((), device=q.device)
     loss_pi = loss_sac + bc_weight * loss_bc
     m["opt_pi"].zero_grad()
     loss_pi.backward()
@@ -407,6 +449,7 @@ def main():
     ap.add_argument("--boxed", default=None)
     a = ap.parse_args()
     c = load_config(a.config)
+    reward = parse_reward(c["env"]["reward"])
     os.makedirs(a.out, exist_ok=True)
     torch.set_num_threads(a.threads)
     torch.manual_seed(c["seed"])
@@ -433,6 +476,15 @@ def main():
                   steps=0, updates=0, episodes=0, wall=0.0, cpu=0.0, env_seed=int(c["seed"]),
                   ep_len=[], ep_ret=[], ep_success=[])
         rb = Replay(s["buffer_size"])
+        src = c["teacher"].get("prior_from")
+        if src:
+            # Prior data shared with another setting's run (relabelled for this reward).
+            shared = Replay.load(os.path.join(src, "replay.npz"), s["buffer_size"])
+            shared.keep_prior()
+            rb = shared
+            st["phase"] = "offline"
+            st["teacher_episodes"] = -1
+            print(f"prior data from {src}: {rb.n} states", flush=True)
     rng = np.random.default_rng(c["seed"] + st["updates"] + st["steps"])
     minutes = a.minutes if a.minutes is not None else c["run"]["chunk_minutes"]
     stop = {"now": False}
@@ -468,13 +520,16 @@ def main():
         rb.act[open_rows] = -1
         prev[:] = -1
 
-    def step_and_store(ctx, cand, mask, act, prior, mc=None):
-        rows = rb.add(ctx, cand, mask, prior, mc)
+    def step_and_store(ctx, cand, mask, act, prior, mcp=None):
+        rows = rb.add(ctx, cand, mask, prior, mcp)
         ok = prev >= 0
         rb.nxt[prev[ok]] = rows[ok]
         rew, term, info = env.step_candidates(np.maximum(act, 0))
         rb.act[rows] = np.where(mask.sum(1) > 0, act, -1)
-        rb.rew[rows], rb.done[rows] = rew, term
+        rb.c[rows], rb.s[rows] = info["compactness"], info["stable"].astype(np.float32)
+        # A placement ended outside exactly when its reward is -1 (every other reward >= 0).
+        rb.inside[rows] = rew > -1.0
+        rb.done[rows] = term
         prev[:] = np.where(term, -1, rows)
         ended = np.flatnonzero(term)
         st["ep_len"] += info["episode_length"][ended].tolist()
@@ -489,8 +544,11 @@ def main():
                 truncate()
                 st["phase"] = "offline"
                 continue
-            ctx, cand, mask, rets, _, choice = env.teacher(c["teacher"]["k"])
-            st["teacher_episodes"] += step_and_store(ctx, cand, mask, choice, True, rets)
+            ctx, cand, mask, _, packed, choice, parts = env.teacher(c["teacher"]["k"])
+            mcp = np.concatenate([parts[..., :2], packed[..., None].astype(np.float32),
+                                  parts[..., 2:]], -1)
+            mcp[packed < 0] = np.nan
+            st["teacher_episodes"] += step_and_store(ctx, cand, mask, choice, True, mcp)
             st["teacher_steps"] += n_env
         elif st["phase"] == "offline":
             if st["offline_updates"] >= c["offline"]["updates"]:
@@ -499,7 +557,7 @@ def main():
                 prev[:] = -1
                 continue
             rows = rb.sample(rng, s["batch_size"], True)
-            stats.append(update(m, batch_tensors(rb, rows, rng, "cpu"), c, s["bc_weight_start"],
+            stats.append(update(m, batch_tensors(rb, rows, rng, "cpu", reward), c, s["bc_weight_start"],
                                 s["mc_weight"]))
             st["offline_updates"] += 1
             st["updates"] += 1
@@ -521,7 +579,7 @@ def main():
                 on = rb.sample(rng, half, False)
                 pr = rb.sample(rng, s["batch_size"] - half if on is not None else s["batch_size"], True)
                 rows = pr if on is None else np.concatenate([pr, on])
-                stats.append(update(m, batch_tensors(rb, rows, rng, "cpu"), c, bc, s["mc_weight"]))
+                stats.append(update(m, batch_tensors(rb, rows, rng, "cpu", reward), c, bc, s["mc_weight"]))
                 st["updates"] += 1
         if time.time() - last_log >= c["run"]["log_every_s"]:
             last_log = time.time()

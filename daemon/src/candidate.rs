@@ -144,6 +144,29 @@ impl CandidatePolicy {
         Ok(self.feats.placements[best])
     }
 
+    /// The network's logits for explicit inputs (the contract's layouts; for parity tests and
+    /// tools). Errors name a wrong input length.
+    pub fn logits(&mut self, context: &[f32], candidates: &[f32], mask: &[f32]) -> Result<&[f32]> {
+        let want = [CONTEXT_LEN, MAX_CANDIDATES * CANDIDATE_LEN, MAX_CANDIDATES];
+        for ((name, have), want) in INPUT_NAMES
+            .iter()
+            .zip([context.len(), candidates.len(), mask.len()])
+            .zip(want)
+        {
+            if have != want {
+                return Err(model_err(
+                    &self.path,
+                    format!("input {name:?} of {have} values, expected {want}"),
+                ));
+            }
+        }
+        self.feats.context.copy_from_slice(context);
+        self.feats.candidates.copy_from_slice(candidates);
+        self.feats.mask.copy_from_slice(mask);
+        self.infer()?;
+        Ok(&self.logits)
+    }
+
     /// Runs the network on the current features into `logits` (unchecked values).
     fn infer(&mut self) -> Result<()> {
         let srcs: [&[f32]; 3] = [&self.feats.context, &self.feats.candidates, &self.feats.mask];
