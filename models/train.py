@@ -28,12 +28,13 @@ Phases, in order, each resumable (one run folder holds everything):
    (RLPD, Ball et al. 2023), the imitation weight decaying to ``sac.bc_weight_end``.
 
 Every batch is augmented with the box's half turn (``herb_sim.half_turn_*``) with probability
-1/2: exact for the box. At every chunk end (``run.chunk_minutes``, ``--minutes``) and on
-SIGTERM the run saves its checkpoint **and its replay buffer** atomically (write, then
-rename) and exports ``policy.onnx`` (the candidate contract: inputs ``context``,
-``candidates``, ``mask``; output ``logits``) with parity samples; ``progress.csv`` grows by a
-row every ``run.log_every_s``. ``--resume`` continues exactly where the last save stopped; a
-missing or corrupt checkpoint or buffer is an error naming the file, never a silent restart.
+1/2: exact for the box. Every ``run.chunk_minutes``, at the run's end (``--minutes``, default
+one chunk, ``inf`` to the end of the last phase) and on SIGTERM, the run saves its checkpoint
+**and its replay buffer** atomically (write, then rename); at the run's end and on SIGTERM it
+also exports ``policy.onnx`` (the candidate contract: inputs ``context``, ``candidates``,
+``mask``; output ``logits``) with parity samples. ``progress.csv`` grows by a row every
+``run.log_every_s``. ``--resume`` continues where the last save stopped; a missing or corrupt
+checkpoint or buffer is an error naming the file, never a silent restart from an empty buffer.
 """
 
 import argparse
@@ -46,6 +47,7 @@ import sys
 import time
 import tomllib
 import warnings
+import zipfile
 
 import numpy as np
 import torch
@@ -109,23 +111,28 @@ def make_env(c, seed, boxed=None, threads=None):
 class Scorer(nn.Module):
     """Scores every candidate of a decision: a context encoder, one MLP shared by all
     candidates (their row plus the context code), and a second layer that also sees the mean
-    code of the decision's candidates. ``heads`` outputs per candidate."""
+    code of the decision's candidates. ``heads`` outputs per candidate. A linear layer over a
+    candidate's row joined with a decision-wide code is written as the sum of two linear maps
+    (the decision's part computed once), which is the same function and keeps the exported
+    graph free of broadcast concatenations."""
 
     def __init__(self, heads, width=64):
         super().__init__()
         self.ctx = nn.Sequential(nn.Linear(G, 128), nn.LayerNorm(128), nn.ReLU(),
                                  nn.Linear(128, width), nn.ReLU())
-        self.cand = nn.Sequential(nn.Linear(FEAT + width, width), nn.LayerNorm(width), nn.ReLU(),
-                                  nn.Linear(width, width), nn.ReLU())
-        self.out = nn.Sequential(nn.Linear(2 * width, width), nn.LayerNorm(width), nn.ReLU(),
-                                 nn.Linear(width, heads))
+        self.cand_in = nn.Linear(FEAT, width)
+        self.ctx_in = nn.Linear(width, width, bias=False)
+        self.cand = nn.Sequential(nn.LayerNorm(width), nn.ReLU(), nn.Linear(width, width), nn.ReLU())
+        self.own = nn.Linear(width, width)
+        self.mean_in = nn.Linear(width, width, bias=False)
+        self.out = nn.Sequential(nn.LayerNorm(width), nn.ReLU(), nn.Linear(width, heads))
 
     def forward(self, ctx, cand, mask):
         g = self.ctx(ctx)
-        h = self.cand(torch.cat([cand, g[:, None, :].expand(-1, cand.shape[1], -1)], -1))
+        h = self.cand(self.cand_in(cand) + self.ctx_in(g)[:, None, :])
         m = mask[..., None]
         pooled = (h * m).sum(1) / m.sum(1).clamp(min=1.0)
-        return self.out(torch.cat([h, pooled[:, None, :].expand(-1, cand.shape[1], -1)], -1))
+        return self.out(self.own(h) + self.mean_in(pooled)[:, None, :])
 
 
 class Actor(nn.Module):
@@ -205,11 +212,17 @@ class Replay:
         self.n += k
         return rows
 
-    def save(self, path):
+    def save(self, path, cut=()):
+        """Writes the buffer (then renames it into place). Rows in `cut`, the last states of
+        episodes still running, are saved without an action: a resumed run starts new
+        episodes, so those never get their successor."""
         tmp = path + ".tmp"
+        fields = {k: getattr(self, k)[: self.n] for k in self.FIELDS}
+        if len(cut):
+            fields["act"] = fields["act"].copy()
+            fields["act"][np.asarray(cut)] = -1
         with open(tmp, "wb") as f:
-            np.savez(f, n=np.int64(self.n), cap=np.int64(self.cap),
-                     **{k: getattr(self, k)[: self.n] for k in self.FIELDS})
+            np.savez(f, n=np.int64(self.n), cap=np.int64(self.cap), **fields)
         os.replace(tmp, path)
 
     @classmethod
@@ -226,7 +239,7 @@ class Replay:
                                      f"(n, {', '.join(map(str, want.shape[1:]))}) with n = {n}")
                 want[:n] = a
             r.n = n
-        except (OSError, KeyError, ValueError, EOFError) as err:
+        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as err:
             raise SystemExit(f"{path}: corrupt or truncated replay buffer ({err}); "
                              "the run does not go on from an empty one")
         return r
@@ -341,7 +354,7 @@ def update(m, b, c, bc_weight, mc_weight):
     with torch.no_grad():
         for tp, cp in zip(target.parameters(), critic.parameters()):
             tp.lerp_(cp, s["tau"])
-    return float(loss_td), float(loss_mc), float(loss_bc), float(ent.mean()), float(alpha)
+    return tuple(float(v.detach()) for v in (loss_td, loss_mc, loss_bc, ent.mean(), alpha))
 
 
 class Deployed(nn.Module):
@@ -412,15 +425,15 @@ def append_progress(out, row):
         w.writerow(row)
 
 
-def save(out, m, st, rb):
-    """Checkpoint and buffer, each written then renamed."""
+def save(out, m, st, rb, cut=()):
+    """Checkpoint and buffer, each written then renamed (`cut`: see ``Replay.save``)."""
     ck = {k: m[k].state_dict() for k in ("actor", "critic", "target", "opt_q", "opt_pi", "opt_a")}
     ck["log_alpha"] = m["log_alpha"].detach().cpu()
     ck["state"] = st
     ck["rng"] = (np.random.get_state(), torch.get_rng_state())
     tmp = os.path.join(out, "checkpoint.pt.tmp")
     torch.save(ck, tmp)
-    rb.save(os.path.join(out, "replay.npz"))
+    rb.save(os.path.join(out, "replay.npz"), cut)
     os.replace(tmp, os.path.join(out, "checkpoint.pt"))
 
 
@@ -491,6 +504,9 @@ def main():
     signal.signal(signal.SIGTERM, lambda *_: stop.update(now=True))
     t0, cpu0, last_log = time.time(), time.process_time(), time.time()
     deadline = t0 + minutes * 60.0
+    # A checkpoint every run.chunk_minutes, whatever the run's length.
+    every = c["run"]["chunk_minutes"] * 60.0
+    next_save = t0 + every
     # Each chunk opens its environments with a fresh seed (recorded): episodes differ from
     # the last chunk's, and a resumed run never repeats them.
     env = make_env(c, st["env_seed"], a.boxed, a.threads)
@@ -581,6 +597,15 @@ def main():
                 rows = pr if on is None else np.concatenate([pr, on])
                 stats.append(update(m, batch_tensors(rb, rows, rng, "cpu", reward), c, bc, s["mc_weight"]))
                 st["updates"] += 1
+        if time.time() >= next_save:
+            next_save = time.time() + every
+            wall, cpu = time.time() - t0, time.process_time() - cpu0
+            st["wall"] += wall
+            st["cpu"] += cpu
+            save(a.out, m, st, rb, prev[prev >= 0])
+            st["wall"] -= wall
+            st["cpu"] -= cpu
+            print(f"checkpoint: {rb.n} states", flush=True)
         if time.time() - last_log >= c["run"]["log_every_s"]:
             last_log = time.time()
             extra = {}
