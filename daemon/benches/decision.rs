@@ -84,7 +84,7 @@ fn bench_policy(
                         object: next,
                         shape: catalog.shape(next),
                         step: 5,
-                        catalog: &catalog,
+                        catalog,
                         after: &[],
                     })
                     .expect("decision");

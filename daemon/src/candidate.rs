@@ -169,7 +169,11 @@ impl CandidatePolicy {
 
     /// Runs the network on the current features into `logits` (unchecked values).
     fn infer(&mut self) -> Result<()> {
-        let srcs: [&[f32]; 3] = [&self.feats.context, &self.feats.candidates, &self.feats.mask];
+        let srcs: [&[f32]; 3] = [
+            &self.feats.context,
+            &self.feats.candidates,
+            &self.feats.mask,
+        ];
         for (t, src) in self.inputs.iter_mut().zip(srcs) {
             Arc::make_mut(t)
                 .try_as_plain_ram_mut()
@@ -181,7 +185,12 @@ impl CandidatePolicy {
         }
         let logits = &mut self.logits;
         self.state
-            .run(self.inputs.iter().map(|t| t.clone().into_tvalue()).collect())
+            .run(
+                self.inputs
+                    .iter()
+                    .map(|t| t.clone().into_tvalue())
+                    .collect(),
+            )
             .and_then(|out| {
                 let first = out.first().ok_or_else(|| {
                     tract_onnx::tract_core::internal::anyhow!("the model returned no output")
@@ -260,7 +269,9 @@ fn check_contract(raw: &InferenceModel) -> std::result::Result<(), String> {
     if outs.len() != 1 || raw.outlet_label(outs[0]) != Some(CandidateLayout::OUTPUT_NAME) {
         return Err(format!(
             "outputs {:?}, expected one named {:?}",
-            outs.iter().map(|o| raw.outlet_label(*o)).collect::<Vec<_>>(),
+            outs.iter()
+                .map(|o| raw.outlet_label(*o))
+                .collect::<Vec<_>>(),
             CandidateLayout::OUTPUT_NAME
         ));
     }
@@ -269,8 +280,7 @@ fn check_contract(raw: &InferenceModel) -> std::result::Result<(), String> {
         .into_typed()
         .map_err(|e| format!("cannot type the model: {e:#}"))?;
     let of = typed.output_fact(0).map_err(|e| e.to_string())?;
-    if of.datum_type != DatumType::F32 || of.shape.as_concrete() != Some(&[1, MAX_CANDIDATES][..])
-    {
+    if of.datum_type != DatumType::F32 || of.shape.as_concrete() != Some(&[1, MAX_CANDIDATES][..]) {
         return Err(format!(
             "output {:?} {:?}, expected f32 [1, {MAX_CANDIDATES}]",
             of.datum_type, of.shape

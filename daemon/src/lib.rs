@@ -21,8 +21,8 @@ pub mod planner;
 pub mod policy;
 pub mod sequence;
 
-pub use error::{DecideError, Result};
 pub use candidate::CandidatePolicy;
+pub use error::{DecideError, Result};
 pub use onnx::OnnxPolicy;
 
 /// The placement policy named by `spec`: `blbf`, or the path of an ONNX model, loaded as a
@@ -38,9 +38,9 @@ pub fn load_policy(spec: &str, catalog: &herb_sim::Catalog) -> Result<Box<dyn Po
         source,
     })?;
     match candidate::input_names(&bytes) {
-        Ok(names) if names == candidate::INPUT_NAMES => Ok(Box::new(
-            CandidatePolicy::from_bytes(path, &bytes, catalog)?,
-        )),
+        Ok(names) if names == candidate::INPUT_NAMES => Ok(Box::new(CandidatePolicy::from_bytes(
+            path, &bytes, catalog,
+        )?)),
         _ => Ok(Box::new(OnnxPolicy::load(path)?)),
     }
 }

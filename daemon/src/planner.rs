@@ -7,13 +7,13 @@
 //! budget is about), plans the gripper waypoints, solves inverse kinematics and samples
 //! Ruckig trajectories at the loop period; it also computes brakes on request.
 
+use crate::DecideError;
 use crate::cell::{CellConfig, lift_to, plan_waypoints};
 use crate::config::Config;
 use crate::kinematics::{Arm, DOF, IkOptions};
 use crate::motion::{MotionPlanner, Setpoint, Setpoints};
 use crate::policy::{DecisionInput, Policy, check_action};
 use crate::sequence::{SequenceModel, beam3};
-use crate::DecideError;
 use herb_ipc::bus::{Bus, Sub};
 use herb_ipc::{Fault, GripperAction, HeightmapFrame, MAX_JOB_OBJECTS, Services};
 use herb_sim::observation::{Projections, action_to_placement};
@@ -361,10 +361,7 @@ impl Worker {
                     .as_ref()
                     .expect("refresh_frame found one")
                     .payload();
-                let after = self
-                    .job_order
-                    .get(index as usize + 1..)
-                    .unwrap_or(&[]);
+                let after = self.job_order.get(index as usize + 1..).unwrap_or(&[]);
                 let p = self.decider.decide(frame, ty, index as usize, after);
                 buf.decision_ns = t0.elapsed().as_nanos() as u64;
                 p.map_err(|e| match e {

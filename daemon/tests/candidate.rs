@@ -44,7 +44,10 @@ fn decisions_are_candidates_inside_the_walls() {
     let c = catalog();
     let mut p = CandidatePolicy::load(&fixtures().join("candidates-smoke.onnx"), &c).unwrap();
     assert!(p.fma() > 0);
-    let after: Vec<TypeIdx> = ["003", "005", "013"].iter().map(|i| c.by_id(i).unwrap()).collect();
+    let after: Vec<TypeIdx> = ["003", "005", "013"]
+        .iter()
+        .map(|i| c.by_id(i).unwrap())
+        .collect();
     for id in ["004", "003", "013", "057"] {
         let t = c.by_id(id).unwrap();
         for hm in [
@@ -65,8 +68,14 @@ fn decisions_are_candidates_inside_the_walls() {
             let (x, y, theta) = action_to_placement(a).unwrap();
             let (lo, hi) = c.shape(t).rotated_bounds(Rotation::from_rotation_z(theta));
             let tol = 1e-3;
-            assert!(x + lo.x >= -BOX_HALF_X - tol && x + hi.x <= BOX_HALF_X + tol, "{id}: x {x}");
-            assert!(y + lo.y >= -BOX_HALF_Y - tol && y + hi.y <= BOX_HALF_Y + tol, "{id}: y {y}");
+            assert!(
+                x + lo.x >= -BOX_HALF_X - tol && x + hi.x <= BOX_HALF_X + tol,
+                "{id}: x {x}"
+            );
+            assert!(
+                y + lo.y >= -BOX_HALF_Y - tol && y + hi.y <= BOX_HALF_Y + tol,
+                "{id}: y {y}"
+            );
         }
     }
 }
@@ -91,11 +100,18 @@ fn models_of_the_other_contract_or_corrupt_files_are_refused_by_name() {
     let c = catalog();
     // An observation-contract model is not a candidate policy, and says why ...
     let e = CandidatePolicy::load(&fixtures().join("tiny_policy.onnx"), &c).unwrap_err();
-    assert!(e.to_string().contains("inputs") && e.to_string().contains("tiny_policy"), "{e}");
+    assert!(
+        e.to_string().contains("inputs") && e.to_string().contains("tiny_policy"),
+        "{e}"
+    );
     // ... while the factory loads each contract as its own policy.
     let p = load_policy(&fixtures().join("tiny_policy.onnx").to_string_lossy(), &c).unwrap();
     assert_eq!(p.name(), "onnx");
-    let p = load_policy(&fixtures().join("candidates-smoke.onnx").to_string_lossy(), &c).unwrap();
+    let p = load_policy(
+        &fixtures().join("candidates-smoke.onnx").to_string_lossy(),
+        &c,
+    )
+    .unwrap();
     assert_eq!(p.name(), "candidates");
     // A truncated candidate model is an error naming the file, not a panic.
     let bytes = std::fs::read(fixtures().join("candidates-smoke.onnx")).unwrap();

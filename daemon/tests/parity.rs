@@ -18,8 +18,8 @@ fn check_candidates(onnx: &Path, meta: &serde_json::Value, data: &[f32]) {
     let per = CONTEXT_LEN + MAX_CANDIDATES * CANDIDATE_LEN + MAX_CANDIDATES;
     assert_eq!(data.len(), logits.len() * per, "{}", onnx.display());
     assert!(!logits.is_empty());
-    let catalog = herb_sim::Catalog::builtin(&herb_sim::paths::MeshSource::None("test".into()))
-        .unwrap();
+    let catalog =
+        herb_sim::Catalog::builtin(&herb_sim::paths::MeshSource::None("test".into())).unwrap();
     let mut p = CandidatePolicy::load(onnx, &catalog).unwrap();
     for (k, want) in logits.iter().enumerate() {
         let x = &data[k * per..(k + 1) * per];

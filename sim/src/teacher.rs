@@ -168,10 +168,10 @@ pub fn rollout(
 #[derive(Debug, Clone)]
 pub enum LatticeRule {
     /// The BLBF rule restricted to the lattice ([`Lattice::blbf`]).
-    Blbf(Lattice),
+    Blbf(Box<Lattice>),
 
     /// The lookahead teacher.
-    Lookahead(Lookahead),
+    Lookahead(Box<Lookahead>),
 }
 
 impl LatticeRule {

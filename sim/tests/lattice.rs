@@ -43,8 +43,8 @@ fn on_the_empty_floor_every_inside_node_rests_on_the_floor_and_blbf_takes_the_co
     assert_eq!((spec.nx, spec.ny), (28, 19));
     let lowest = shape.aabb_min.z;
     let mut inside = 0;
-    for k in 0..NUM_YAWS {
-        let (lo, hi) = shape.rotated_bounds(Rotation::from_rotation_z(YAWS[k]));
+    for (k, &yaw) in YAWS.iter().enumerate() {
+        let (lo, hi) = shape.rotated_bounds(Rotation::from_rotation_z(yaw));
         for row in 0..spec.ny {
             for col in 0..spec.nx {
                 let i = l.index(k, col, row);
@@ -118,7 +118,7 @@ fn lattice_rest_heights_are_never_below_the_shared_estimate() {
     let mut scratch = ZScratch::for_catalog(&c, w.heightmap().spec().cell);
     let spec = *l.spec();
     let mut checked = 0;
-    for k in 0..NUM_YAWS {
+    for (k, &yaw) in YAWS.iter().enumerate() {
         for row in 0..spec.ny {
             for col in 0..spec.nx {
                 let i = l.index(k, col, row);
@@ -126,7 +126,7 @@ fn lattice_rest_heights_are_never_below_the_shared_estimate() {
                     continue;
                 }
                 let (x, y) = spec.cell_centre(col, row);
-                let fine = estimate_z(w.heightmap(), shape, x, y, YAWS[k], &mut scratch);
+                let fine = estimate_z(w.heightmap(), shape, x, y, yaw, &mut scratch);
                 // The max-pooled estimate is conservative up to the footprint's rasterisation
                 // at the coarser cell (a few mm at a hull's sloped rim).
                 assert!(
@@ -200,7 +200,7 @@ fn a_full_box_has_no_feasible_placement_and_the_episode_ends_with_that_reason() 
     // episode ends at once, failed, with the reason recorded.
     let (c, big) = with_board();
     let mut env = PackingEnv::new(c.clone(), WorldConfig::default(), RewardMode::Simple).unwrap();
-    let mut rule = LatticeRule::Blbf(Lattice::new(&c));
+    let mut rule = LatticeRule::Blbf(Box::new(Lattice::new(&c)));
     let r = run_lattice_episode(&mut env, "big", &[big], &mut rule, 0).unwrap();
     assert!(!r.success);
     assert_eq!(r.placements, 0);
@@ -254,8 +254,10 @@ fn the_teacher_never_returns_less_than_the_lattice_blbf_rule_and_candidate_0_is_
         }
         ret
     };
-    let blbf = run(&mut LatticeRule::Blbf(Lattice::new(&c)));
-    let teacher = run(&mut LatticeRule::Lookahead(Lookahead::new(&c, 4, reward)));
+    let blbf = run(&mut LatticeRule::Blbf(Box::new(Lattice::new(&c))));
+    let teacher = run(&mut LatticeRule::Lookahead(Box::new(Lookahead::new(
+        &c, 4, reward,
+    ))));
     assert!(teacher >= blbf, "teacher {teacher} < lattice blbf {blbf}");
 
     // From the empty box, candidate 0's simulated outcome is the lattice BLBF episode.

@@ -427,10 +427,10 @@ fn run(cli: Cli) -> AnyResult<()> {
                         let results = match m {
                             EvalMethod::LatticeBlbf | EvalMethod::Lookahead => {
                                 let rule = match m {
-                                    EvalMethod::Lookahead => LatticeRule::Lookahead(
+                                    EvalMethod::Lookahead => LatticeRule::Lookahead(Box::new(
                                         Lookahead::new(&catalog, lookahead_k, lookahead_reward),
-                                    ),
-                                    _ => LatticeRule::Blbf(Lattice::new(&catalog)),
+                                    )),
+                                    _ => LatticeRule::Blbf(Box::new(Lattice::new(&catalog))),
                                 };
                                 run_lattice_method(
                                     &catalog,

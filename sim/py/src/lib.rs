@@ -156,20 +156,33 @@ impl VecEnv {
         let n = self.slots.len();
         let ctx = Array2::from_shape_vec(
             (n, CONTEXT_LEN),
-            self.slots.iter().flat_map(|s| s.feats.context.iter().copied()).collect(),
+            self.slots
+                .iter()
+                .flat_map(|s| s.feats.context.iter().copied())
+                .collect(),
         )
         .map_err(value_err)?;
         let cands = Array3::from_shape_vec(
             (n, MAX_CANDIDATES, CANDIDATE_LEN),
-            self.slots.iter().flat_map(|s| s.feats.candidates.iter().copied()).collect(),
+            self.slots
+                .iter()
+                .flat_map(|s| s.feats.candidates.iter().copied())
+                .collect(),
         )
         .map_err(value_err)?;
         let mask = Array2::from_shape_vec(
             (n, MAX_CANDIDATES),
-            self.slots.iter().flat_map(|s| s.feats.mask.iter().copied()).collect(),
+            self.slots
+                .iter()
+                .flat_map(|s| s.feats.mask.iter().copied())
+                .collect(),
         )
         .map_err(value_err)?;
-        Ok((ctx.into_pyarray(py), cands.into_pyarray(py), mask.into_pyarray(py)))
+        Ok((
+            ctx.into_pyarray(py),
+            cands.into_pyarray(py),
+            mask.into_pyarray(py),
+        ))
     }
 
     fn observations<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray4<f32>>> {
@@ -717,13 +730,13 @@ impl VecEnv {
                         };
                         if !fits {
                             s.rule = Some(if rule == "lookahead" {
-                                LatticeRule::Lookahead(Lookahead::new(
+                                LatticeRule::Lookahead(Box::new(Lookahead::new(
                                     &catalog,
                                     k,
                                     s.env.reward_mode(),
-                                ))
+                                )))
                             } else {
-                                LatticeRule::Blbf(Lattice::new(&catalog))
+                                LatticeRule::Blbf(Box::new(Lattice::new(&catalog)))
                             });
                         }
                         let r = s.rule.as_mut().expect("set above");
