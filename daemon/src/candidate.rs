@@ -217,19 +217,7 @@ fn plan(bytes: &[u8]) -> std::result::Result<(TypedSimpleState, i64), String> {
         .model_for_read(&mut &bytes[..])
         .map_err(|e| format!("not a readable ONNX model: {e:#}"))?;
     check_contract(&raw)?;
-    let typed = raw
-        .into_typed()
-        .and_then(|m| m.into_decluttered())
-        .map_err(|e| format!("cannot type the model: {e:#}"))?;
-    let fma = crate::onnx::fma_count(&typed).unwrap_or(-1);
-    let plan = typed
-        .into_optimized()
-        .and_then(|m| m.into_runnable())
-        .map_err(|e| format!("cannot optimise the model: {e:#}"))?;
-    let state = plan
-        .spawn()
-        .map_err(|e| format!("cannot make a runnable state: {e:#}"))?;
-    Ok((state, fma))
+    crate::onnx::runnable(raw)
 }
 
 /// The input names of an ONNX model (to tell the two policy contracts apart).

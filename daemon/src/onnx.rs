@@ -75,19 +75,7 @@ impl OnnxPolicy {
             .model_for_read(&mut &bytes[..])
             .map_err(|e| format!("not a readable ONNX model: {e:#}"))?;
         check_contract(&raw)?;
-        let typed = raw
-            .into_typed()
-            .and_then(|m| m.into_decluttered())
-            .map_err(|e| format!("cannot type the model: {e:#}"))?;
-        let fma = fma_count(&typed).unwrap_or(-1);
-        let plan = typed
-            .into_optimized()
-            .and_then(|m| m.into_runnable())
-            .map_err(|e| format!("cannot optimise the model: {e:#}"))?;
-        let state = plan
-            .spawn()
-            .map_err(|e| format!("cannot make a runnable state: {e:#}"))?;
-        Ok((state, fma))
+        runnable(raw)
     }
 
     /// Multiply-accumulates per decision, from tract's cost model (-1 if unknown).
@@ -195,8 +183,28 @@ fn check_contract(raw: &InferenceModel) -> std::result::Result<(), String> {
     Ok(())
 }
 
+/// Types, declutters and optimises a checked model into a runnable state; also returns its
+/// multiply-accumulates per run (-1 if unknown). Shared by both policy contracts.
+pub(crate) fn runnable(
+    raw: InferenceModel,
+) -> std::result::Result<(TypedSimpleState, i64), String> {
+    let typed = raw
+        .into_typed()
+        .and_then(|m| m.into_decluttered())
+        .map_err(|e| format!("cannot type the model: {e:#}"))?;
+    let fma = fma_count(&typed).unwrap_or(-1);
+    let plan = typed
+        .into_optimized()
+        .and_then(|m| m.into_runnable())
+        .map_err(|e| format!("cannot optimise the model: {e:#}"))?;
+    let state = plan
+        .spawn()
+        .map_err(|e| format!("cannot make a runnable state: {e:#}"))?;
+    Ok((state, fma))
+}
+
 /// Multiply-accumulates of a (decluttered) model, from the ops' cost reports.
-pub(crate) fn fma_count(m: &TypedModel) -> TractResult<i64> {
+fn fma_count(m: &TypedModel) -> TractResult<i64> {
     use tract_onnx::tract_core::ops::Cost;
     let mut fma = 0i64;
     for node in m.nodes() {

@@ -18,7 +18,7 @@
 use herb_daemon::sequence::{SequenceModel, beam3};
 use herb_daemon::{Blbf, DecisionInput, Policy};
 use herb_sim::features::{self, CANDIDATE_LEN, CONTEXT_LEN, DecisionFeatures};
-use herb_sim::lattice::{Lattice, MAX_CANDIDATES};
+use herb_sim::lattice::{Lattice, MAX_CANDIDATES, Placement};
 use herb_sim::paths::{self, MeshSource};
 use herb_sim::teacher::{LatticeRule, Lookahead};
 use herb_sim::{Catalog, ObsLayout, PackingEnv, RewardMode, SharedCatalog, TypeIdx, WorldConfig};
@@ -628,30 +628,8 @@ impl VecEnv {
                     .zip(idx.par_iter())
                     .map(|(s, &j)| {
                         s.feats_fresh = false;
-                        let o = match s.feats.placements.get(j as usize).copied() {
-                            Some(p) => {
-                                let r = s
-                                    .env
-                                    .step_placement(p.x, p.y, p.theta())
-                                    .map_err(|e| e.to_string())?;
-                                Out {
-                                    reward: r.reward,
-                                    terminated: r.terminated,
-                                    packed: r.info.packed as u32,
-                                    success: r.info.success,
-                                    compactness: r.info.outcome.compactness,
-                                    stable: r.info.outcome.stable,
-                                    ..Out::default()
-                                }
-                            }
-                            None => Out {
-                                reward: -1.0,
-                                terminated: true,
-                                packed: s.env.world().placed().len() as u32,
-                                success: false,
-                                ..Out::default()
-                            },
-                        };
+                        let p = s.feats.placements.get(j as usize).copied();
+                        let o = Self::place(s, p)?;
                         Self::finish_step(sampler, s, o, autoreset)
                     })
                     .collect()
@@ -740,30 +718,8 @@ impl VecEnv {
                             });
                         }
                         let r = s.rule.as_mut().expect("set above");
-                        let o = match r.decide(&s.env).map_err(|e| e.to_string())? {
-                            Some(p) => {
-                                let r = s
-                                    .env
-                                    .step_placement(p.x, p.y, p.theta())
-                                    .map_err(|e| e.to_string())?;
-                                Out {
-                                    reward: r.reward,
-                                    terminated: r.terminated,
-                                    packed: r.info.packed as u32,
-                                    success: r.info.success,
-                                    compactness: r.info.outcome.compactness,
-                                    stable: r.info.outcome.stable,
-                                    ..Out::default()
-                                }
-                            }
-                            None => Out {
-                                reward: -1.0,
-                                terminated: true,
-                                packed: s.env.world().placed().len() as u32,
-                                success: false,
-                                ..Out::default()
-                            },
-                        };
+                        let p = r.decide(&s.env).map_err(|e| e.to_string())?;
+                        let o = Self::place(s, p)?;
                         Self::finish_step(sampler, s, o, autoreset)
                     })
                     .collect()
@@ -774,6 +730,33 @@ impl VecEnv {
 }
 
 impl VecEnv {
+    /// Places the slot's next object at `p`; without a placement (no feasible one) the episode
+    /// ends, failed, with reward -1.
+    fn place(s: &mut Slot, p: Option<Placement>) -> Result<Out, String> {
+        let Some(p) = p else {
+            return Ok(Out {
+                reward: -1.0,
+                terminated: true,
+                packed: s.env.world().placed().len() as u32,
+                success: false,
+                ..Out::default()
+            });
+        };
+        let r = s
+            .env
+            .step_placement(p.x, p.y, p.theta())
+            .map_err(|e| e.to_string())?;
+        Ok(Out {
+            reward: r.reward,
+            terminated: r.terminated,
+            packed: r.info.packed as u32,
+            success: r.info.success,
+            compactness: r.info.outcome.compactness,
+            stable: r.info.outcome.stable,
+            ..Out::default()
+        })
+    }
+
     /// Books a step's reward and, when the episode ended, its return and length, and resets
     /// the slot under autoreset.
     fn finish_step(
