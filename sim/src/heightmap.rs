@@ -180,19 +180,33 @@ impl Heightmap {
     pub fn max_pool_into(&self, dst: &mut Heightmap) {
         let (ss, ds) = (self.spec, dst.spec);
         dst.data.fill(0.0);
-        // Each source column's destination column (the same for every row), computed once
-        // with the same arithmetic as the cell-by-cell definition.
-        const MAX_COLS: usize = 1024;
         let dst_col = |col: usize| {
             let (x, y) = ss.cell_centre(col, 0);
             let u = ds.to_pixel(x, y).0.floor();
             (u >= 0.0 && (u as usize) < ds.nx).then_some(u as usize)
         };
-        let mut cols = [usize::MAX; MAX_COLS];
-        if ss.nx <= MAX_COLS {
-            for (col, c) in cols.iter_mut().enumerate().take(ss.nx) {
-                *c = dst_col(col).unwrap_or(usize::MAX);
+        // Source columns map to destination columns monotonically: each destination column
+        // takes a contiguous run of source columns, found once (same arithmetic as the
+        // cell-by-cell definition), so each row reduces run by run.
+        const MAX_RUNS: usize = 1024;
+        let mut runs = [(0usize, 0usize, 0usize); MAX_RUNS];
+        let mut n_runs = 0;
+        let mut col = 0;
+        while col < ss.nx {
+            let Some(d) = dst_col(col) else {
+                col += 1;
+                continue;
+            };
+            let start = col;
+            while col < ss.nx && dst_col(col) == Some(d) {
+                col += 1;
             }
+            if n_runs == MAX_RUNS {
+                // Finer than any grid in use: fall back to cell by cell.
+                return self.max_pool_cells(dst);
+            }
+            runs[n_runs] = (d, start, col);
+            n_runs += 1;
         }
         for row in 0..ss.ny {
             let (x, y) = ss.cell_centre(0, row);
@@ -202,14 +216,27 @@ impl Heightmap {
             }
             let drow = &mut dst.data[v as usize * ds.nx..(v as usize + 1) * ds.nx];
             let srow = &self.data[row * ss.nx..(row + 1) * ss.nx];
-            for (col, &h) in srow.iter().enumerate() {
-                let c = if ss.nx <= MAX_COLS {
-                    cols[col]
-                } else {
-                    dst_col(col).unwrap_or(usize::MAX)
-                };
-                if let Some(d) = drow.get_mut(c) {
-                    *d = d.max(h);
+            for &(d, a, b) in &runs[..n_runs] {
+                let m = srow[a..b]
+                    .iter()
+                    .fold(drow[d], |m, &h| if h > m { h } else { m });
+                drow[d] = m;
+            }
+        }
+    }
+
+    /// [`Heightmap::max_pool_into`] cell by cell (the definition).
+    fn max_pool_cells(&self, dst: &mut Heightmap) {
+        let (ss, ds) = (self.spec, dst.spec);
+        dst.data.fill(0.0);
+        for row in 0..ss.ny {
+            for col in 0..ss.nx {
+                let (x, y) = ss.cell_centre(col, row);
+                let (u, v) = ds.to_pixel(x, y);
+                let (c, r) = (u.floor(), v.floor());
+                if c >= 0.0 && r >= 0.0 && (c as usize) < ds.nx && (r as usize) < ds.ny {
+                    let d = &mut dst.data[r as usize * ds.nx + c as usize];
+                    *d = d.max(self.data[row * ss.nx + col]);
                 }
             }
         }
@@ -376,6 +403,25 @@ fn floor_i(x: f32) -> isize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The run-by-run pooling equals the cell-by-cell definition, bit for bit, for the grids
+    /// the lattice and BLBF use, on a rough heightmap.
+    #[test]
+    fn max_pooling_by_runs_equals_the_definition() {
+        let spec = GridSpec::for_box(crate::observation::ObsLayout::CELL_M).unwrap();
+        let mut hm = Heightmap::new(spec);
+        for (i, v) in hm.data_mut().iter_mut().enumerate() {
+            *v = ((i * 7919) % 1000) as f32 * 2.9e-4 - 0.01;
+        }
+        for cell in [0.00625, 0.0125, 0.01, 0.0031] {
+            let ds = GridSpec::for_box(cell).unwrap();
+            let (mut a, mut b) = (Heightmap::new(ds), Heightmap::new(ds));
+            hm.max_pool_into(&mut a);
+            hm.max_pool_cells(&mut b);
+            let bits = |h: &Heightmap| h.data().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&a), bits(&b), "cell {cell}");
+        }
+    }
 
     #[test]
     fn grid_centres_stay_inside_the_walls() {
