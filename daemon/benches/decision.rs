@@ -75,8 +75,11 @@ fn bench_policy(
             let mut total = Duration::ZERO;
             for _ in 0..iters {
                 let t0 = Instant::now();
-                ObsLayout::write(world.heightmap(), Some(projections.get(next)), &mut obs)
-                    .expect("observation");
+                // As herbd's planner: the observation only for policies that read it.
+                if policy.needs_observation() {
+                    ObsLayout::write(world.heightmap(), Some(projections.get(next)), &mut obs)
+                        .expect("observation");
+                }
                 let a = policy
                     .decide(&DecisionInput {
                         observation: &obs,

@@ -282,6 +282,9 @@ impl Policy for CandidatePolicy {
         "candidates"
     }
     fn begin_episode(&mut self, _seed: u64) {}
+    fn needs_observation(&self) -> bool {
+        false
+    }
     fn decide(&mut self, input: &DecisionInput) -> Result<[f32; 3]> {
         input
             .heightmap

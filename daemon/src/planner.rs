@@ -260,12 +260,17 @@ impl Decider {
         // One snapshot of the shared frame (the decision must not change under it).
         hm.data_mut().copy_from_slice(frame.cells());
         let hm = &*hm;
-        ObsLayout::write(hm, Some(self.projections.get(object)), &mut self.obs)?;
+        let observation: &[f32] = if self.policy.needs_observation() {
+            ObsLayout::write(hm, Some(self.projections.get(object)), &mut self.obs)?;
+            &self.obs
+        } else {
+            &[]
+        };
         let shape = self.catalog.shape(object);
         let a = self
             .policy
             .decide(&DecisionInput {
-                observation: &self.obs,
+                observation,
                 heightmap: hm,
                 object,
                 shape,

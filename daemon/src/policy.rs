@@ -40,6 +40,11 @@ pub trait Policy {
     fn begin_episode(&mut self, seed: u64);
     /// The action for `input`, in `[-1, 1]^3`.
     fn decide(&mut self, input: &DecisionInput) -> Result<[f32; 3]>;
+    /// Whether [`DecisionInput::observation`] is read. Callers may skip building it (and pass
+    /// an empty slice) for policies that return false.
+    fn needs_observation(&self) -> bool {
+        true
+    }
 }
 
 /// Checks an input before a policy sees it: observation length and values in `[0, 1]`, and a
