@@ -29,13 +29,22 @@
 //!
 //! # Candidates
 //!
-//! A small set of feasible placements ([`Lattice::candidates`]), each refined to the best of
-//! the nine [`FINE_CELL_M`] (6.25 mm, the BLBF grid) positions around its lattice node on the
-//! heightmap max-pooled to that cell: per yaw, the lowest-top node nearest each of the four
-//! corners, with x or with y as the first tie-break (up to 32, duplicates removed). Candidate 0
-//! is the lowest top, then the smallest x, then the smallest y over all of them: the
-//! deep-bottom-left-back rule of the BLBF heuristic restricted to the lattice
-//! ([`Lattice::blbf`]).
+//! A small set of feasible placements ([`Lattice::candidates`], at most [`MAX_CANDIDATES`]):
+//! per yaw and per corner of the box, the inside-the-walls lattice node with the lowest top
+//! nearest that corner (x or y as the first tie-break), then
+//!
+//! - **loose**: refined to the best (BLBF order) of the nine [`FINE_CELL_M`] (6.25 mm, the
+//!   BLBF grid) positions around the node, with the same conservative pooling at that cell:
+//!   the lattice's margin to the neighbours is kept;
+//! - **tight**: the loose one slid towards its corner on the 6.25 mm grid while its top, from
+//!   the footprint sampled at the cell centres as the BLBF heuristic does, does not rise:
+//!   against its neighbours.
+//!
+//! Each is kept if its top is within the height limit; duplicates are removed and the rest
+//! sorted by the BLBF order (lowest top, then smallest x, then smallest y, then yaw), so
+//! candidate 0 is the deep-bottom-left-back rule of the BLBF heuristic restricted to the
+//! lattice ([`Lattice::blbf`]). No candidate crosses a wall or exceeds the height limit: an
+//! empty list means no feasible placement.
 //!
 //! Allocation happens in [`Lattice::new`] only.
 
