@@ -216,12 +216,28 @@ fn shortest_session(root: &Path) -> (String, usize) {
 /// other tests use BLBF.
 #[test]
 fn packs_a_boxed_episode_end_to_end_with_real_processes() {
+    pack_shortest_episode_with("episode", &repo().join("models/policy-cs06.onnx"));
+}
+
+/// With a policy of the candidate contract (the export fixture `candidates-smoke.onnx`, a
+/// fixture, not a trained policy): herbd loads it through the same factory, gives it the rest
+/// of the job, and decides every placement of the episode with it.
+#[test]
+fn packs_a_boxed_episode_with_a_candidate_policy() {
+    pack_shortest_episode_with(
+        "candidates",
+        &repo().join("models/fixtures/candidates-smoke.onnx"),
+    );
+}
+
+/// Packs the shortest BoxED episode with herbd placing by `policy`, and checks the job, the
+/// loop's and the loopback's reports.
+fn pack_shortest_episode_with(tag: &str, policy: &Path) {
     let Some(root) = herb_sim::paths::boxed_root_for_tests() else {
         return;
     };
     let (session, n) = shortest_session(&root);
-    let policy = repo().join("models/policy-cs06.onnx");
-    let (dir, prefix, cfg) = setup_with("episode", policy.to_str().unwrap());
+    let (dir, prefix, cfg) = setup_with(tag, policy.to_str().unwrap());
     let cfg_s = cfg.to_str().unwrap();
     let boxed = root.to_str().unwrap();
     let mut lb = spawn(
@@ -288,10 +304,8 @@ fn packs_a_boxed_episode_end_to_end_with_real_processes() {
     );
     assert_eq!(stats["decision_us"]["n"], n as u64);
     let log = std::fs::read_to_string(dir.join("herbd.log")).unwrap();
-    assert!(
-        log.contains("policy-cs06.onnx"),
-        "herbd ran the SAC policy:\n{log}"
-    );
+    let file = policy.file_name().unwrap().to_string_lossy();
+    assert!(log.contains(&*file), "herbd ran {file}:\n{log}");
     lb.signal(libc::SIGTERM);
     assert!(lb.wait_for(Duration::from_secs(10)).success());
     let sim = last_json(&lb_lines, "loopback_final");
