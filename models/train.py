@@ -615,6 +615,7 @@ def main():
                              entropy=round(v[3], 3), alpha=round(v[4], 5))
             log(extra)
     truncate()
+    log({})
     st["wall"] += time.time() - t0
     st["cpu"] += time.process_time() - cpu0
     save(a.out, m, st, rb)
@@ -622,7 +623,6 @@ def main():
         export(m["actor"], a.out, env)
     except RuntimeError as err:
         print(f"export not replaced: {err}", file=sys.stderr)
-    log({})
     print(f"saved {a.out}: phase {st['phase']}, {rb.n} states", flush=True)
     return 0
 
