@@ -128,6 +128,16 @@ impl VecEnv {
         Ok(())
     }
 
+    /// An error naming the first environment whose episode has ended (without autoreset).
+    fn ensure_running(&self) -> PyResult<()> {
+        match self.slots.iter().position(|s| !s.running) {
+            Some(i) => Err(PyRuntimeError::new_err(format!(
+                "environment {i} has ended its episode: call reset()"
+            ))),
+            None => Ok(()),
+        }
+    }
+
     /// Computes the slot's candidate inputs for its current state.
     fn slot_features(catalog: &Catalog, s: &mut Slot) {
         let lattice = s.lattice.get_or_insert_with(|| Lattice::new(catalog));
@@ -389,8 +399,9 @@ impl VecEnv {
 
     /// Places each environment's next object at `actions[i]` (`[N, 3]`, clipped to
     /// `[-1, 1]`; NaN is an error). Returns `(observations, rewards, terminated, info)`;
-    /// `info` holds arrays `packed`, `success`, and, for environments whose episode just
-    /// ended, `episode_return` and `episode_length` (others 0).
+    /// `info` holds arrays `packed`, `success`, the placement's `compactness` and `stable`,
+    /// and, for environments whose episode just ended, `episode_return` and `episode_length`
+    /// (others 0).
     #[allow(clippy::type_complexity)]
     fn step<'py>(
         &mut self,
@@ -417,11 +428,7 @@ impl VecEnv {
                 i
             )));
         }
-        if let Some(i) = self.slots.iter().position(|s| !s.running) {
-            return Err(PyRuntimeError::new_err(format!(
-                "environment {i} has ended its episode: call reset()"
-            )));
-        }
+        self.ensure_running()?;
         let acts: Vec<[f32; 3]> = (0..n)
             .map(|i| std::array::from_fn(|k| a[[i, k]].clamp(-1.0, 1.0)))
             .collect();
@@ -599,12 +606,8 @@ impl VecEnv {
                 idx.len()
             )));
         }
+        self.ensure_running()?;
         for (i, s) in self.slots.iter().enumerate() {
-            if !s.running {
-                return Err(PyRuntimeError::new_err(format!(
-                    "environment {i} has ended its episode: call reset()"
-                )));
-            }
             if !s.feats_fresh {
                 return Err(PyRuntimeError::new_err(format!(
                     "environment {i}: call candidates() or teacher() before step_candidates()"
@@ -684,11 +687,7 @@ impl VecEnv {
                 active.len()
             )));
         }
-        if let Some(i) = self.slots.iter().position(|s| !s.running) {
-            return Err(PyRuntimeError::new_err(format!(
-                "environment {i} has ended its episode: call reset()"
-            )));
-        }
+        self.ensure_running()?;
         let catalog = self.catalog.clone();
         let (slots, sampler, pool, autoreset) =
             (&mut self.slots, &self.sampler, &self.pool, self.autoreset);
