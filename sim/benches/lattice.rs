@@ -94,37 +94,46 @@ fn report(what: &str, h: &Histogram<u64>) {
 
 fn benches(c: &mut Criterion) {
     let (catalog, states) = states();
-    let mut lattice = Lattice::new(&catalog);
-    let (mut h_planes, mut h_cands, mut h_all) = (hist(), hist(), hist());
-    let mut k = 0usize;
-    let mut n_cands = 0usize;
-    c.bench_function("lattice/planes+candidates", |b| {
-        b.iter_custom(|iters| {
-            let mut total = Duration::ZERO;
-            for _ in 0..iters {
-                let (hm, t) = &states[k % states.len()];
-                k += 1;
-                let t0 = Instant::now();
-                lattice.compute(hm, catalog.shape(*t));
-                let t1 = Instant::now();
-                n_cands += lattice.candidates().len();
-                let t2 = Instant::now();
-                total += t2 - t0;
-                h_planes.record((t1 - t0).as_nanos() as u64).ok();
-                h_cands.record((t2 - t1).as_nanos() as u64).ok();
-                h_all.record((t2 - t0).as_nanos() as u64).ok();
-            }
-            total
-        })
-    });
-    eprintln!(
-        "{} states, {:.1} candidates per decision",
-        states.len(),
-        n_cands as f64 / h_all.len().max(1) as f64
-    );
-    report("lattice planes (compute)", &h_planes);
-    report("lattice candidates", &h_cands);
-    report("lattice planes + candidates", &h_all);
+    // The footprint cache (the run-time path) and rasterising the footprints every decision
+    // (the path on other grids), in one run.
+    for (label, mut lattice) in [
+        ("cached footprints", Lattice::new(&catalog)),
+        (
+            "footprints rasterised each decision",
+            Lattice::new(&catalog).without_cache(),
+        ),
+    ] {
+        let (mut h_planes, mut h_cands, mut h_all) = (hist(), hist(), hist());
+        let mut k = 0usize;
+        let mut n_cands = 0usize;
+        c.bench_function(&format!("lattice/planes+candidates ({label})"), |b| {
+            b.iter_custom(|iters| {
+                let mut total = Duration::ZERO;
+                for _ in 0..iters {
+                    let (hm, t) = &states[k % states.len()];
+                    k += 1;
+                    let t0 = Instant::now();
+                    lattice.compute(hm, &catalog, *t);
+                    let t1 = Instant::now();
+                    n_cands += lattice.candidates().len();
+                    let t2 = Instant::now();
+                    total += t2 - t0;
+                    h_planes.record((t1 - t0).as_nanos() as u64).ok();
+                    h_cands.record((t2 - t1).as_nanos() as u64).ok();
+                    h_all.record((t2 - t0).as_nanos() as u64).ok();
+                }
+                total
+            })
+        });
+        eprintln!(
+            "{label}: {} states, {:.1} candidates per decision",
+            states.len(),
+            n_cands as f64 / h_all.len().max(1) as f64
+        );
+        report(&format!("lattice planes (compute), {label}"), &h_planes);
+        report(&format!("lattice candidates, {label}"), &h_cands);
+        report(&format!("lattice planes + candidates, {label}"), &h_all);
+    }
 }
 
 criterion_group! {

@@ -105,8 +105,7 @@ impl DecisionFeatures {
         next: TypeIdx,
         after: &[TypeIdx],
     ) -> usize {
-        let shape = catalog.shape(next);
-        lattice.compute(hm, shape);
+        lattice.compute(hm, catalog, next);
         self.placements.clear();
         self.placements.extend_from_slice(lattice.candidates());
         self.fill(lattice, catalog, next, after);

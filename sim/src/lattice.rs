@@ -48,7 +48,7 @@
 //!
 //! Allocation happens in [`Lattice::new`] only.
 
-use crate::catalog::{Catalog, ObjectShape};
+use crate::catalog::{Catalog, ObjectShape, TypeIdx};
 use crate::frames::{BOX_HALF_X, BOX_HALF_Y, SUCCESS_TOP_Z};
 use crate::heightmap::{GridSpec, Heightmap};
 use crate::zestimate::{ZScratch, bottom_footprint, pool_footprint, rest_height, support_fraction};
@@ -131,11 +131,14 @@ pub struct Lattice {
     coarse: Heightmap,
     fine: Heightmap,
     full_fp: ZScratch,
-    coarse_fp: [ZScratch; NUM_YAWS],
-    fine_fp: [ZScratch; NUM_YAWS],
-    tight_fp: [ZScratch; NUM_YAWS],
-    bounds: [(Vector, Vector); NUM_YAWS],
-    top_above_origin: [f32; NUM_YAWS],
+    /// The footprints of the shape of the last [`Lattice::compute`] when it was not cached.
+    current: [Footprints; NUM_YAWS],
+    /// The footprints of every catalog type over the observation grid, built once.
+    cache: Vec<[Footprints; NUM_YAWS]>,
+    /// Grid the cache was built for.
+    cache_spec: GridSpec,
+    /// Which footprints the last [`Lattice::compute`] used: a cached type, or `current`.
+    active: Option<usize>,
     rest_z: Vec<f32>,
     top: Vec<f32>,
     support: Vec<f32>,
@@ -143,28 +146,115 @@ pub struct Lattice {
     candidates: Vec<Placement>,
 }
 
+/// One shape's footprints at one yaw: its bottom min-pooled to the lattice and to the
+/// refinement grid (conservative), sampled at the refinement grid's cell centres as the BLBF
+/// heuristic does (for the tight candidates), and its bounds around the origin. They depend
+/// on the shape and the heightmap grid only, not on the heights.
+#[derive(Debug, Clone, Default)]
+struct Footprints {
+    coarse: ZScratch,
+    fine: ZScratch,
+    tight: ZScratch,
+    bounds: (Vector, Vector),
+}
+
+impl Footprints {
+    fn sized(catalog: &Catalog) -> Self {
+        Self {
+            coarse: ZScratch::for_catalog(catalog, LATTICE_CELL_M),
+            fine: ZScratch::for_catalog(catalog, FINE_CELL_M),
+            tight: ZScratch::for_catalog(catalog, FINE_CELL_M),
+            bounds: (Vector::ZERO, Vector::ZERO),
+        }
+    }
+
+    /// Rasterises `shape` at yaw `theta` for heightmaps on the grid `hs` (`full` is scratch
+    /// at that grid's resolution).
+    fn build(
+        &mut self,
+        hs: &GridSpec,
+        spec: &GridSpec,
+        fine_spec: &GridSpec,
+        shape: &ObjectShape,
+        theta: f32,
+        full: &mut ZScratch,
+    ) {
+        let rot = Rotation::from_rotation_z(theta);
+        let (x0, y0) = spec.cell_centre(0, 0);
+        bottom_footprint(hs, shape, x0, y0, rot, full);
+        pool_footprint(hs, full, (0, 0), spec, &mut self.coarse);
+        // The refinement grid's first cell centre, in whole heightmap cells from the
+        // lattice's (exact for the observation grid: 2 cells in -x, 0 in y).
+        let (fx0, fy0) = fine_spec.cell_centre(0, 0);
+        let shift = (
+            ((fx0 - x0) / hs.cell).round() as isize,
+            ((y0 - fy0) / hs.cell).round() as isize,
+        );
+        pool_footprint(hs, full, shift, fine_spec, &mut self.fine);
+        bottom_footprint(fine_spec, shape, fx0, fy0, rot, &mut self.tight);
+        self.bounds = shape.rotated_bounds(rot);
+    }
+}
+
 impl Lattice {
-    /// A lattice with buffers sized for every shape of `catalog`.
+    /// A lattice with buffers sized for every shape of `catalog`, and the footprints of every
+    /// shape of `catalog` over the observation grid ([`crate::ObsLayout`]) built up front.
     pub fn new(catalog: &Catalog) -> Self {
         let spec = GridSpec::for_box(LATTICE_CELL_M).expect("lattice cell within GridSpec range");
         let fine_spec = GridSpec::for_box(FINE_CELL_M).expect("fine cell within GridSpec range");
+        let cache_spec = GridSpec::for_box(FULL_CELL_M).expect("observation cell within range");
         let n = NUM_YAWS * spec.len();
+        let mut full_fp = ZScratch::for_catalog(catalog, FULL_CELL_M);
+        let cache = catalog
+            .types()
+            .map(|t| {
+                std::array::from_fn(|k| {
+                    let mut f = Footprints::default();
+                    f.build(
+                        &cache_spec,
+                        &spec,
+                        &fine_spec,
+                        catalog.shape(t),
+                        YAWS[k],
+                        &mut full_fp,
+                    );
+                    f
+                })
+            })
+            .collect();
         Self {
             spec,
             fine_spec,
             coarse: Heightmap::new(spec),
             fine: Heightmap::new(fine_spec),
-            full_fp: ZScratch::for_catalog(catalog, FULL_CELL_M),
-            coarse_fp: std::array::from_fn(|_| ZScratch::for_catalog(catalog, LATTICE_CELL_M)),
-            fine_fp: std::array::from_fn(|_| ZScratch::for_catalog(catalog, FINE_CELL_M)),
-            tight_fp: std::array::from_fn(|_| ZScratch::for_catalog(catalog, FINE_CELL_M)),
-            bounds: [(Vector::ZERO, Vector::ZERO); NUM_YAWS],
-            top_above_origin: [0.0; NUM_YAWS],
+            full_fp,
+            current: std::array::from_fn(|_| Footprints::sized(catalog)),
+            cache,
+            cache_spec,
+            active: None,
             rest_z: vec![0.0; n],
             top: vec![0.0; n],
             support: vec![0.0; n],
             flags: vec![0; n],
             candidates: Vec::with_capacity(4 * MAX_CANDIDATES),
+        }
+    }
+
+    /// The same lattice without the footprint cache: every [`Lattice::compute`] rasterises
+    /// the object's footprints itself (the path taken on a grid other than the observation
+    /// grid). For tests and benchmarks comparing the two paths.
+    pub fn without_cache(mut self) -> Self {
+        self.cache = Vec::new();
+        self.active = None;
+        self
+    }
+
+    /// The footprints at yaw `k` of the last [`Lattice::compute`].
+    #[inline]
+    fn fp(&self, k: usize) -> &Footprints {
+        match self.active {
+            Some(t) => &self.cache[t][k],
+            None => &self.current[k],
         }
     }
 
@@ -181,7 +271,7 @@ impl Lattice {
     /// The footprint's bounds `(min, max)` around the origin at yaw `k`, from the last
     /// [`Lattice::compute`].
     pub fn bounds(&self, k: usize) -> (Vector, Vector) {
-        self.bounds[k]
+        self.fp(k).bounds
     }
 
     /// Index of yaw `k`, column `col`, row `row` in the planes.
@@ -215,42 +305,39 @@ impl Lattice {
         self.flags.iter().filter(|&&f| f == FEASIBLE).count()
     }
 
-    /// Fills the planes for `shape` over `hm` (any grid covering the box; validated by the
-    /// caller). Clears the candidates.
-    pub fn compute(&mut self, hm: &Heightmap, shape: &ObjectShape) {
+    /// Fills the planes for object type `ty` of `catalog` (the catalog given to
+    /// [`Lattice::new`]) over `hm` (any grid covering the box; validated by the caller).
+    /// Clears the candidates. On the observation grid the footprints come from the cache
+    /// built by [`Lattice::new`]; on another grid they are rasterised here.
+    pub fn compute(&mut self, hm: &Heightmap, catalog: &Catalog, ty: TypeIdx) {
         hm.max_pool_into(&mut self.coarse);
         hm.max_pool_into(&mut self.fine);
         self.candidates.clear();
         let spec = self.spec;
         let limit = HEIGHT_LIMIT_M;
-        for (k, &theta) in YAWS.iter().enumerate() {
-            let rot = Rotation::from_rotation_z(theta);
-            let hs = *hm.spec();
-            // Footprints at the heightmap's resolution, min-pooled to the lattice and the
-            // refinement grids (conservative), and sampled at the refinement grid's cell
-            // centres as the BLBF heuristic does (for the tight candidates).
-            let (x0, y0) = spec.cell_centre(0, 0);
-            bottom_footprint(&hs, shape, x0, y0, rot, &mut self.full_fp);
-            pool_footprint(&hs, &self.full_fp, (0, 0), &spec, &mut self.coarse_fp[k]);
-            // The refinement grid's first cell centre, in whole heightmap cells from the
-            // lattice's (exact for the observation grid: 2 cells in -x, 0 in y).
-            let (fx0, fy0) = self.fine_spec.cell_centre(0, 0);
-            let shift = (
-                ((fx0 - x0) / hs.cell).round() as isize,
-                ((y0 - fy0) / hs.cell).round() as isize,
-            );
-            pool_footprint(
-                &hs,
-                &self.full_fp,
-                shift,
-                &self.fine_spec,
-                &mut self.fine_fp[k],
-            );
-            bottom_footprint(&self.fine_spec, shape, fx0, fy0, rot, &mut self.tight_fp[k]);
-            let fp = &self.coarse_fp[k];
-            let (lo, hi) = shape.rotated_bounds(rot);
-            self.bounds[k] = (lo, hi);
-            self.top_above_origin[k] = fp.top();
+        let cached = *hm.spec() == self.cache_spec && catalog.len() == self.cache.len();
+        self.active = cached.then_some(ty.0 as usize);
+        if !cached {
+            let shape = catalog.shape(ty);
+            for (k, &theta) in YAWS.iter().enumerate() {
+                let (spec, fine_spec) = (self.spec, self.fine_spec);
+                self.current[k].build(
+                    hm.spec(),
+                    &spec,
+                    &fine_spec,
+                    shape,
+                    theta,
+                    &mut self.full_fp,
+                );
+            }
+        }
+        for k in 0..NUM_YAWS {
+            let fps = match self.active {
+                Some(t) => &self.cache[t][k],
+                None => &self.current[k],
+            };
+            let fp = &fps.coarse;
+            let (lo, hi) = fps.bounds;
             for row in 0..spec.ny {
                 for col in 0..spec.nx {
                     let i = (k * spec.ny + row) * spec.nx + col;
@@ -347,6 +434,11 @@ impl Lattice {
         &self.candidates
     }
 
+    /// The candidates from the last [`Lattice::candidates`] call (empty before it).
+    pub fn computed_candidates(&self) -> &[Placement] {
+        &self.candidates
+    }
+
     /// The BLBF rule restricted to the lattice: candidate 0, or `None` when nothing is
     /// feasible.
     pub fn blbf(&mut self) -> Option<Placement> {
@@ -361,8 +453,9 @@ impl Lattice {
     fn push(&self, from: Placement, sx: f32, sy: f32, x_first: bool) -> Option<Placement> {
         let fs = self.fine_spec;
         let k = from.yaw as usize;
-        let fp = &self.tight_fp[k];
-        let (lo, hi) = self.bounds[k];
+        let fps = self.fp(k);
+        let fp = &fps.tight;
+        let (lo, hi) = fps.bounds;
         let (u, v) = fs.to_pixel(from.x, from.y);
         let (mut c, mut r) = (u.floor() as isize, v.floor() as isize);
         let top_at = |c: isize, r: isize| -> Option<(f32, f32, f32)> {
@@ -417,8 +510,9 @@ impl Lattice {
         let fs = self.fine_spec;
         let (u, v) = fs.to_pixel(x, y);
         let (c0, r0) = (u.floor() as isize, v.floor() as isize);
-        let (lo, hi) = self.bounds[k];
-        let fp = &self.fine_fp[k];
+        let fps = self.fp(k);
+        let (lo, hi) = fps.bounds;
+        let fp = &fps.fine;
         let mut best: Option<Placement> = None;
         for r in r0 - 1..=r0 + 1 {
             for c in c0 - 1..=c0 + 1 {

@@ -26,6 +26,7 @@ pub mod lattice;
 pub mod mesh;
 pub mod observation;
 pub mod paths;
+pub mod reserve;
 pub mod teacher;
 pub mod world;
 pub mod zestimate;

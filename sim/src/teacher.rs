@@ -20,6 +20,7 @@ use crate::env::{PackingEnv, RewardMode};
 use crate::error::Result;
 use crate::eval::EpisodeResult;
 use crate::lattice::{Lattice, Placement};
+use crate::reserve::Reserve;
 use crate::world::PackingWorld;
 use rapier3d::math::Rotation;
 use std::time::Instant;
@@ -87,7 +88,7 @@ impl Lookahead {
             return Ok(None);
         };
         self.lattice
-            .compute(world.heightmap(), world.catalog().shape(next));
+            .compute(world.heightmap(), world.catalog(), next);
         let n = self.lattice.candidates().len().min(self.k);
         for c in 0..n {
             let first = self.lattice.candidates()[c];
@@ -136,7 +137,7 @@ pub fn rollout(
         let p = if i == 0 {
             first
         } else {
-            lattice.compute(w.heightmap(), w.catalog().shape(ty));
+            lattice.compute(w.heightmap(), w.catalog(), ty);
             match lattice.blbf() {
                 Some(p) => p,
                 None => {
@@ -172,6 +173,10 @@ pub enum LatticeRule {
 
     /// The lookahead teacher.
     Lookahead(Box<Lookahead>),
+
+    /// The lattice BLBF rule that keeps room for later objects: the first candidate, in BLBF
+    /// order, after which the fewest reserved objects stop fitting ([`Reserve::lost`]).
+    Reserve(Box<(Lattice, Reserve)>),
 }
 
 impl LatticeRule {
@@ -181,6 +186,7 @@ impl LatticeRule {
             Self::Blbf(_) => "lattice-blbf".into(),
 
             Self::Lookahead(t) => format!("lookahead (teacher, k = {})", t.k()),
+            Self::Reserve(_) => "lattice-reserve".into(),
         }
     }
 
@@ -194,11 +200,27 @@ impl LatticeRule {
         match self {
             Self::Blbf(l) => {
                 let w = env.world();
-                l.compute(w.heightmap(), w.catalog().shape(next));
+                l.compute(w.heightmap(), w.catalog(), next);
                 Ok(l.blbf())
             }
 
             Self::Lookahead(t) => t.decide(env.world(), remaining),
+            Self::Reserve(b) => {
+                let (l, r) = &mut **b;
+                let w = env.world();
+                l.compute(w.heightmap(), w.catalog(), next);
+                r.prepare(l, w.catalog(), &remaining[1..]);
+                l.candidates();
+                let l = &*l;
+                let mut best: Option<(usize, Placement)> = None;
+                for p in l.computed_candidates() {
+                    let lost = r.lost(l, p);
+                    if best.is_none_or(|(b, _)| lost < b) {
+                        best = Some((lost, *p));
+                    }
+                }
+                Ok(best.map(|(_, p)| p))
+            }
         }
     }
 }

@@ -38,7 +38,7 @@ fn on_the_empty_floor_every_inside_node_rests_on_the_floor_and_blbf_takes_the_co
     let ty = c.by_id("004").unwrap();
     let shape = c.shape(ty);
     let mut l = Lattice::new(&c);
-    l.compute(w.heightmap(), shape);
+    l.compute(w.heightmap(), &c, ty);
     let spec = *l.spec();
     assert_eq!((spec.nx, spec.ny), (28, 19));
     let lowest = shape.aabb_min.z;
@@ -114,7 +114,7 @@ fn lattice_rest_heights_are_never_below_the_shared_estimate() {
     let ty = c.by_id("013").unwrap();
     let shape = c.shape(ty);
     let mut l = Lattice::new(&c);
-    l.compute(w.heightmap(), shape);
+    l.compute(w.heightmap(), &c, ty);
     let mut scratch = ZScratch::for_catalog(&c, w.heightmap().spec().cell);
     let spec = *l.spec();
     let mut checked = 0;
@@ -162,10 +162,10 @@ fn the_box_turned_half_a_turn_maps_yaw_k_to_yaw_k_plus_2_at_the_mirrored_node() 
     let mut turned = w.heightmap().data().to_vec();
     turned.reverse();
     let turned = Heightmap::from_data(spec, turned).unwrap();
-    let shape = c.shape(c.by_id("005").unwrap());
+    let ty = c.by_id("005").unwrap();
     let (mut a, mut b) = (Lattice::new(&c), Lattice::new(&c));
-    a.compute(w.heightmap(), shape);
-    b.compute(&turned, shape);
+    a.compute(w.heightmap(), &c, ty);
+    b.compute(&turned, &c, ty);
     let ls = *a.spec();
     let mut worst = 0.0f32;
     let mut flag_diff = 0;
@@ -190,7 +190,7 @@ fn a_full_box_has_no_feasible_placement_and_the_episode_ends_with_that_reason() 
     // Everything at the rim + 12 cm: no object's top stays 5 mm below the limit.
     let full = Heightmap::from_data(spec, vec![SUCCESS_TOP_Z - 0.01; spec.len()]).unwrap();
     let mut l = Lattice::new(&c);
-    l.compute(&full, c.shape(c.by_id("003").unwrap()));
+    l.compute(&full, &c, c.by_id("003").unwrap());
     assert_eq!(l.feasible_count(), 0);
     assert!(l.flags().iter().all(|f| f & BELOW_LIMIT == 0));
     assert!(l.candidates().is_empty());
@@ -273,4 +273,31 @@ fn the_teacher_never_returns_less_than_the_lattice_blbf_rule_and_candidate_0_is_
     let mut l = Lattice::new(&c);
     let again = rollout(&mut l, reward, &w, &seq, outs[2].placement).unwrap();
     assert_eq!(again, outs[2]);
+}
+
+#[test]
+fn cached_footprints_give_the_same_planes_and_candidates_as_rasterising_each_time() {
+    let c = common::primitives();
+    let w = pile(&c, 7);
+    let mut cached = Lattice::new(&c);
+    let mut fresh = Lattice::new(&c).without_cache();
+    for ty in c.types() {
+        cached.compute(w.heightmap(), &c, ty);
+        fresh.compute(w.heightmap(), &c, ty);
+        for (a, b) in [
+            (cached.rest_z(), fresh.rest_z()),
+            (cached.top(), fresh.top()),
+            (cached.support(), fresh.support()),
+        ] {
+            assert!(
+                a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()),
+                "type {ty:?}"
+            );
+        }
+        assert_eq!(cached.flags(), fresh.flags());
+        for k in 0..NUM_YAWS {
+            assert_eq!(cached.bounds(k), fresh.bounds(k));
+        }
+        assert_eq!(cached.candidates(), fresh.candidates(), "type {ty:?}");
+    }
 }

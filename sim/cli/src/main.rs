@@ -6,6 +6,7 @@ use herb_sim::catalog::{Catalog, fit_canonical};
 use herb_sim::eval::{self, Method};
 use herb_sim::lattice::Lattice;
 use herb_sim::paths::{self, MeshSource};
+use herb_sim::reserve::Reserve;
 use herb_sim::teacher::{LatticeRule, Lookahead, run_lattice_episode};
 use herb_sim::{PackingEnv, RewardMode, SharedCatalog, WorldConfig};
 use std::path::{Path, PathBuf};
@@ -86,6 +87,8 @@ enum EvalMethod {
     /// The lookahead teacher: the best of --lookahead-k lattice candidates by the return of a
     /// lattice-BLBF rollout to the episode's end (Beam-3 order by default).
     Lookahead,
+    /// The lattice BLBF rule keeping room for later objects (Beam-3 order by default).
+    LatticeReserve,
 }
 
 impl EvalMethod {
@@ -98,6 +101,7 @@ impl EvalMethod {
             Self::Random => "random",
             Self::LatticeBlbf => "lattice-blbf",
             Self::Lookahead => "lookahead",
+            Self::LatticeReserve => "lattice-reserve",
         }
     }
 
@@ -106,7 +110,11 @@ impl EvalMethod {
             Self::Human => Some(Method::Human),
             Self::HumanPose => Some(Method::HumanPose),
             Self::Random => Some(Method::Random),
-            Self::Herb | Self::Blbf | Self::LatticeBlbf | Self::Lookahead => None,
+            Self::Herb
+            | Self::Blbf
+            | Self::LatticeBlbf
+            | Self::Lookahead
+            | Self::LatticeReserve => None,
         }
     }
 }
@@ -425,11 +433,18 @@ fn run(cli: Cli) -> AnyResult<()> {
                             (None, _) => SequenceMode::Beam3,
                         };
                         let results = match m {
-                            EvalMethod::LatticeBlbf | EvalMethod::Lookahead => {
+                            EvalMethod::LatticeBlbf
+                            | EvalMethod::Lookahead
+                            | EvalMethod::LatticeReserve => {
                                 let rule = match m {
                                     EvalMethod::Lookahead => LatticeRule::Lookahead(Box::new(
                                         Lookahead::new(&catalog, lookahead_k, lookahead_reward),
                                     )),
+                                    EvalMethod::LatticeReserve => {
+                                        let l = Lattice::new(&catalog);
+                                        let r = Reserve::new(&l);
+                                        LatticeRule::Reserve(Box::new((l, r)))
+                                    }
                                     _ => LatticeRule::Blbf(Box::new(Lattice::new(&catalog))),
                                 };
                                 run_lattice_method(

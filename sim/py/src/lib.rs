@@ -20,6 +20,7 @@ use herb_daemon::{Blbf, DecisionInput, Policy};
 use herb_sim::features::{self, CANDIDATE_LEN, CONTEXT_LEN, DecisionFeatures};
 use herb_sim::lattice::{Lattice, MAX_CANDIDATES, Placement};
 use herb_sim::paths::{self, MeshSource};
+use herb_sim::reserve::Reserve;
 use herb_sim::teacher::{LatticeRule, Lookahead};
 use herb_sim::{Catalog, ObsLayout, PackingEnv, RewardMode, SharedCatalog, TypeIdx, WorldConfig};
 use numpy::ndarray::{Array1, Array2, Array3, Array4};
@@ -671,9 +672,9 @@ impl VecEnv {
         if !(1..=MAX_CANDIDATES).contains(&k) {
             return Err(value_err(format!("k {k} outside 1..={MAX_CANDIDATES}")));
         }
-        if rule != "lattice-blbf" && rule != "lookahead" {
+        if !["lattice-blbf", "lookahead", "lattice-reserve"].contains(&rule) {
             return Err(value_err(format!(
-                "rule {rule:?}: expected lattice-blbf or lookahead"
+                "rule {rule:?}: expected lattice-blbf, lookahead or lattice-reserve"
             )));
         }
         let n = self.slots.len();
@@ -703,6 +704,7 @@ impl VecEnv {
                         let fits = match &s.rule {
                             Some(LatticeRule::Blbf(_)) => rule == "lattice-blbf",
                             Some(LatticeRule::Lookahead(t)) => rule == "lookahead" && t.k() == k,
+                            Some(LatticeRule::Reserve(_)) => rule == "lattice-reserve",
                             None => false,
                         };
                         if !fits {
@@ -712,6 +714,10 @@ impl VecEnv {
                                     k,
                                     s.env.reward_mode(),
                                 )))
+                            } else if rule == "lattice-reserve" {
+                                let l = Lattice::new(&catalog);
+                                let r = Reserve::new(&l);
+                                LatticeRule::Reserve(Box::new((l, r)))
                             } else {
                                 LatticeRule::Blbf(Box::new(Lattice::new(&catalog)))
                             });
