@@ -85,7 +85,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--policy", action="append", default=[], help="ONNX policy (repeat)")
     ap.add_argument("--rule", action="append", default=[],
-                    choices=["blbf", "lattice-blbf", "lookahead", "lattice-reserve"], help="decision rule (repeat)")
+                    choices=["blbf", "lattice-blbf", "lookahead", "lattice-reserve", "geo-lookahead"], help="decision rule (repeat)")
     ap.add_argument("--k", type=int, default=8, help="candidates of the lookahead rule")
     ap.add_argument("--episodes", type=int, default=256)
     ap.add_argument("--seed", type=int, default=777)

@@ -19,10 +19,11 @@ use crate::catalog::TypeIdx;
 use crate::env::{PackingEnv, RewardMode};
 use crate::error::Result;
 use crate::eval::EpisodeResult;
+use crate::heightmap::Heightmap;
 use crate::lattice::{Lattice, Placement};
 use crate::reserve::Reserve;
 use crate::world::PackingWorld;
-use rapier3d::math::Rotation;
+use rapier3d::math::{Rotation, Vector};
 use std::time::Instant;
 
 /// What the rollout after one candidate placement achieved.
@@ -177,6 +178,9 @@ pub enum LatticeRule {
     /// The lattice BLBF rule that keeps room for later objects: the first candidate, in BLBF
     /// order, after which the fewest reserved objects stop fitting ([`Reserve::lost`]).
     Reserve(Box<(Lattice, Reserve)>),
+
+    /// The geometric lookahead teacher.
+    Geo(Box<GeoLookahead>),
 }
 
 impl LatticeRule {
@@ -187,6 +191,7 @@ impl LatticeRule {
 
             Self::Lookahead(t) => format!("lookahead (teacher, k = {})", t.k()),
             Self::Reserve(_) => "lattice-reserve".into(),
+            Self::Geo(t) => format!("geo-lookahead (k = {})", t.k()),
         }
     }
 
@@ -205,6 +210,10 @@ impl LatticeRule {
             }
 
             Self::Lookahead(t) => t.decide(env.world(), remaining),
+            Self::Geo(t) => {
+                let w = env.world();
+                Ok(t.decide(w.catalog(), w.heightmap(), remaining))
+            }
             Self::Reserve(b) => {
                 let (l, r) = &mut **b;
                 let w = env.world();
@@ -254,4 +263,129 @@ pub fn run_lattice_episode(
         }
     }
     Ok(r)
+}
+
+/// What the geometric rollout after one candidate placement achieved.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GeoOutcome {
+    /// The candidate placement.
+    pub placement: Placement,
+    /// Objects of the remaining sequence that found a feasible lattice placement, the
+    /// candidate's included.
+    pub packed: usize,
+    /// The highest cell of the heightmap when the rollout ended (m).
+    pub final_top: f32,
+}
+
+/// A geometric lookahead teacher: like [`Lookahead`], the first `k` lattice candidates each
+/// followed by the lattice BLBF rule for the rest of the sequence, but without physics. Each
+/// placed object raises the heightmap cells under its footprint's bounding box to its top
+/// (objects never settle, tip or fall), so a rollout costs a few lattice computations, not a
+/// physics simulation, and its outcome is a deterministic, piecewise-smooth function of the
+/// heightmap. It keeps the candidate whose rollout finds a feasible placement for the most
+/// objects, then the lowest final top, then the earlier candidate: with no geometric reason
+/// to deviate it places as the lattice BLBF rule.
+#[derive(Debug, Clone)]
+pub struct GeoLookahead {
+    k: usize,
+    lattice: Lattice,
+    rollout: Lattice,
+    scratch: Heightmap,
+    outcomes: Vec<GeoOutcome>,
+}
+
+impl GeoLookahead {
+    /// A geometric teacher over the first `k` (at least 1) candidates.
+    pub fn new(catalog: &crate::Catalog, k: usize) -> Self {
+        let spec = crate::heightmap::GridSpec::for_box(crate::ObsLayout::CELL_M)
+            .expect("observation cell within GridSpec range");
+        Self {
+            k: k.max(1),
+            lattice: Lattice::new(catalog),
+            rollout: Lattice::new(catalog),
+            scratch: Heightmap::new(spec),
+            outcomes: Vec::with_capacity(k.max(1)),
+        }
+    }
+
+    /// Candidates tried per decision.
+    pub fn k(&self) -> usize {
+        self.k
+    }
+
+    /// The placement for `remaining[0]` over `hm`, or `None` when the lattice holds no
+    /// feasible placement (or `remaining` is empty).
+    pub fn decide(
+        &mut self,
+        catalog: &crate::Catalog,
+        hm: &Heightmap,
+        remaining: &[TypeIdx],
+    ) -> Option<Placement> {
+        self.outcomes.clear();
+        let &next = remaining.first()?;
+        if self.scratch.spec() != hm.spec() {
+            self.scratch = hm.clone();
+        }
+        self.lattice.compute(hm, catalog, next);
+        let n = self.lattice.candidates().len().min(self.k);
+        for c in 0..n {
+            let first = self.lattice.computed_candidates()[c];
+            self.scratch.data_mut().copy_from_slice(hm.data());
+            raise_bounding_box(
+                &mut self.scratch,
+                &first,
+                self.lattice.bounds(first.yaw as usize),
+            );
+            let mut packed = 1;
+            for &ty in &remaining[1..] {
+                self.rollout.compute(&self.scratch, catalog, ty);
+                let Some(p) = self.rollout.blbf() else { break };
+                raise_bounding_box(&mut self.scratch, &p, self.rollout.bounds(p.yaw as usize));
+                packed += 1;
+            }
+            self.outcomes.push(GeoOutcome {
+                placement: first,
+                packed,
+                final_top: self.scratch.max(),
+            });
+        }
+        let mut best: Option<&GeoOutcome> = None;
+        for o in &self.outcomes {
+            if best.is_none_or(|b| {
+                o.packed > b.packed || (o.packed == b.packed && o.final_top < b.final_top)
+            }) {
+                best = Some(o);
+            }
+        }
+        best.map(|o| o.placement)
+    }
+
+    /// The geometric outcomes of the last decision's candidates.
+    pub fn outcomes(&self) -> &[GeoOutcome] {
+        &self.outcomes
+    }
+}
+
+/// Raises the cells of `hm` whose centres lie under the bounding box `bounds` (around the
+/// origin) of placement `p` to at least its top.
+pub fn raise_bounding_box(hm: &mut Heightmap, p: &Placement, bounds: (Vector, Vector)) {
+    let spec = *hm.spec();
+    let (lo, hi) = bounds;
+    let (u0, v0) = spec.to_pixel(p.x + lo.x, p.y + hi.y);
+    let (u1, v1) = spec.to_pixel(p.x + hi.x, p.y + lo.y);
+    // Cells whose centre (index + 0.5) lies in [u0, u1] x [v0, v1].
+    let first = |a: f32| (a - 0.5).ceil().max(0.0) as usize;
+    let last = |b: f32, n: usize| ((b - 0.5).floor().max(-1.0) as isize).min(n as isize - 1);
+    let (c0, c1) = (first(u0), last(u1, spec.nx));
+    let (r0, r1) = (first(v0), last(v1, spec.ny));
+    if c1 < c0 as isize || r1 < r0 as isize {
+        return;
+    }
+    let nx = spec.nx;
+    let data = hm.data_mut();
+    for r in r0..=r1 as usize {
+        for v in &mut data[r * nx + c0..=r * nx + c1 as usize] {
+            *v = v.max(p.top);
+        }
+    }
 }

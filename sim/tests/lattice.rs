@@ -6,7 +6,9 @@ use herb_sim::env::{PackingEnv, RewardMode};
 use herb_sim::eval::NO_FEASIBLE_PLACEMENT;
 use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y, SUCCESS_TOP_Z};
 use herb_sim::lattice::{BELOW_LIMIT, FEASIBLE, INSIDE, Lattice, NUM_YAWS, WALL_TOL_M, YAWS};
-use herb_sim::teacher::{LatticeRule, Lookahead, rollout, run_lattice_episode};
+use herb_sim::teacher::{
+    GeoLookahead, LatticeRule, Lookahead, raise_bounding_box, rollout, run_lattice_episode,
+};
 use herb_sim::zestimate::{ZScratch, estimate_z};
 use herb_sim::{Heightmap, PackingWorld, SharedCatalog, TypeIdx, WorldConfig};
 use rapier3d::math::Rotation;
@@ -300,4 +302,66 @@ fn cached_footprints_give_the_same_planes_and_candidates_as_rasterising_each_tim
         }
         assert_eq!(cached.candidates(), fresh.candidates(), "type {ty:?}");
     }
+}
+
+#[test]
+fn raising_a_placement_lifts_exactly_the_cells_under_its_bounding_box() {
+    let c = common::primitives();
+    let w = common::world(&c);
+    let ty = c.by_id("004").unwrap();
+    let mut l = Lattice::new(&c);
+    l.compute(w.heightmap(), &c, ty);
+    let p = l.blbf().unwrap();
+    let (lo, hi) = l.bounds(p.yaw as usize);
+    let mut hm = w.heightmap().clone();
+    raise_bounding_box(&mut hm, &p, (lo, hi));
+    let spec = *hm.spec();
+    let mut raised = 0;
+    for row in 0..spec.ny {
+        for col in 0..spec.nx {
+            let (x, y) = spec.cell_centre(col, row);
+            let under = x >= p.x + lo.x && x <= p.x + hi.x && y >= p.y + lo.y && y <= p.y + hi.y;
+            let h = hm.data()[row * spec.nx + col];
+            let before = w.heightmap().data()[row * spec.nx + col];
+            if under {
+                assert_eq!(h, before.max(p.top), "cell {col} {row}");
+                raised += 1;
+            } else {
+                assert_eq!(h, before, "cell {col} {row}");
+            }
+        }
+    }
+    // The footprint's area in cells, within a row and a column of cells.
+    let cell = spec.cell;
+    let want = ((hi.x - lo.x) / cell) * ((hi.y - lo.y) / cell);
+    let slack = (hi.x - lo.x + hi.y - lo.y) / cell + 1.0;
+    assert!(
+        (raised as f32 - want).abs() <= slack,
+        "{raised} cells, about {want}"
+    );
+}
+
+#[test]
+fn the_geometric_teacher_with_one_candidate_places_as_the_lattice_blbf_rule() {
+    let c = common::primitives();
+    let w = pile(&c, 5);
+    let seq: Vec<TypeIdx> = ["013", "004", "005", "003", "007"]
+        .iter()
+        .map(|id| c.by_id(id).unwrap())
+        .collect();
+    let mut one = GeoLookahead::new(&c, 1);
+    let mut l = Lattice::new(&c);
+    l.compute(w.heightmap(), &c, seq[0]);
+    assert_eq!(one.decide(&c, w.heightmap(), &seq), l.blbf());
+    // With more candidates: the choice packs at least as many objects (geometrically) as
+    // candidate 0, and every outcome counts the candidate itself.
+    let mut eight = GeoLookahead::new(&c, 8);
+    let choice = eight.decide(&c, w.heightmap(), &seq).unwrap();
+    let outs = eight.outcomes();
+    assert!(outs.len() > 1);
+    assert!(outs.iter().all(|o| (1..=seq.len()).contains(&o.packed)));
+    let chosen = outs.iter().find(|o| o.placement == choice).unwrap();
+    assert!(chosen.packed >= outs[0].packed);
+    // No objects: no decision.
+    assert_eq!(eight.decide(&c, w.heightmap(), &[]), None);
 }

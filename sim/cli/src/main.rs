@@ -7,7 +7,7 @@ use herb_sim::eval::{self, Method};
 use herb_sim::lattice::Lattice;
 use herb_sim::paths::{self, MeshSource};
 use herb_sim::reserve::Reserve;
-use herb_sim::teacher::{LatticeRule, Lookahead, run_lattice_episode};
+use herb_sim::teacher::{GeoLookahead, LatticeRule, Lookahead, run_lattice_episode};
 use herb_sim::{PackingEnv, RewardMode, SharedCatalog, WorldConfig};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -89,6 +89,9 @@ enum EvalMethod {
     Lookahead,
     /// The lattice BLBF rule keeping room for later objects (Beam-3 order by default).
     LatticeReserve,
+    /// The geometric lookahead teacher: the best of --lookahead-k lattice candidates by a
+    /// physics-free lattice-BLBF rollout (Beam-3 order by default).
+    GeoLookahead,
 }
 
 impl EvalMethod {
@@ -102,6 +105,7 @@ impl EvalMethod {
             Self::LatticeBlbf => "lattice-blbf",
             Self::Lookahead => "lookahead",
             Self::LatticeReserve => "lattice-reserve",
+            Self::GeoLookahead => "geo-lookahead",
         }
     }
 
@@ -114,7 +118,8 @@ impl EvalMethod {
             | Self::Blbf
             | Self::LatticeBlbf
             | Self::Lookahead
-            | Self::LatticeReserve => None,
+            | Self::LatticeReserve
+            | Self::GeoLookahead => None,
         }
     }
 }
@@ -435,10 +440,14 @@ fn run(cli: Cli) -> AnyResult<()> {
                         let results = match m {
                             EvalMethod::LatticeBlbf
                             | EvalMethod::Lookahead
-                            | EvalMethod::LatticeReserve => {
+                            | EvalMethod::LatticeReserve
+                            | EvalMethod::GeoLookahead => {
                                 let rule = match m {
                                     EvalMethod::Lookahead => LatticeRule::Lookahead(Box::new(
                                         Lookahead::new(&catalog, lookahead_k, lookahead_reward),
+                                    )),
+                                    EvalMethod::GeoLookahead => LatticeRule::Geo(Box::new(
+                                        GeoLookahead::new(&catalog, lookahead_k),
                                     )),
                                     EvalMethod::LatticeReserve => {
                                         let l = Lattice::new(&catalog);

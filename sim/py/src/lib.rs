@@ -21,7 +21,7 @@ use herb_sim::features::{self, CANDIDATE_LEN, CONTEXT_LEN, DecisionFeatures};
 use herb_sim::lattice::{Lattice, MAX_CANDIDATES, Placement};
 use herb_sim::paths::{self, MeshSource};
 use herb_sim::reserve::Reserve;
-use herb_sim::teacher::{LatticeRule, Lookahead};
+use herb_sim::teacher::{GeoLookahead, LatticeRule, Lookahead};
 use herb_sim::{Catalog, ObsLayout, PackingEnv, RewardMode, SharedCatalog, TypeIdx, WorldConfig};
 use numpy::ndarray::{Array1, Array2, Array3, Array4};
 use numpy::{
@@ -672,9 +672,16 @@ impl VecEnv {
         if !(1..=MAX_CANDIDATES).contains(&k) {
             return Err(value_err(format!("k {k} outside 1..={MAX_CANDIDATES}")));
         }
-        if !["lattice-blbf", "lookahead", "lattice-reserve"].contains(&rule) {
+        if ![
+            "lattice-blbf",
+            "lookahead",
+            "lattice-reserve",
+            "geo-lookahead",
+        ]
+        .contains(&rule)
+        {
             return Err(value_err(format!(
-                "rule {rule:?}: expected lattice-blbf, lookahead or lattice-reserve"
+                "rule {rule:?}: expected lattice-blbf, lookahead, lattice-reserve or geo-lookahead"
             )));
         }
         let n = self.slots.len();
@@ -705,6 +712,7 @@ impl VecEnv {
                             Some(LatticeRule::Blbf(_)) => rule == "lattice-blbf",
                             Some(LatticeRule::Lookahead(t)) => rule == "lookahead" && t.k() == k,
                             Some(LatticeRule::Reserve(_)) => rule == "lattice-reserve",
+                            Some(LatticeRule::Geo(t)) => rule == "geo-lookahead" && t.k() == k,
                             None => false,
                         };
                         if !fits {
@@ -714,6 +722,8 @@ impl VecEnv {
                                     k,
                                     s.env.reward_mode(),
                                 )))
+                            } else if rule == "geo-lookahead" {
+                                LatticeRule::Geo(Box::new(GeoLookahead::new(&catalog, k)))
                             } else if rule == "lattice-reserve" {
                                 let l = Lattice::new(&catalog);
                                 let r = Reserve::new(&l);
