@@ -67,6 +67,11 @@ fn bench_policy(
     extra: &str,
 ) {
     let (mut world, next) = scene(catalog);
+    // The rest of the job (read by candidate policies' context features).
+    let after: Vec<TypeIdx> = ["003", "005", "004", "011"]
+        .iter()
+        .map(|id| catalog.by_id(id).expect("id"))
+        .collect();
     let projections = Projections::new(catalog);
     let mut obs = vec![0.0f32; ObsLayout::LEN];
     let mut h = Histogram::<u64>::new_with_bounds(1, 10_000_000_000, 3).expect("histogram");
@@ -88,7 +93,7 @@ fn bench_policy(
                         shape: catalog.shape(next),
                         step: 5,
                         catalog,
-                        after: &[],
+                        after: &after,
                     })
                     .expect("decision");
                 let (x, y, theta) = action_to_placement(a).expect("action");

@@ -1,0 +1,92 @@
+#!/usr/bin/env python3
+"""Held-out probe: do the candidate features predict the teacher's simulated outcomes?
+
+    python models/probe_teacher.py --run runs/cs06 --epochs 100
+
+Reads a run's replay buffer (``replay.npz``), keeps the teacher's states (prior rows) where
+candidate 0 and at least one other candidate were simulated, and splits them in collection
+order: the first 80 % train a scorer (the recipe's ``Scorer``) to regress each tried
+candidate's simulated return under ``--reward``, as an advantage over candidate 0 (``adv``)
+or as is (``abs``); the last 20 % are held out. Every ``--every`` epochs it prints, on both
+parts, the share of states where the scorer's best tried candidate is the teacher's, its mean
+regret (best simulated return minus the chosen candidate's), the share of "big misses"
+(chosen return more than 0.5 below the best: a failure another candidate avoided) and the
+same for always taking candidate 0 (the lattice BLBF rule). A student can only recover the
+teacher's gain if the held-out regret falls below candidate 0's.
+"""
+
+import argparse
+import os
+import sys
+
+import numpy as np
+import torch
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import train as T  # noqa: E402  (the recipe's Scorer, masks and reward parsing)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--run", required=True, help="run folder holding replay.npz")
+    ap.add_argument("--reward", default="cs0.6")
+    ap.add_argument("--mode", choices=["adv", "abs"], default="adv")
+    ap.add_argument("--epochs", type=int, default=100)
+    ap.add_argument("--every", type=int, default=10)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args()
+    torch.set_num_threads(a.threads)
+    torch.manual_seed(a.seed)
+    path = os.path.join(a.run, "replay.npz")
+    rb = T.Replay.load(path, 0)
+    rows = np.flatnonzero(rb.prior[: rb.n])
+    ret = rb.returns(rows, T.parse_reward(a.reward))
+    known = ~np.isnan(ret)
+    keep = known[:, 0] & (known.sum(1) > 1)
+    rows, ret, known = rows[keep], ret[keep], known[keep]
+    if len(rows) < 10:
+        raise SystemExit(f"{path}: {len(rows)} teacher states with simulated candidates; need 10")
+    ctx = torch.as_tensor(rb.ctx[rows].astype(np.float32))
+    cand = torch.as_tensor(rb.cand[rows].astype(np.float32))
+    mask = torch.as_tensor(T.masks(rb.count[rows]))
+    n = len(rows)
+    cut = int(0.8 * n)
+    train, held = np.arange(cut), np.arange(cut, n)
+    target = ret - ret[:, :1] if a.mode == "adv" else ret
+    net = T.Scorer(1)
+    opt = torch.optim.Adam(net.parameters(), lr=3e-4)
+    rng = np.random.default_rng(a.seed)
+
+    def score(idx):
+        q = net(ctx[idx], cand[idx], mask[idx])[..., 0]
+        return q - q[:, :1] if a.mode == "adv" else q
+
+    def report(idx):
+        with torch.no_grad():
+            q = score(idx).numpy()
+        q = np.where(known[idx], q, -np.inf)
+        r = np.where(known[idx], ret[idx], -np.inf)
+        best = r.max(1)
+        chosen = ret[idx, q.argmax(1)]
+        agree = (q.argmax(1) == r.argmax(1)).mean()
+        return (f"agree {agree:.3f} regret {np.mean(best - chosen):.4f} "
+                f"(candidate 0: {np.mean(best - ret[idx, 0]):.4f}) big misses "
+                f"{np.mean(chosen < best - 0.5):.3f} (candidate 0: {np.mean(ret[idx, 0] < best - 0.5):.3f})")
+
+    print(f"{n} teacher states ({cut} train, {n - cut} held out), {a.reward}, {a.mode}")
+    for ep in range(a.epochs):
+        for i in range(0, cut, 128):
+            b = rng.permutation(train)[:128] if i == 0 else train[rng.integers(0, cut, 128)]
+            k = torch.as_tensor(known[b])
+            loss = ((score(b) - torch.as_tensor(np.nan_to_num(target[b]))) ** 2)[k].mean()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+        if (ep + 1) % a.every == 0:
+            print(f"epoch {ep + 1}: held out {report(held)} | train {report(train)}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
