@@ -142,6 +142,10 @@ pub struct Lattice {
     rest_z: Vec<f32>,
     top: Vec<f32>,
     support: Vec<f32>,
+    /// Scratch for [`Lattice::candidates`]: nodes of one yaw at the lowest top.
+    lowest: Vec<u32>,
+    /// `support` is up to date with the last [`Lattice::compute`].
+    support_ready: bool,
     flags: Vec<u8>,
     candidates: Vec<Placement>,
 }
@@ -235,6 +239,8 @@ impl Lattice {
             rest_z: vec![0.0; n],
             top: vec![0.0; n],
             support: vec![0.0; n],
+            support_ready: false,
+            lowest: Vec::with_capacity(spec.len()),
             flags: vec![0; n],
             candidates: Vec::with_capacity(4 * MAX_CANDIDATES),
         }
@@ -290,8 +296,38 @@ impl Lattice {
         &self.top
     }
 
-    /// Supported footprint shares `[yaw][row][col]`.
-    pub fn support(&self) -> &[f32] {
+    /// Supported footprint shares `[yaw][row][col]`, at feasible nodes (0 elsewhere). The
+    /// decision does not need this plane (candidates carry their own support), so it is
+    /// computed here, on the first call after [`Lattice::compute`].
+    pub fn support(&mut self) -> &[f32] {
+        if !self.support_ready {
+            let spec = self.spec;
+            for k in 0..NUM_YAWS {
+                let fp = match self.active {
+                    Some(t) => &self.cache[t][k].coarse,
+                    None => &self.current[k].coarse,
+                };
+                for row in 0..spec.ny {
+                    for col in 0..spec.nx {
+                        let i = (k * spec.ny + row) * spec.nx + col;
+                        self.support[i] = if self.flags[i] == FEASIBLE {
+                            let (dc, dr) = (col as isize, row as isize);
+                            support_fraction(
+                                &self.coarse,
+                                fp,
+                                dc,
+                                dr,
+                                self.rest_z[i],
+                                SUPPORT_TOL_M,
+                            )
+                        } else {
+                            0.0
+                        };
+                    }
+                }
+            }
+            self.support_ready = true;
+        }
         &self.support
     }
 
@@ -312,6 +348,7 @@ impl Lattice {
     pub fn compute(&mut self, hm: &Heightmap, catalog: &Catalog, ty: TypeIdx) {
         hm.max_pool_into(&mut self.coarse);
         hm.max_pool_into(&mut self.fine);
+        self.support_ready = false;
         self.candidates.clear();
         let spec = self.spec;
         let limit = HEIGHT_LIMIT_M;
@@ -347,7 +384,6 @@ impl Lattice {
                         // Across a wall: not estimated.
                         self.rest_z[i] = f32::INFINITY;
                         self.top[i] = f32::INFINITY;
-                        self.support[i] = 0.0;
                         self.flags[i] = 0;
                         continue;
                     }
@@ -359,12 +395,6 @@ impl Lattice {
                     let below = top <= limit;
                     self.rest_z[i] = z;
                     self.top[i] = top;
-                    // Support only where the placement is feasible (0 elsewhere).
-                    self.support[i] = if below {
-                        support_fraction(&self.coarse, fp, dc, dr, z, SUPPORT_TOL_M)
-                    } else {
-                        0.0
-                    };
                     self.flags[i] = INSIDE | if below { BELOW_LIMIT } else { 0 };
                 }
             }
@@ -379,28 +409,40 @@ impl Lattice {
         }
         let spec = self.spec;
         let limit = HEIGHT_LIMIT_M;
+        let mut lowest = std::mem::take(&mut self.lowest);
         for k in 0..NUM_YAWS {
+            // The inside-the-walls nodes of the lowest top, in row-major order: every corner's
+            // choice below is among them (the top is the first key). Inside the walls suffices
+            // here: the coarse top is conservative, the refined top decides the height limit.
+            lowest.clear();
+            let mut min_top = f32::INFINITY;
+            for i in k * spec.len()..(k + 1) * spec.len() {
+                if self.flags[i] & INSIDE == 0 {
+                    continue;
+                }
+                let t = self.top[i];
+                if t < min_top {
+                    min_top = t;
+                    lowest.clear();
+                }
+                if t == min_top {
+                    lowest.push((i - k * spec.len()) as u32);
+                }
+            }
             for (sx, sy) in [(1.0f32, 1.0f32), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)] {
                 for x_first in [true, false] {
                     // Lowest top, then nearest the corner (-sx, -sy) along the first axis.
-                    let mut best: Option<(usize, usize, (f32, f32, f32))> = None;
-                    for row in 0..spec.ny {
-                        for col in 0..spec.nx {
-                            let i = (k * spec.ny + row) * spec.nx + col;
-                            // Inside the walls suffices here: the coarse top is conservative,
-                            // the refined top decides the height limit below.
-                            if self.flags[i] & INSIDE == 0 {
-                                continue;
-                            }
-                            let (x, y) = spec.cell_centre(col, row);
-                            let key = if x_first {
-                                (self.top[i], sx * x, sy * y)
-                            } else {
-                                (self.top[i], sy * y, sx * x)
-                            };
-                            if best.is_none_or(|(_, _, b)| key < b) {
-                                best = Some((col, row, key));
-                            }
+                    let mut best: Option<(usize, usize, (f32, f32))> = None;
+                    for &j in &lowest {
+                        let (col, row) = (j as usize % spec.nx, j as usize / spec.nx);
+                        let (x, y) = spec.cell_centre(col, row);
+                        let key = if x_first {
+                            (sx * x, sy * y)
+                        } else {
+                            (sy * y, sx * x)
+                        };
+                        if best.is_none_or(|(_, _, b)| key < b) {
+                            best = Some((col, row, key));
                         }
                     }
                     let Some((col, row, _)) = best else { continue };
@@ -425,6 +467,7 @@ impl Lattice {
                 }
             }
         }
+        self.lowest = lowest;
         self.candidates.sort_by(Placement::blbf_cmp);
         // Keep one of each position and yaw (sorted, so duplicates are adjacent unless their
         // estimates differ, loose and tight at the same spot: keep both then).
@@ -513,7 +556,7 @@ impl Lattice {
         let fps = self.fp(k);
         let (lo, hi) = fps.bounds;
         let fp = &fps.fine;
-        let mut best: Option<Placement> = None;
+        let mut best: Option<(Placement, isize, isize)> = None;
         for r in r0 - 1..=r0 + 1 {
             for c in c0 - 1..=c0 + 1 {
                 if c < 0 || r < 0 || c as usize >= fs.nx || r as usize >= fs.ny {
@@ -532,16 +575,20 @@ impl Lattice {
                     yaw: k as u8,
                     rest_z: z,
                     top: z + fp.top(),
-                    support: support_fraction(&self.fine, fp, c, r, z, SUPPORT_TOL_M),
+                    support: 0.0,
                     node: (col as u16, row as u16),
                     tight: false,
                 };
-                if best.is_none_or(|b| p.blbf_cmp(&b).is_lt()) {
-                    best = Some(p);
+                if best.is_none_or(|(b, _, _)| p.blbf_cmp(&b).is_lt()) {
+                    best = Some((p, c, r));
                 }
             }
         }
-        best
+        // Support (not part of the order) for the winner only.
+        best.map(|(p, c, r)| Placement {
+            support: support_fraction(&self.fine, fp, c, r, p.rest_z, SUPPORT_TOL_M),
+            ..p
+        })
     }
 }
 

@@ -286,10 +286,11 @@ fn cached_footprints_give_the_same_planes_and_candidates_as_rasterising_each_tim
     for ty in c.types() {
         cached.compute(w.heightmap(), &c, ty);
         fresh.compute(w.heightmap(), &c, ty);
+        let (sa, sb) = (cached.support().to_vec(), fresh.support().to_vec());
         for (a, b) in [
             (cached.rest_z(), fresh.rest_z()),
             (cached.top(), fresh.top()),
-            (cached.support(), fresh.support()),
+            (&sa[..], &sb[..]),
         ] {
             assert!(
                 a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()),
