@@ -90,6 +90,9 @@ def load_config(path):
             raise SystemExit(f"{path}: env.{k} must be a positive integer")
     if not 1 <= c["teacher"]["k"] <= C:
         raise SystemExit(f"{path}: teacher.k must be 1 to {C}")
+    h = c["teacher"].get("horizon")
+    if h is not None and not (isinstance(h, int) and h >= 1):
+        raise SystemExit(f"{path}: teacher.horizon must be a positive integer (objects per rollout)")
     for k in ("total_steps", "batch_size", "buffer_size"):
         if not (isinstance(c["sac"][k], int) and c["sac"][k] > 0):
             raise SystemExit(f"{path}: sac.{k} must be a positive integer")
@@ -560,7 +563,8 @@ def main():
                 truncate()
                 st["phase"] = "offline"
                 continue
-            ctx, cand, mask, _, packed, choice, parts = env.teacher(c["teacher"]["k"])
+            ctx, cand, mask, _, packed, choice, parts = env.teacher(
+                c["teacher"]["k"], c["teacher"].get("horizon"))
             mcp = np.concatenate([parts[..., :2], packed[..., None].astype(np.float32),
                                   parts[..., 2:]], -1)
             mcp[packed < 0] = np.nan

@@ -11,7 +11,9 @@ policy. Used to choose between training runs without looking at the BoxED test e
 (Table I). Needs onnxruntime for
 ``--policy``. ``--rule`` runs a decision rule in Rust instead: ``blbf`` (the daemon's BLBF
 heuristic, through the same action mapping as a policy), ``lattice-blbf`` (BLBF restricted to the
-placement lattice) or ``lookahead`` (the teacher, ``--k`` candidates).
+placement lattice), ``lattice-reserve`` (keeping room for later objects), ``lookahead`` (the
+teacher, ``--k`` candidates, rollouts of ``--horizon`` objects or to the end) or
+``geo-lookahead`` (the teacher's rollouts without physics).
 """
 
 import argparse
@@ -50,7 +52,7 @@ def onnx_actor(path):
                                         for k in range(len(obs))]).astype(np.float32)
 
 
-def validate(act, episodes, seed, reward, boxed, rule=None, k=8):
+def validate(act, episodes, seed, reward, boxed, rule=None, k=8, horizon=None):
     """Success rate and mean objects packed of ``act`` (a policy from ``onnx_actor``) or, with
     ``rule``, of a lattice rule stepped in Rust, on the validation episodes."""
     # One environment per episode; each counts its first episode only (autoreset keeps the
@@ -64,7 +66,7 @@ def validate(act, episodes, seed, reward, boxed, rule=None, k=8):
     while not done.all():
         if rule is not None:
             # Only environments still in their first episode: the teacher is costly.
-            obs, _, term, _, info = env.step_rule(rule, k, active=~done)
+            obs, _, term, _, info = env.step_rule(rule, k, active=~done, horizon=horizon)
         elif act is not None and act[0] == "candidates":
             _, term, info = env.step_candidates(act[1](*env.candidates()))
         elif act is not None:
@@ -86,7 +88,9 @@ def main():
     ap.add_argument("--policy", action="append", default=[], help="ONNX policy (repeat)")
     ap.add_argument("--rule", action="append", default=[],
                     choices=["blbf", "lattice-blbf", "lookahead", "lattice-reserve", "geo-lookahead"], help="decision rule (repeat)")
-    ap.add_argument("--k", type=int, default=8, help="candidates of the lookahead rule")
+    ap.add_argument("--k", type=int, default=8, help="candidates of the lookahead rules")
+    ap.add_argument("--horizon", type=int, default=None,
+                    help="objects per lookahead rollout, the candidate's included (default: to the end)")
     ap.add_argument("--episodes", type=int, default=256)
     ap.add_argument("--seed", type=int, default=777)
     ap.add_argument("--reward", default="cs0.6", help="reward mode (does not change the episodes)")
@@ -94,6 +98,8 @@ def main():
     a = ap.parse_args()
     if not 1 <= a.episodes <= 4096:
         raise SystemExit(f"--episodes {a.episodes}: need 1 to 4096")
+    if a.horizon is not None and a.horizon < 1:
+        raise SystemExit(f"--horizon {a.horizon}: need at least 1 object")
     if not a.policy and not a.rule:
         raise SystemExit("give at least one --policy or --rule")
     print(f"{a.episodes} training-distribution episodes, seed {a.seed}")
@@ -103,8 +109,10 @@ def main():
     for r in a.rule:
         t = time.perf_counter()
         s, n = validate(None, a.episodes, a.seed, a.reward, a.boxed,
-                        rule=None if r == "blbf" else r, k=a.k)
-        label = f"{r} (k = {a.k})" if r == "lookahead" else r
+                        rule=None if r == "blbf" else r, k=a.k, horizon=a.horizon)
+        label = f"{r} (k = {a.k})" if r in ("lookahead", "geo-lookahead") else r
+        if r == "lookahead" and a.horizon is not None:
+            label = f"{r} (k = {a.k}, horizon {a.horizon})"
         print(f"{label}: success {100 * s:.2f} %, objects packed {n:.2f} "
               f"({time.perf_counter() - t:.0f} s)", flush=True)
     return 0

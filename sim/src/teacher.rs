@@ -53,6 +53,7 @@ pub struct CandidateOutcome {
 #[derive(Debug, Clone)]
 pub struct Lookahead {
     k: usize,
+    horizon: usize,
     reward: RewardMode,
     lattice: Lattice,
     rollout: Lattice,
@@ -64,6 +65,7 @@ impl Lookahead {
     pub fn new(catalog: &crate::Catalog, k: usize, reward: RewardMode) -> Self {
         Self {
             k: k.max(1),
+            horizon: usize::MAX,
             reward,
             lattice: Lattice::new(catalog),
             rollout: Lattice::new(catalog),
@@ -71,9 +73,23 @@ impl Lookahead {
         }
     }
 
+    /// The same teacher with rollouts that stop after `horizon` (at least 1) objects, the
+    /// candidate's included: a cheaper teacher whose returns cover only the next `horizon`
+    /// placements (a rollout that reaches the horizon counts as a success). `usize::MAX`, the
+    /// default, simulates to the episode's end.
+    pub fn with_horizon(mut self, horizon: usize) -> Self {
+        self.horizon = horizon.max(1);
+        self
+    }
+
     /// Candidates simulated per decision.
     pub fn k(&self) -> usize {
         self.k
+    }
+
+    /// Objects simulated per rollout at most, the candidate's included.
+    pub fn horizon(&self) -> usize {
+        self.horizon
     }
 
     /// The teacher's placement for `remaining[0]` in `world`, or `None` when the lattice holds
@@ -93,7 +109,14 @@ impl Lookahead {
         let n = self.lattice.candidates().len().min(self.k);
         for c in 0..n {
             let first = self.lattice.candidates()[c];
-            let o = rollout(&mut self.rollout, self.reward, world, remaining, first)?;
+            let end = remaining.len().min(self.horizon);
+            let o = rollout(
+                &mut self.rollout,
+                self.reward,
+                world,
+                &remaining[..end],
+                first,
+            )?;
             self.outcomes.push(o);
         }
         let best =

@@ -366,3 +366,33 @@ fn the_geometric_teacher_with_one_candidate_places_as_the_lattice_blbf_rule() {
     // No objects: no decision.
     assert_eq!(eight.decide(&c, w.heightmap(), &[]), None);
 }
+
+#[test]
+fn a_teacher_with_a_horizon_simulates_that_many_objects_and_the_rollout_of_that_prefix() {
+    let c = common::primitives();
+    let reward = RewardMode::cs(0.6).unwrap();
+    let seq: Vec<TypeIdx> = ["013", "004", "005", "003", "007", "011"]
+        .iter()
+        .map(|id| c.by_id(id).unwrap())
+        .collect();
+    let w = common::world(&c);
+    let mut t = Lookahead::new(&c, 3, reward).with_horizon(2);
+    assert_eq!(t.horizon(), 2);
+    t.decide(&w, &seq).unwrap().unwrap();
+    let outs = t.outcomes().to_vec();
+    assert_eq!(outs.len(), 3);
+    let mut l = Lattice::new(&c);
+    for o in &outs {
+        assert!(o.packed <= 2, "{o:?}");
+        // The same as a rollout of the first two objects.
+        assert_eq!(
+            *o,
+            rollout(&mut l, reward, &w, &seq[..2], o.placement).unwrap()
+        );
+    }
+    // A horizon of 0 is taken as 1: the candidate alone.
+    let mut one = Lookahead::new(&c, 2, reward).with_horizon(0);
+    assert_eq!(one.horizon(), 1);
+    one.decide(&w, &seq).unwrap().unwrap();
+    assert!(one.outcomes().iter().all(|o| o.packed <= 1));
+}

@@ -491,13 +491,15 @@ impl VecEnv {
     /// return and objects packed (NaN and -1 where not simulated), the teacher's choice (-1
     /// without candidates), and the return's parts, sum of C, sum of S and failed (0 or 1), so
     /// that it can be relabelled for another reward (NaN where not simulated). Step with
-    /// [`VecEnv::step_candidates`].
+    /// [`VecEnv::step_candidates`]. With `horizon`, each rollout stops after that many objects
+    /// (the candidate's included; returns then cover those placements only).
     #[allow(clippy::type_complexity)]
-    #[pyo3(signature = (k=8))]
+    #[pyo3(signature = (k=8, horizon=None))]
     fn teacher<'py>(
         &mut self,
         py: Python<'py>,
         k: usize,
+        horizon: Option<usize>,
     ) -> PyResult<(
         Bound<'py, PyArray2<f32>>,
         Bound<'py, PyArray3<f32>>,
@@ -510,6 +512,10 @@ impl VecEnv {
         if !(1..=MAX_CANDIDATES).contains(&k) {
             return Err(value_err(format!("k {k} outside 1..={MAX_CANDIDATES}")));
         }
+        if horizon == Some(0) {
+            return Err(value_err("horizon 0: need at least 1 object"));
+        }
+        let horizon = horizon.unwrap_or(usize::MAX);
         let (slots, pool, catalog) = (&mut self.slots, &self.pool, &self.catalog);
         type Sim = (Vec<f32>, Vec<i32>, i64, Vec<f32>);
         let sims: Result<Vec<Sim>, String> = py.detach(|| {
@@ -525,11 +531,10 @@ impl VecEnv {
                             return Ok((rets, packed, -1, parts));
                         }
                         let reward = s.env.reward_mode();
-                        let t = s
-                            .teacher
-                            .get_or_insert_with(|| Lookahead::new(catalog, k, reward));
-                        if t.k() != k {
-                            *t = Lookahead::new(catalog, k, reward);
+                        let make = || Lookahead::new(catalog, k, reward).with_horizon(horizon);
+                        let t = s.teacher.get_or_insert_with(make);
+                        if t.k() != k || t.horizon() != horizon {
+                            *t = make();
                         }
                         let chosen = t
                             .decide(s.env.world(), s.env.remaining())
@@ -654,15 +659,17 @@ impl VecEnv {
     /// environment's reward, of a lattice-BLBF rollout to the episode's end). An object
     /// without a feasible placement ends its episode, failed, with reward -1. With `active`
     /// (`[N]` bool), only the environments marked true are stepped (the others report reward
-    /// 0, not terminated, and keep their state). Returns as [`VecEnv::step`].
+    /// 0, not terminated, and keep their state). `horizon` limits the `lookahead` teacher's
+    /// rollouts to that many objects (see [`VecEnv::teacher`]). Returns as [`VecEnv::step`].
     #[allow(clippy::type_complexity)]
-    #[pyo3(signature = (rule, k=8, active=None))]
+    #[pyo3(signature = (rule, k=8, active=None, horizon=None))]
     fn step_rule<'py>(
         &mut self,
         py: Python<'py>,
         rule: &str,
         k: usize,
         active: Option<PyReadonlyArray1<'py, bool>>,
+        horizon: Option<usize>,
     ) -> PyResult<(
         Bound<'py, PyArray4<f32>>,
         Bound<'py, PyArray1<f32>>,
@@ -672,6 +679,10 @@ impl VecEnv {
         if !(1..=MAX_CANDIDATES).contains(&k) {
             return Err(value_err(format!("k {k} outside 1..={MAX_CANDIDATES}")));
         }
+        if horizon == Some(0) {
+            return Err(value_err("horizon 0: need at least 1 object"));
+        }
+        let horizon = horizon.unwrap_or(usize::MAX);
         if ![
             "lattice-blbf",
             "lookahead",
@@ -710,18 +721,19 @@ impl VecEnv {
                         }
                         let fits = match &s.rule {
                             Some(LatticeRule::Blbf(_)) => rule == "lattice-blbf",
-                            Some(LatticeRule::Lookahead(t)) => rule == "lookahead" && t.k() == k,
+                            Some(LatticeRule::Lookahead(t)) => {
+                                rule == "lookahead" && t.k() == k && t.horizon() == horizon
+                            }
                             Some(LatticeRule::Reserve(_)) => rule == "lattice-reserve",
                             Some(LatticeRule::Geo(t)) => rule == "geo-lookahead" && t.k() == k,
                             None => false,
                         };
                         if !fits {
                             s.rule = Some(if rule == "lookahead" {
-                                LatticeRule::Lookahead(Box::new(Lookahead::new(
-                                    &catalog,
-                                    k,
-                                    s.env.reward_mode(),
-                                )))
+                                LatticeRule::Lookahead(Box::new(
+                                    Lookahead::new(&catalog, k, s.env.reward_mode())
+                                        .with_horizon(horizon),
+                                ))
                             } else if rule == "geo-lookahead" {
                                 LatticeRule::Geo(Box::new(GeoLookahead::new(&catalog, k)))
                             } else if rule == "lattice-reserve" {

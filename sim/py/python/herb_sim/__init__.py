@@ -92,22 +92,25 @@ class HerbVectorEnv(gym.vector.VectorEnv):
         candidates [N, MAX_CANDIDATES, CANDIDATE_LEN], mask [N, MAX_CANDIDATES])``."""
         return self._env.candidates()
 
-    def teacher(self, k=8):
-        """The lookahead teacher on every environment: ``(context, candidates, mask, returns,
+    def teacher(self, k=8, horizon=None):
+        """The lookahead teacher on every environment (rollouts of at most ``horizon``
+        objects, to the episode's end by default): ``(context, candidates, mask, returns,
         packed, choice, parts)``; see ``VecEnv.teacher``."""
-        return self._env.teacher(k)
+        return self._env.teacher(k, horizon)
 
     def step_candidates(self, index):
         """Steps every environment with its candidate ``index[i]`` (from the last
         ``candidates()`` or ``teacher()``): ``(rewards, terminated, info)``."""
         return self._env.step_candidates(np.ascontiguousarray(index, dtype=np.int64))
 
-    def step_rule(self, rule, k=8, active=None):
+    def step_rule(self, rule, k=8, active=None, horizon=None):
         """Steps every environment (or those where ``active`` is true) with a lattice rule
-        decided in Rust (``lattice-blbf`` or ``lookahead`` with ``k`` candidates); returns as
+        decided in Rust (``lattice-blbf``, ``lattice-reserve``, or ``lookahead`` or
+        ``geo-lookahead`` with ``k`` candidates; ``horizon`` limits the lookahead's
+        rollouts to that many objects); returns as
         ``step``. See ``VecEnv.step_rule``."""
         if active is not None:
             active = np.ascontiguousarray(active, dtype=bool)
-        obs, reward, terminated, info = self._env.step_rule(rule, k, active)
+        obs, reward, terminated, info = self._env.step_rule(rule, k, active, horizon)
         truncated = np.zeros(self.num_envs, dtype=bool)
         return obs, reward, terminated, truncated, info
