@@ -27,8 +27,9 @@
 //! Allocation happens in [`Reserve::new`] only.
 
 use crate::catalog::{Catalog, TypeIdx};
-use crate::heightmap::Heightmap;
-use crate::lattice::{HEIGHT_LIMIT_M, Lattice, Placement};
+use crate::heightmap::{GridSpec, Heightmap};
+use crate::lattice::{HEIGHT_LIMIT_M, LATTICE_CELL_M, Lattice, Placement};
+use rapier3d::math::Vector;
 
 /// Number of later objects whose room is measured.
 pub const RESERVE_SLOTS: usize = 3;
@@ -67,10 +68,18 @@ pub struct CellRect {
     pub r1: usize,
 }
 
+impl Default for Reserve {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl Reserve {
-    /// Buffers for the lattice grid of `lattice`.
-    pub fn new(lattice: &Lattice) -> Self {
-        let n = lattice.spec().len();
+    /// Buffers for the lattice grid.
+    pub fn new() -> Self {
+        let n = GridSpec::for_box(LATTICE_CELL_M)
+            .expect("lattice cell within GridSpec range")
+            .len();
         let windows = || Windows {
             size: (0, 0),
             sorted: Vec::with_capacity(n),
@@ -86,9 +95,9 @@ impl Reserve {
     }
 
     /// Chooses the reserved objects among `after` (the objects after the next one, in order)
-    /// and measures their windows over the pooled heightmap of `lattice` (after its
-    /// [`Lattice::compute`]).
-    pub fn prepare(&mut self, lattice: &Lattice, catalog: &Catalog, after: &[TypeIdx]) {
+    /// and measures their windows over `pooled`, the heightmap pooled to the lattice grid
+    /// ([`Lattice::pooled`] after [`Lattice::compute`]).
+    pub fn prepare(&mut self, pooled: &Heightmap, catalog: &Catalog, after: &[TypeIdx]) {
         self.count = 0;
         if let Some(&first) = after.first() {
             self.objects[0] = first;
@@ -116,7 +125,6 @@ impl Reserve {
                 self.count += 1;
             }
         }
-        let pooled = lattice.pooled();
         for j in 0..self.count {
             let shape = catalog.shape(self.objects[j]);
             let e = shape.extents();
@@ -182,10 +190,11 @@ impl Reserve {
         self.before[j]
     }
 
-    /// The lattice cells a placement's footprint bounding box overlaps.
-    pub fn footprint_cells(lattice: &Lattice, p: &Placement) -> CellRect {
-        let spec = *lattice.pooled().spec();
-        let (lo, hi) = lattice.bounds(p.yaw as usize);
+    /// The cells of the lattice grid `spec` that the bounding box `bounds` (around the
+    /// origin, as [`Lattice::bounds`] gives it for the placement's yaw) of placement `p`
+    /// overlaps.
+    pub fn footprint_cells(spec: &GridSpec, bounds: (Vector, Vector), p: &Placement) -> CellRect {
+        let (lo, hi) = bounds;
         let eps = 1e-3;
         let (u0, v0) = spec.to_pixel(p.x + lo.x, p.y + hi.y);
         let (u1, v1) = spec.to_pixel(p.x + hi.x, p.y + lo.y);
@@ -232,7 +241,7 @@ impl Reserve {
     /// Number of reserved objects that would no longer fit below [`HEIGHT_LIMIT_M`] after
     /// placement `p`, among those that fit before it.
     pub fn lost(&self, lattice: &Lattice, p: &Placement) -> usize {
-        let rect = Self::footprint_cells(lattice, p);
+        let rect = Self::footprint_cells(lattice.spec(), lattice.bounds(p.yaw as usize), p);
         (0..self.count)
             .filter(|&j| {
                 self.before[j] <= HEIGHT_LIMIT_M && self.after(j, rect, p.top) > HEIGHT_LIMIT_M

@@ -241,7 +241,7 @@ impl LatticeRule {
                 let (l, r) = &mut **b;
                 let w = env.world();
                 l.compute(w.heightmap(), w.catalog(), next);
-                r.prepare(l, w.catalog(), &remaining[1..]);
+                r.prepare(l.pooled(), w.catalog(), &remaining[1..]);
                 l.candidates();
                 let l = &*l;
                 let mut best: Option<(usize, Placement)> = None;

@@ -62,8 +62,8 @@ fn the_best_top_after_every_candidate_matches_the_brute_force_oracle() {
         .collect();
     let mut l = Lattice::new(&c);
     l.compute(w.heightmap(), &c, next);
-    let mut r = Reserve::new(&l);
-    r.prepare(&l, &c, &after);
+    let mut r = Reserve::new();
+    r.prepare(l.pooled(), &c, &after);
     // Slot 0 is the object right after the next; then the largest by footprint area.
     assert_eq!(r.count(), 3);
     assert_eq!(r.objects()[0], after[0]);
@@ -86,7 +86,7 @@ fn the_best_top_after_every_candidate_matches_the_brute_force_oracle() {
             "slot {j} before"
         );
         for p in &candidates {
-            let rect = Reserve::footprint_cells(&l, p);
+            let rect = Reserve::footprint_cells(l.spec(), l.bounds(p.yaw as usize), p);
             assert_eq!(
                 r.after(j, rect, p.top),
                 brute_best_top(l.pooled(), e, Some((rect, p.top))),
@@ -105,8 +105,8 @@ fn a_candidate_covering_the_floor_to_the_rim_leaves_no_room() {
     let after = [c.by_id("005").unwrap()];
     let mut l = Lattice::new(&c);
     l.compute(w.heightmap(), &c, next);
-    let mut r = Reserve::new(&l);
-    r.prepare(&l, &c, &after);
+    let mut r = Reserve::new();
+    r.prepare(l.pooled(), &c, &after);
     assert_eq!(r.count(), 1);
     assert!(r.before(0) <= HEIGHT_LIMIT_M, "fits on the empty floor");
     let spec = *l.spec();
@@ -119,13 +119,62 @@ fn a_candidate_covering_the_floor_to_the_rim_leaves_no_room() {
     assert!(r.after(0, all, HEIGHT_LIMIT_M) > HEIGHT_LIMIT_M);
     // A placement's footprint cells contain its own node.
     let p = l.candidates()[0];
-    let rect = Reserve::footprint_cells(&l, &p);
+    let rect = Reserve::footprint_cells(l.spec(), l.bounds(p.yaw as usize), &p);
     let (col, row) = (p.node.0 as usize, p.node.1 as usize);
     assert!(
         (rect.c0..=rect.c1).contains(&col) && (rect.r0..=rect.r1).contains(&row),
         "{rect:?} {p:?}"
     );
     // No later objects: nothing reserved.
-    r.prepare(&l, &c, &[]);
+    r.prepare(l.pooled(), &c, &[]);
     assert_eq!(r.count(), 0);
+}
+
+#[test]
+fn the_reserve_of_the_box_turned_half_a_turn_is_the_same() {
+    let c = common::primitives();
+    let l = Lattice::new(&c);
+    let spec = *l.spec();
+    // An uneven pooled heightmap (a fixture, not a pack) and the same turned half a turn.
+    let data: Vec<f32> = (0..spec.len())
+        .map(|i| 0.2 * (((i * 7919) % 101) as f32 / 100.0).powi(3))
+        .collect();
+    let mut turned = data.clone();
+    turned.reverse();
+    let (a, b) = (
+        Heightmap::from_data(spec, data).unwrap(),
+        Heightmap::from_data(spec, turned).unwrap(),
+    );
+    let after: Vec<TypeIdx> = ["005", "013", "003", "057"]
+        .iter()
+        .map(|id| c.by_id(id).unwrap())
+        .collect();
+    let (mut ra, mut rb) = (Reserve::new(), Reserve::new());
+    ra.prepare(&a, &c, &after);
+    rb.prepare(&b, &c, &after);
+    assert_eq!(ra.objects(), rb.objects());
+    for j in 0..ra.count() {
+        assert_eq!(ra.before(j), rb.before(j));
+        for (c0, c1, r0, r1) in [
+            (0, 5, 0, 3),
+            (10, 17, 4, 12),
+            (20, 27, 15, 18),
+            (3, 3, 9, 9),
+        ] {
+            let rect = CellRect { c0, c1, r0, r1 };
+            let turned_rect = CellRect {
+                c0: spec.nx - 1 - c1,
+                c1: spec.nx - 1 - c0,
+                r0: spec.ny - 1 - r1,
+                r1: spec.ny - 1 - r0,
+            };
+            for top in [0.05, 0.15, 0.3] {
+                assert_eq!(
+                    ra.after(j, rect, top),
+                    rb.after(j, turned_rect, top),
+                    "slot {j}"
+                );
+            }
+        }
+    }
 }

@@ -451,7 +451,7 @@ fn run(cli: Cli) -> AnyResult<()> {
                                     )),
                                     EvalMethod::LatticeReserve => {
                                         let l = Lattice::new(&catalog);
-                                        let r = Reserve::new(&l);
+                                        let r = Reserve::new();
                                         LatticeRule::Reserve(Box::new((l, r)))
                                     }
                                     _ => LatticeRule::Blbf(Box::new(Lattice::new(&catalog))),

@@ -738,7 +738,7 @@ impl VecEnv {
                                 LatticeRule::Geo(Box::new(GeoLookahead::new(&catalog, k)))
                             } else if rule == "lattice-reserve" {
                                 let l = Lattice::new(&catalog);
-                                let r = Reserve::new(&l);
+                                let r = Reserve::new();
                                 LatticeRule::Reserve(Box::new((l, r)))
                             } else {
                                 LatticeRule::Blbf(Box::new(Lattice::new(&catalog)))
