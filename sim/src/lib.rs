@@ -21,6 +21,7 @@ pub mod eval;
 pub mod features;
 pub mod frames;
 pub mod heightmap;
+pub mod hull;
 pub mod image;
 pub mod lattice;
 pub mod mesh;

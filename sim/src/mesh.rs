@@ -1,12 +1,8 @@
-//! Mesh loading (OBJ through `tobj`) and hull reduction.
+//! Mesh loading (OBJ through `tobj`).
 
-use crate::catalog::sphere_directions;
 use crate::error::{Result, SimError};
 use rapier3d::math::Vector;
 use std::path::Path;
-
-/// Number of sampling directions used to reduce a hull (plus the 26 axis and diagonal ones).
-pub const SUPPORT_DIRECTIONS: usize = 160;
 
 /// All vertex positions of an OBJ file (every object and group), in file units.
 pub fn load_obj_vertices(path: &Path) -> Result<Vec<Vector>> {
@@ -41,38 +37,4 @@ pub fn load_obj_vertices(path: &Path) -> Result<Vec<Vector>> {
         )));
     }
     Ok(out)
-}
-
-/// The support points of `points` in a fixed set of directions: the vertices of an inner
-/// approximation of the convex hull with at most `SUPPORT_DIRECTIONS + 26` vertices. Keeps the
-/// axis-aligned extremes exactly (so extents are preserved) and is deterministic.
-pub fn support_points(points: &[Vector]) -> Vec<Vector> {
-    let mut dirs = sphere_directions(SUPPORT_DIRECTIONS);
-    for i in -1i32..=1 {
-        for j in -1i32..=1 {
-            for k in -1i32..=1 {
-                if (i, j, k) != (0, 0, 0) {
-                    dirs.push(Vector::new(i as f32, j as f32, k as f32).normalize());
-                }
-            }
-        }
-    }
-    let mut idx: Vec<usize> = dirs
-        .iter()
-        .map(|d| {
-            let mut best = 0;
-            let mut best_v = f32::MIN;
-            for (i, p) in points.iter().enumerate() {
-                let v = p.dot(*d);
-                if v > best_v {
-                    best_v = v;
-                    best = i;
-                }
-            }
-            best
-        })
-        .collect();
-    idx.sort_unstable();
-    idx.dedup();
-    idx.into_iter().map(|i| points[i]).collect()
 }

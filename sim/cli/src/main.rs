@@ -2,8 +2,9 @@
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use herb_sim::boxed::{self, Episode};
-use herb_sim::catalog::{Catalog, fit_canonical};
+use herb_sim::catalog::Catalog;
 use herb_sim::eval::{self, Method};
+use herb_sim::hull::fit_canonical;
 use herb_sim::lattice::Lattice;
 use herb_sim::paths::{self, MeshSource};
 use herb_sim::reserve::Reserve;
