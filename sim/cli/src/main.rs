@@ -110,6 +110,32 @@ impl EvalMethod {
         }
     }
 
+    /// The object order of this method's rows: `--sequence` if given, else largest first for
+    /// the BLBF rules and Beam-3 for the others; `None` for the replays (human order).
+    fn order(&self, sequence: Option<SequenceArg>) -> Option<SequenceMode> {
+        if self.sim_method().is_some() {
+            return None;
+        }
+        Some(match (sequence, self) {
+            (Some(s), _) => s.into(),
+            (None, Self::Blbf | Self::LatticeBlbf) => SequenceMode::Largest,
+            (None, _) => SequenceMode::Beam3,
+        })
+    }
+
+    /// The lattice rule of a lattice method (`None` for the others).
+    fn rule(&self, catalog: &Catalog, k: usize, reward: RewardMode) -> Option<LatticeRule> {
+        Some(match self {
+            Self::LatticeBlbf => LatticeRule::Blbf(Box::new(Lattice::new(catalog))),
+            Self::Lookahead => LatticeRule::Lookahead(Box::new(Lookahead::new(catalog, k, reward))),
+            Self::LatticeReserve => {
+                LatticeRule::Reserve(Box::new((Lattice::new(catalog), Reserve::new())))
+            }
+            Self::GeoLookahead => LatticeRule::Geo(Box::new(GeoLookahead::new(catalog, k))),
+            Self::Herb | Self::Blbf | Self::Human | Self::HumanPose | Self::Random => return None,
+        })
+    }
+
     fn sim_method(&self) -> Option<Method> {
         match self {
             Self::Human => Some(Method::Human),
@@ -147,80 +173,96 @@ impl From<SequenceArg> for SequenceMode {
 #[derive(Subcommand)]
 enum Cmd {
     /// Run methods over all BoxED episodes and write the Table I metrics (Markdown, CSV, plots).
-    Eval {
-        /// Method (repeat for several rows).
-        #[arg(long, value_enum)]
-        method: Vec<EvalMethod>,
-        /// Object order for herb and blbf (defaults: beam3 for herb, largest for blbf); the
-        /// replays and random use the human order.
-        #[arg(long, value_enum)]
-        sequence: Option<SequenceArg>,
-        /// The ONNX placement policy for herb (repeat for one herb row per policy, labelled by
-        /// file stem).
-        #[arg(long)]
-        policy: Vec<PathBuf>,
-        /// The sequence model for Beam-3.
-        #[arg(long, default_value = "models/sequence.json")]
-        sequence_model: PathBuf,
-        /// Candidates the lookahead teacher simulates per decision.
-        #[arg(long, default_value_t = 8)]
-        lookahead_k: usize,
-        /// Reward whose return the lookahead teacher maximises (simple, c, cs<alpha>).
-        #[arg(long, default_value = "cs0.6")]
-        lookahead_reward: String,
-        /// Base seed (episode i uses seed + i).
-        #[arg(long, default_value_t = 0)]
-        seed: u64,
-        /// Worker threads.
-        #[arg(long, default_value_t = 2)]
-        jobs: usize,
-        /// Only the first N episodes.
-        #[arg(long)]
-        limit: Option<usize>,
-        /// Write the final heightmap of this episode (session name) as a PNG ...
-        #[arg(long)]
-        png_episode: Option<String>,
-        /// ... to this path.
-        #[arg(long, default_value = "results/final-heightmap.png")]
-        png: PathBuf,
-        /// Write the table (Markdown) here.
-        #[arg(long, default_value = "results/table1.md")]
-        out: PathBuf,
-        /// Write per-episode results (CSV) here.
-        #[arg(long, default_value = "results/table1.csv")]
-        csv: PathBuf,
-        /// Write the plots (compactness per step, objects packed) into this folder.
-        #[arg(long, default_value = "results")]
-        plots: PathBuf,
-    },
+    Eval(EvalArgs),
     /// Pack one BoxED episode, print each placement, and write a picture of the final pack.
-    Pack {
-        /// Session name (e.g. p1_s1).
-        #[arg(long, default_value = "p1_s1")]
-        session: String,
-        /// Placement method.
-        #[arg(long, value_enum, default_value = "human")]
-        method: MethodArg,
-        /// Seed for the random method.
-        #[arg(long, default_value_t = 0)]
-        seed: u64,
-        /// Output picture.
-        #[arg(long, default_value = "results/pack.png")]
-        png: PathBuf,
-    },
+    Pack(PackArgs),
     /// Count the human object-type transitions of all BoxED episodes and write the sequence
     /// model (`models/sequence.json`, used by Beam-3).
-    Sequence {
-        /// Output file.
-        #[arg(long, default_value = "models/sequence.json")]
-        out: PathBuf,
-    },
+    Sequence(SequenceArgs),
     /// Print each object's shape source; with --fit, fit canonical frames from the meshes.
-    Catalog {
-        /// Print fitted `yaw_rad`, `origin_mesh_m`, `dims_m` for objects with a mesh.
-        #[arg(long)]
-        fit: bool,
-    },
+    Catalog(CatalogArgs),
+}
+
+/// Arguments of `herb-sim eval`.
+#[derive(Args)]
+struct EvalArgs {
+    /// Method (repeat for several rows).
+    #[arg(long, value_enum)]
+    method: Vec<EvalMethod>,
+    /// Object order for herb and blbf (defaults: beam3 for herb, largest for blbf); the
+    /// replays and random use the human order.
+    #[arg(long, value_enum)]
+    sequence: Option<SequenceArg>,
+    /// The ONNX placement policy for herb (repeat for one herb row per policy, labelled by
+    /// file stem).
+    #[arg(long)]
+    policy: Vec<PathBuf>,
+    /// The sequence model for Beam-3.
+    #[arg(long, default_value = "models/sequence.json")]
+    sequence_model: PathBuf,
+    /// Candidates the lookahead teacher simulates per decision.
+    #[arg(long, default_value_t = 8)]
+    lookahead_k: usize,
+    /// Reward whose return the lookahead teacher maximises (simple, c, cs<alpha>).
+    #[arg(long, default_value = "cs0.6")]
+    lookahead_reward: String,
+    /// Base seed (episode i uses seed + i).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Worker threads.
+    #[arg(long, default_value_t = 2)]
+    jobs: usize,
+    /// Only the first N episodes.
+    #[arg(long)]
+    limit: Option<usize>,
+    /// Write the final heightmap of this episode (session name) as a PNG ...
+    #[arg(long)]
+    png_episode: Option<String>,
+    /// ... to this path.
+    #[arg(long, default_value = "results/final-heightmap.png")]
+    png: PathBuf,
+    /// Write the table (Markdown) here.
+    #[arg(long, default_value = "results/table1.md")]
+    out: PathBuf,
+    /// Write per-episode results (CSV) here.
+    #[arg(long, default_value = "results/table1.csv")]
+    csv: PathBuf,
+    /// Write the plots (compactness per step, objects packed) into this folder.
+    #[arg(long, default_value = "results")]
+    plots: PathBuf,
+}
+
+/// Arguments of `herb-sim pack`.
+#[derive(Args)]
+struct PackArgs {
+    /// Session name (e.g. p1_s1).
+    #[arg(long, default_value = "p1_s1")]
+    session: String,
+    /// Placement method.
+    #[arg(long, value_enum, default_value = "human")]
+    method: MethodArg,
+    /// Seed for the random method.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Output picture.
+    #[arg(long, default_value = "results/pack.png")]
+    png: PathBuf,
+}
+
+/// Arguments of `herb-sim sequence`.
+#[derive(Args)]
+struct SequenceArgs {
+    /// Output file.
+    #[arg(long, default_value = "models/sequence.json")]
+    out: PathBuf,
+}
+
+/// Arguments of `herb-sim catalog`.
+#[derive(Args)]
+struct CatalogArgs {
+    /// Print fitted `yaw_rad`, `origin_mesh_m`, `dims_m` for objects with a mesh.
+    #[arg(long)]
+    fit: bool,
 }
 
 fn main() -> ExitCode {
@@ -273,312 +315,305 @@ fn need_root(root: Option<PathBuf>) -> AnyResult<PathBuf> {
 
 fn run(cli: Cli) -> AnyResult<()> {
     match cli.cmd {
-        Cmd::Sequence { out } => {
-            let (catalog, root) = load_catalog(&cli.data)?;
-            let root = need_root(root)?;
-            let (sessions, bad) = boxed::load_all(&root, &catalog)?;
-            if !bad.is_empty() {
-                let list: Vec<String> = bad.iter().map(|e| e.to_string()).collect();
-                return Err(format!("bad sessions: {}", list.join("; ")).into());
-            }
-            let episodes: Vec<Episode> = sessions.iter().map(|s| s.episode(&catalog)).collect();
-            let model = herb_daemon::SequenceModel::fit(
-                &catalog,
-                &episodes,
-                "BoxED sessions/*/PickPlace_dataset.json: each instance at its first placement, \
-                 in the human order (herb_sim::boxed::Session::episode)",
+        Cmd::Sequence(a) => sequence_cmd(&cli.data, a),
+        Cmd::Catalog(a) => catalog_cmd(&cli.data, a),
+        Cmd::Pack(a) => pack_cmd(&cli.data, a),
+        Cmd::Eval(a) => eval_cmd(&cli.data, a),
+    }
+}
+
+/// `herb-sim sequence`: fits the Beam-3 sequence model to the BoxED sessions.
+fn sequence_cmd(data: &DataArgs, a: SequenceArgs) -> AnyResult<()> {
+    let SequenceArgs { out } = a;
+    let (catalog, root) = load_catalog(data)?;
+    let root = need_root(root)?;
+    let (sessions, bad) = boxed::load_all(&root, &catalog)?;
+    if !bad.is_empty() {
+        let list: Vec<String> = bad.iter().map(|e| e.to_string()).collect();
+        return Err(format!("bad sessions: {}", list.join("; ")).into());
+    }
+    let episodes: Vec<Episode> = sessions.iter().map(|s| s.episode(&catalog)).collect();
+    let model = herb_daemon::SequenceModel::fit(
+        &catalog,
+        &episodes,
+        "BoxED sessions/*/PickPlace_dataset.json: each instance at its first placement, \
+             in the human order (herb_sim::boxed::Session::episode)",
+    );
+    write_file(&out, &model.to_json())?;
+    eprintln!(
+        "wrote {} ({} episodes, {} transitions)",
+        out.display(),
+        model.provenance().episodes,
+        model.provenance().transitions
+    );
+    Ok(())
+}
+
+/// `herb-sim catalog`: shape sources, and with `--fit` the canonical frames of the meshes.
+fn catalog_cmd(data: &DataArgs, a: CatalogArgs) -> AnyResult<()> {
+    let CatalogArgs { fit } = a;
+    let (catalog, root) = load_catalog(data)?;
+    if fit {
+        let meshes = paths::mesh_source(data.meshes.as_deref(), root.as_deref());
+        let MeshSource::Folder(dir) = meshes else {
+            return Err("--fit needs a mesh folder".into());
+        };
+        for s in catalog.specs() {
+            let Some(file) = &s.mesh else { continue };
+            let raw = herb_sim::mesh::load_obj_vertices(&dir.join(file))?;
+            let scaled: Vec<_> = raw.iter().map(|&v| v * s.mesh_scale).collect();
+            // Round objects have no resting face: keep their nominal up axis.
+            let refine = s.primitive != herb_sim::catalog::Primitive::Ellipsoid;
+            let f = fit_canonical(&scaled, s.up_mesh, refine);
+            println!(
+                "{}  up_mesh = [{:.5}, {:.5}, {:.5}]\n     yaw_rad = {:.4}\n     origin_mesh_m = [{:.5}, {:.5}, {:.5}]\n     dims_m = [{:.4}, {:.4}, {:.4}]",
+                s.id,
+                f.up_mesh[0],
+                f.up_mesh[1],
+                f.up_mesh[2],
+                f.yaw_rad,
+                f.origin_mesh_m[0],
+                f.origin_mesh_m[1],
+                f.origin_mesh_m[2],
+                f.dims_m[0],
+                f.dims_m[1],
+                f.dims_m[2]
             );
-            write_file(&out, &model.to_json())?;
-            eprintln!(
-                "wrote {} ({} episodes, {} transitions)",
-                out.display(),
-                model.provenance().episodes,
-                model.provenance().transitions
-            );
-            Ok(())
-        }
-        Cmd::Catalog { fit } => {
-            let (catalog, root) = load_catalog(&cli.data)?;
-            if fit {
-                let meshes = paths::mesh_source(cli.data.meshes.as_deref(), root.as_deref());
-                let MeshSource::Folder(dir) = meshes else {
-                    return Err("--fit needs a mesh folder".into());
-                };
-                for s in catalog.specs() {
-                    let Some(file) = &s.mesh else { continue };
-                    let raw = herb_sim::mesh::load_obj_vertices(&dir.join(file))?;
-                    let scaled: Vec<_> = raw.iter().map(|&v| v * s.mesh_scale).collect();
-                    // Round objects have no resting face: keep their nominal up axis.
-                    let refine = s.primitive != herb_sim::catalog::Primitive::Ellipsoid;
-                    let f = fit_canonical(&scaled, s.up_mesh, refine);
-                    println!(
-                        "{}  up_mesh = [{:.5}, {:.5}, {:.5}]\n     yaw_rad = {:.4}\n     origin_mesh_m = [{:.5}, {:.5}, {:.5}]\n     dims_m = [{:.4}, {:.4}, {:.4}]",
-                        s.id,
-                        f.up_mesh[0],
-                        f.up_mesh[1],
-                        f.up_mesh[2],
-                        f.yaw_rad,
-                        f.origin_mesh_m[0],
-                        f.origin_mesh_m[1],
-                        f.origin_mesh_m[2],
-                        f.dims_m[0],
-                        f.dims_m[1],
-                        f.dims_m[2]
-                    );
-                }
-            }
-            Ok(())
-        }
-        Cmd::Pack {
-            session,
-            method,
-            seed,
-            png,
-        } => {
-            let (catalog, root) = load_catalog(&cli.data)?;
-            let root = need_root(root)?;
-            let s = boxed::load_session(&root, &session, &catalog)?;
-            let ep = s.episode(&catalog);
-            pack_one(&catalog, &ep, method.into(), seed, &png)
-        }
-        Cmd::Eval {
-            method,
-            sequence,
-            policy,
-            sequence_model,
-            lookahead_k,
-            lookahead_reward,
-            seed,
-            jobs,
-            limit,
-            png_episode,
-            png,
-            out,
-            csv,
-            plots,
-        } => {
-            if method.is_empty() {
-                return Err(
-                    "give at least one --method (herb, blbf, human, human-pose, random)".into(),
-                );
-            }
-            if method.contains(&EvalMethod::Herb) && policy.is_empty() {
-                return Err(
-                    "herb needs --policy <model.onnx> (e.g. models/policy-cs06.onnx)".into(),
-                );
-            }
-            if !policy.is_empty() && !method.contains(&EvalMethod::Herb) {
-                return Err("--policy is used by --method herb only".into());
-            }
-            if sequence.is_some() && method.iter().any(|m| m.sim_method().is_some()) {
-                return Err("--sequence applies to herb and blbf only (replays and random use the human order)".into());
-            }
-            let (catalog, root) = load_catalog(&cli.data)?;
-            let root = need_root(root)?;
-            let (sessions, bad) = boxed::load_all(&root, &catalog)?;
-            for e in &bad {
-                eprintln!("skipping bad session: {e}");
-            }
-            let mut episodes: Vec<Episode> = sessions.iter().map(|s| s.episode(&catalog)).collect();
-            if let Some(n) = limit {
-                episodes.truncate(n);
-            }
-            let lookahead_reward = RewardMode::parse(&lookahead_reward)?;
-            if !(1..=herb_sim::lattice::MAX_CANDIDATES).contains(&lookahead_k) {
-                return Err(format!(
-                    "--lookahead-k {lookahead_k}: need 1 to {}",
-                    herb_sim::lattice::MAX_CANDIDATES
-                )
-                .into());
-            }
-            let model = if method.contains(&EvalMethod::Herb)
-                || method.contains(&EvalMethod::Lookahead)
-                || matches!(sequence, Some(SequenceArg::Beam3))
-            {
-                Some(SequenceModel::load(&sequence_model, &catalog)?)
-            } else {
-                None
-            };
-            let target = eval::mean_std(episodes.iter().map(|e| e.objects.len() as f64));
-            let cfg = WorldConfig::default();
-            let mut rows = Vec::new();
-            let mut all_results = Vec::new();
-            let mut csv_text = String::from(
-                "method,sequence,episode,objects,packed,success,placements,stable,final_compactness,physics_steps,latency_mean_ms\n",
-            );
-            // One run per (method, policy): herb once per policy, the others once.
-            let runs: Vec<(EvalMethod, Option<&Path>)> = method
-                .iter()
-                .flat_map(|&m| match m {
-                    EvalMethod::Herb => policy.iter().map(|p| (m, Some(p.as_path()))).collect(),
-                    _ => vec![(m, None)],
-                })
-                .collect();
-            for (m, policy) in runs {
-                let t = Instant::now();
-                let name = match policy {
-                    Some(p) => format!(
-                        "{} {}",
-                        m.name(),
-                        p.file_stem().and_then(|s| s.to_str()).unwrap_or("policy")
-                    ),
-                    None => m.name().to_string(),
-                };
-                let (label, seq_name, results) = match m.sim_method() {
-                    Some(sm) => (
-                        name.clone(),
-                        "human",
-                        eval::run_all(&catalog, &cfg, &episodes, sm, seed, jobs)?,
-                    ),
-                    None => {
-                        let mode: SequenceMode = match (sequence, m) {
-                            (Some(s), _) => s.into(),
-                            (None, EvalMethod::Blbf | EvalMethod::LatticeBlbf) => {
-                                SequenceMode::Largest
-                            }
-                            (None, _) => SequenceMode::Beam3,
-                        };
-                        let results = match m {
-                            EvalMethod::LatticeBlbf
-                            | EvalMethod::Lookahead
-                            | EvalMethod::LatticeReserve
-                            | EvalMethod::GeoLookahead => {
-                                let rule = match m {
-                                    EvalMethod::Lookahead => LatticeRule::Lookahead(Box::new(
-                                        Lookahead::new(&catalog, lookahead_k, lookahead_reward),
-                                    )),
-                                    EvalMethod::GeoLookahead => LatticeRule::Geo(Box::new(
-                                        GeoLookahead::new(&catalog, lookahead_k),
-                                    )),
-                                    EvalMethod::LatticeReserve => {
-                                        let l = Lattice::new(&catalog);
-                                        let r = Reserve::new();
-                                        LatticeRule::Reserve(Box::new((l, r)))
-                                    }
-                                    _ => LatticeRule::Blbf(Box::new(Lattice::new(&catalog))),
-                                };
-                                run_lattice_method(
-                                    &catalog,
-                                    &cfg,
-                                    &episodes,
-                                    &rule,
-                                    mode,
-                                    model.as_ref(),
-                                    seed,
-                                    jobs,
-                                )?
-                            }
-                            _ => run_policy_method(
-                                &catalog,
-                                &cfg,
-                                &episodes,
-                                m,
-                                mode,
-                                model.as_ref(),
-                                policy,
-                                seed,
-                                jobs,
-                            )?,
-                        };
-                        let name = match m {
-                            EvalMethod::Lookahead => {
-                                format!("lookahead (teacher, k = {lookahead_k})")
-                            }
-                            _ => name.clone(),
-                        };
-                        (format!("{name} ({})", mode.name()), mode.name(), results)
-                    }
-                };
-                let secs = t.elapsed().as_secs_f64();
-                let placements: usize = results
-                    .iter()
-                    .filter_map(|r| r.as_ref().ok())
-                    .map(|r| r.placements)
-                    .sum();
-                eprintln!(
-                    "{label}: {} episodes, {} placements in {:.1} s ({:.0} placements/s on {} threads)",
-                    results.len(),
-                    placements,
-                    secs,
-                    placements as f64 / secs,
-                    jobs
-                );
-                for r in &results {
-                    match r {
-                        Ok(r) => {
-                            let lat =
-                                eval::mean_std(r.decision_ns.iter().map(|&n| n as f64 / 1e6)).0;
-                            csv_text.push_str(&format!(
-                                "{},{},{},{},{},{},{},{},{:.4},{},{}\n",
-                                name,
-                                seq_name,
-                                r.name,
-                                r.objects,
-                                r.packed,
-                                r.success,
-                                r.placements,
-                                r.stable,
-                                r.final_compactness(),
-                                r.physics_steps,
-                                if lat.is_nan() {
-                                    String::new()
-                                } else {
-                                    format!("{lat:.4}")
-                                }
-                            ));
-                        }
-                        Err(e) => eprintln!("episode failed: {e}"),
-                    }
-                }
-                rows.push(eval::summarize(&label, &results));
-                all_results.push((label.clone(), results));
-                if let (Some(name), Some(sm)) = (&png_episode, m.sim_method()) {
-                    let ep = episodes
-                        .iter()
-                        .find(|e| &e.name == name)
-                        .ok_or_else(|| format!("no episode {name:?}"))?;
-                    let path = png
-                        .with_file_name(format!(
-                            "{}-{}-{}",
-                            png.file_stem().and_then(|s| s.to_str()).unwrap_or("final"),
-                            m.name(),
-                            name
-                        ))
-                        .with_extension("png");
-                    pack_quiet(&catalog, ep, sm, seed, &path)?;
-                    eprintln!("wrote {}", path.display());
-                }
-            }
-            let mut table = eval::format_table(&rows, target, episodes.len());
-            table.push('\n');
-            for r in &rows {
-                let causes: Vec<String> = r
-                    .failures
-                    .iter()
-                    .map(|(k, n)| format!("{k}: {n}"))
-                    .collect();
-                table.push_str(&format!(
-                    "- {} failures by cause: {}\n",
-                    r.method,
-                    causes.join(", ")
-                ));
-            }
-            println!("{table}");
-            write_file(&out, &table)?;
-            write_file(&csv, &csv_text)?;
-            eprintln!("wrote {} and {}", out.display(), csv.display());
-            match plot::write_plots(&plots, &all_results) {
-                Ok(files) => {
-                    for f in files {
-                        eprintln!("wrote {}", f.display());
-                    }
-                }
-                // The table and CSV are already written: report and keep them.
-                Err(e) => eprintln!("herb-sim: plots not written: {e}"),
-            }
-            Ok(())
         }
     }
+    Ok(())
+}
+
+/// `herb-sim pack`: one BoxED episode, printed, and a picture of the final pack.
+fn pack_cmd(data: &DataArgs, a: PackArgs) -> AnyResult<()> {
+    let PackArgs {
+        session,
+        method,
+        seed,
+        png,
+    } = a;
+    let (catalog, root) = load_catalog(data)?;
+    let root = need_root(root)?;
+    let s = boxed::load_session(&root, &session, &catalog)?;
+    let ep = s.episode(&catalog);
+    pack_one(&catalog, &ep, method.into(), seed, &png)
+}
+
+/// `herb-sim eval`: methods over the BoxED episodes, the Table I metrics (Markdown, CSV, plots).
+fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
+    check_eval_args(&a)?;
+    let lookahead_reward = RewardMode::parse(&a.lookahead_reward)?;
+    let (catalog, root) = load_catalog(data)?;
+    let root = need_root(root)?;
+    let (sessions, bad) = boxed::load_all(&root, &catalog)?;
+    for e in &bad {
+        eprintln!("skipping bad session: {e}");
+    }
+    let mut episodes: Vec<Episode> = sessions.iter().map(|s| s.episode(&catalog)).collect();
+    if let Some(n) = a.limit {
+        episodes.truncate(n);
+    }
+    // The sequence model, when any row orders its objects by Beam-3.
+    let model = if a
+        .method
+        .iter()
+        .any(|m| m.order(a.sequence) == Some(SequenceMode::Beam3))
+    {
+        Some(SequenceModel::load(&a.sequence_model, &catalog)?)
+    } else {
+        None
+    };
+    let target = eval::mean_std(episodes.iter().map(|e| e.objects.len() as f64));
+    let cfg = WorldConfig::default();
+    let mut rows = Vec::new();
+    let mut all_results = Vec::new();
+    let mut csv_text = String::from(
+        "method,sequence,episode,objects,packed,success,placements,stable,final_compactness,physics_steps,latency_mean_ms\n",
+    );
+    // One run per (method, policy): herb once per policy, the others once.
+    let runs: Vec<(EvalMethod, Option<&Path>)> = a
+        .method
+        .iter()
+        .flat_map(|&m| match m {
+            EvalMethod::Herb => a.policy.iter().map(|p| (m, Some(p.as_path()))).collect(),
+            _ => vec![(m, None)],
+        })
+        .collect();
+    for (m, policy) in runs {
+        let t = Instant::now();
+        let name = match (m, policy) {
+            (_, Some(p)) => format!(
+                "{} {}",
+                m.name(),
+                p.file_stem().and_then(|s| s.to_str()).unwrap_or("policy")
+            ),
+            (_, None) => m.name().to_string(),
+        };
+        let (label, seq_name, results) = match (m.sim_method(), m.order(a.sequence)) {
+            (Some(sm), _) => (
+                name.clone(),
+                "human",
+                eval::run_all(&catalog, &cfg, &episodes, sm, a.seed, a.jobs)?,
+            ),
+            (None, mode) => {
+                let mode = mode.expect("every method without a replay has an order");
+                let results = match m.rule(&catalog, a.lookahead_k, lookahead_reward) {
+                    Some(rule) => run_lattice_method(
+                        &catalog,
+                        &cfg,
+                        &episodes,
+                        &rule,
+                        mode,
+                        model.as_ref(),
+                        a.seed,
+                        a.jobs,
+                    )?,
+                    None => run_policy_method(
+                        &catalog,
+                        &cfg,
+                        &episodes,
+                        m,
+                        mode,
+                        model.as_ref(),
+                        policy,
+                        a.seed,
+                        a.jobs,
+                    )?,
+                };
+                // The table names the teacher's k; the CSV keeps the method's name.
+                let shown = match m {
+                    EvalMethod::Lookahead => format!("lookahead (teacher, k = {})", a.lookahead_k),
+                    _ => name.clone(),
+                };
+                (format!("{shown} ({})", mode.name()), mode.name(), results)
+            }
+        };
+        let secs = t.elapsed().as_secs_f64();
+        let placements: usize = results
+            .iter()
+            .filter_map(|r| r.as_ref().ok())
+            .map(|r| r.placements)
+            .sum();
+        eprintln!(
+            "{label}: {} episodes, {} placements in {:.1} s ({:.0} placements/s on {} threads)",
+            results.len(),
+            placements,
+            secs,
+            placements as f64 / secs,
+            a.jobs
+        );
+        csv_text.push_str(&csv_rows(&name, seq_name, &results));
+        rows.push(eval::summarize(&label, &results));
+        all_results.push((label.clone(), results));
+        if let (Some(ep_name), Some(sm)) = (&a.png_episode, m.sim_method()) {
+            let ep = episodes
+                .iter()
+                .find(|e| &e.name == ep_name)
+                .ok_or_else(|| format!("no episode {ep_name:?}"))?;
+            let path = a
+                .png
+                .with_file_name(format!(
+                    "{}-{}-{}",
+                    a.png
+                        .file_stem()
+                        .and_then(|s| s.to_str())
+                        .unwrap_or("final"),
+                    m.name(),
+                    ep_name
+                ))
+                .with_extension("png");
+            pack_quiet(&catalog, ep, sm, a.seed, &path)?;
+            eprintln!("wrote {}", path.display());
+        }
+    }
+    let mut table = eval::format_table(&rows, target, episodes.len());
+    table.push('\n');
+    for r in &rows {
+        let causes: Vec<String> = r
+            .failures
+            .iter()
+            .map(|(k, n)| format!("{k}: {n}"))
+            .collect();
+        table.push_str(&format!(
+            "- {} failures by cause: {}\n",
+            r.method,
+            causes.join(", ")
+        ));
+    }
+    println!("{table}");
+    write_file(&a.out, &table)?;
+    write_file(&a.csv, &csv_text)?;
+    eprintln!("wrote {} and {}", a.out.display(), a.csv.display());
+    match plot::write_plots(&a.plots, &all_results) {
+        Ok(files) => {
+            for f in files {
+                eprintln!("wrote {}", f.display());
+            }
+        }
+        // The table and CSV are already written: report and keep them.
+        Err(e) => eprintln!("herb-sim: plots not written: {e}"),
+    }
+    Ok(())
+}
+
+/// The argument checks of `herb-sim eval` that need no data.
+fn check_eval_args(a: &EvalArgs) -> AnyResult<()> {
+    if a.method.is_empty() {
+        return Err("give at least one --method (see herb-sim eval --help)".into());
+    }
+    if a.method.contains(&EvalMethod::Herb) && a.policy.is_empty() {
+        return Err("herb needs --policy <model.onnx> (e.g. models/policy-cs06.onnx)".into());
+    }
+    if !a.policy.is_empty() && !a.method.contains(&EvalMethod::Herb) {
+        return Err("--policy is used by --method herb only".into());
+    }
+    if a.sequence.is_some() && a.method.iter().any(|m| m.sim_method().is_some()) {
+        return Err(
+            "--sequence applies to herb, blbf and the lattice rules only (replays and random use the human order)"
+                .into(),
+        );
+    }
+    if !(1..=herb_sim::lattice::MAX_CANDIDATES).contains(&a.lookahead_k) {
+        return Err(format!(
+            "--lookahead-k {}: need 1 to {}",
+            a.lookahead_k,
+            herb_sim::lattice::MAX_CANDIDATES
+        )
+        .into());
+    }
+    Ok(())
+}
+
+/// The per-episode CSV rows of one method.
+fn csv_rows(name: &str, seq_name: &str, results: &[Result<eval::EpisodeResult, String>]) -> String {
+    let mut text = String::new();
+    for r in results {
+        match r {
+            Ok(r) => {
+                let lat = eval::mean_std(r.decision_ns.iter().map(|&n| n as f64 / 1e6)).0;
+                text.push_str(&format!(
+                    "{},{},{},{},{},{},{},{},{:.4},{},{}\n",
+                    name,
+                    seq_name,
+                    r.name,
+                    r.objects,
+                    r.packed,
+                    r.success,
+                    r.placements,
+                    r.stable,
+                    r.final_compactness(),
+                    r.physics_steps,
+                    if lat.is_nan() {
+                        String::new()
+                    } else {
+                        format!("{lat:.4}")
+                    }
+                ));
+            }
+            Err(e) => eprintln!("episode failed: {e}"),
+        }
+    }
+    text
 }
 
 /// Runs a decision-core policy over `episodes`, one policy per worker thread.
