@@ -13,21 +13,14 @@
 //!   [`COUNT_SCALE`], total hull volume / box volume, total footprint area (extents x * y) /
 //!   box floor area, largest extent / [`SIZE_SCALE_M`];
 //! - then the free volume under the rim (sum over cells of `max(0, rim - h)` times the cell
-//!   area) / box volume, and the highest cell / [`HEIGHT_SCALE_M`];
-//! - then the reserved later objects ([`crate::reserve`]: the object after the next one, then
-//!   the largest later ones by footprint), [`RESERVE_SLOTS`] of them: canonical extents x, y,
-//!   z / [`SIZE_SCALE_M`] each (zeros for a missing slot).
+//!   area) / box volume, and the highest cell / [`HEIGHT_SCALE_M`].
 //!
 //! # Candidate row (`CANDIDATE_LEN` values), for each of up to [`MAX_CANDIDATES`]
 //!
 //! x / `BOX_HALF_X`, y / `BOX_HALF_Y`, the yaw one-hot (4), rest z, top, top minus the highest
 //! cell (each / `HEIGHT_SCALE_M`), support, tight flag, the four wall gaps of the footprint
-//! (-x, +x, -y, +y; / [`GAP_SCALE_M`], clamped to 1), per reserved object whether it still
-//! fits below the height limit once the candidate is placed (1 or 0; 1 for a missing slot)
-//! and how much the candidate raises its best top ([`Reserve::after`] minus
-//! [`Reserve::before`], / [`GAP_SCALE_M`], clamped to `[0, 1]`; 0 for a missing slot), and a
-//! 5 x 5 patch of the pooled heightmap centred on the candidate's lattice node, each cell's
-//! height minus the object's bottom at rest, / [`GAP_SCALE_M`], clamped to
+//! (-x, +x, -y, +y; / [`GAP_SCALE_M`], clamped to 1), and a 5 x 5 patch of the pooled heightmap centred on the candidate's lattice node,
+//! each cell's height minus the object's bottom at rest, / [`GAP_SCALE_M`], clamped to
 //! `[-1, 1]` (cells outside the box count as the walls' top). Rows past the candidate count are
 //! zero and masked.
 //!
@@ -35,15 +28,13 @@
 //!
 //! Turning the box half a turn about z maps a state to an equivalent one: x and y change sign,
 //! yaw `k` becomes `k + 2`, the -x/+x and -y/+y wall gaps swap, and the context heightmap and
-//! each patch are turned half a turn (their values reversed). The reserve values do not
-//! change (the windows of a turned heightmap are the turned windows). [`half_turn_context`] and
+//! each patch are turned half a turn (their values reversed). [`half_turn_context`] and
 //! [`half_turn_candidates`] apply it: an exact augmentation for training.
 
 use crate::catalog::{Catalog, TypeIdx};
 use crate::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT};
 use crate::heightmap::Heightmap;
-use crate::lattice::{HEIGHT_LIMIT_M, Lattice, MAX_CANDIDATES, NUM_YAWS, Placement};
-use crate::reserve::{RESERVE_SLOTS, Reserve};
+use crate::lattice::{Lattice, MAX_CANDIDATES, NUM_YAWS, Placement};
 use rapier3d::math::Rotation;
 
 /// Heights are divided by this (m): the observation's height scale.
@@ -59,11 +50,9 @@ pub const PATCH: usize = 5;
 /// Lattice columns and rows (the 12.5 mm grid over the box).
 pub const GRID: (usize, usize) = (28, 19);
 /// Values of the context vector.
-pub const CONTEXT_LEN: usize = GRID.0 * GRID.1 + 4 + 4 + 2 + 3 * RESERVE_SLOTS;
+pub const CONTEXT_LEN: usize = GRID.0 * GRID.1 + 4 + 4 + 2;
 /// Values of a candidate row.
-pub const CANDIDATE_LEN: usize = 2 + NUM_YAWS + 3 + 2 + 4 + 2 * RESERVE_SLOTS + PATCH * PATCH;
-/// Index of the first patch value in a candidate row.
-const PATCH_START: usize = CANDIDATE_LEN - PATCH * PATCH;
+pub const CANDIDATE_LEN: usize = 2 + NUM_YAWS + 3 + 2 + 4 + PATCH * PATCH;
 
 /// Names and shapes of a candidate policy's ONNX inputs and output.
 #[derive(Debug, Clone, Copy)]
@@ -92,8 +81,6 @@ pub struct DecisionFeatures {
     pub mask: Vec<f32>,
     /// The candidate placements, row order.
     pub placements: Vec<Placement>,
-    /// The reserved later objects of the last decision.
-    reserve: Reserve,
 }
 
 impl Default for DecisionFeatures {
@@ -103,7 +90,6 @@ impl Default for DecisionFeatures {
             candidates: vec![0.0; MAX_CANDIDATES * CANDIDATE_LEN],
             mask: vec![0.0; MAX_CANDIDATES],
             placements: Vec::with_capacity(MAX_CANDIDATES),
-            reserve: Reserve::new(),
         }
     }
 }
@@ -122,7 +108,6 @@ impl DecisionFeatures {
         lattice.compute(hm, catalog, next);
         self.placements.clear();
         self.placements.extend_from_slice(lattice.candidates());
-        self.reserve.prepare(lattice.pooled(), catalog, after);
         self.fill(lattice, catalog, next, after);
         self.placements.len()
     }
@@ -181,17 +166,6 @@ impl DecisionFeatures {
             c[i] = v;
             i += 1;
         }
-        let reserve = &self.reserve;
-        for j in 0..RESERVE_SLOTS {
-            let e = reserve
-                .objects()
-                .get(j)
-                .map(|&t| catalog.shape(t).extents() / SIZE_SCALE_M);
-            for v in e.map_or([0.0; 3], |e| [e.x, e.y, e.z]) {
-                c[i] = v;
-                i += 1;
-            }
-        }
         debug_assert_eq!(i, CONTEXT_LEN);
 
         self.candidates.fill(0.0);
@@ -220,24 +194,6 @@ impl DecisionFeatures {
                 row[k] = v;
                 k += 1;
             }
-            let rect = Reserve::footprint_cells(&spec, (lo, hi), p);
-            for j in 0..RESERVE_SLOTS {
-                let (fits, cost) = if j < reserve.count() {
-                    let (before, after) = (reserve.before(j), reserve.after(j, rect, p.top));
-                    let cost = if after.is_finite() && before.is_finite() {
-                        ((after - before) / GAP_SCALE_M).clamp(0.0, 1.0)
-                    } else {
-                        1.0
-                    };
-                    ((after <= HEIGHT_LIMIT_M) as u8 as f32, cost)
-                } else {
-                    (1.0, 0.0)
-                };
-                row[k] = fits;
-                row[k + 1] = cost;
-                k += 2;
-            }
-            debug_assert_eq!(k, PATCH_START);
             let bottom = p.rest_z + lowest;
             let (nc, nr) = (p.node.0 as isize, p.node.1 as isize);
             let half = (PATCH / 2) as isize;
@@ -271,7 +227,7 @@ pub fn half_turn_candidates(rows: &mut [f32]) {
         let g = 2 + NUM_YAWS + 5;
         row.swap(g, g + 1);
         row.swap(g + 2, g + 3);
-        row[PATCH_START..].reverse();
+        row[g + 4..].reverse();
     }
 }
 

@@ -19,10 +19,11 @@
 //!   max-pooled cells), so it errs towards "does not fit".
 //! - A candidate placement raises every cell its footprint's bounding box overlaps to the
 //!   candidate's top. A window overlapping that rectangle then rests at
-//!   `max(window, candidate top)`, the others are unchanged, so the best top after the
-//!   candidate is found by scanning the windows in ascending order (sorted once per decision)
-//!   for the first one not overlapping and the first one overlapping: a handful of steps per
-//!   candidate.
+//!   `max(window, candidate top)`, the others are unchanged. The windows overlapping it form a
+//!   rectangle of window positions, so the best top after the candidate is the lower of the
+//!   lowest window outside that rectangle (prefix and suffix minima per row and over rows)
+//!   and the candidate's top raised to the lowest window inside it (range minima per row): a
+//!   few steps per row of windows, per candidate.
 //!
 //! Allocation happens in [`Reserve::new`] only.
 
@@ -34,14 +35,53 @@ use rapier3d::math::Vector;
 /// Number of later objects whose room is measured.
 pub const RESERVE_SLOTS: usize = 3;
 
-/// One reserved object in one yaw: its windows over the pooled heightmap, lowest first.
+/// Levels of the per-row range-minimum tables (windows per row at most 2^LEVELS).
+const LEVELS: usize = 6;
+
+/// One reserved object in one yaw: the resting bottom of every window inside the walls, with
+/// tables that give the lowest bottom outside or inside a rectangle of windows in a few steps
+/// per row.
 #[derive(Debug, Clone, Default)]
 struct Windows {
     /// Window size in cells (columns, rows).
     size: (usize, usize),
-    /// `(resting bottom, first column, first row)` of every window inside the walls, sorted
-    /// by bottom.
-    sorted: Vec<(f32, u16, u16)>,
+    /// Windows per row and rows of windows (0 when the object does not fit in this yaw).
+    nwc: usize,
+    nwr: usize,
+    /// Lowest bottom of all windows.
+    lowest: f32,
+    /// Lowest bottom of the window rows before / after each row (exclusive; infinite if none).
+    above: Vec<f32>,
+    below: Vec<f32>,
+    /// Per window: lowest bottom of its row's windows left / right of it (exclusive).
+    left: Vec<f32>,
+    right: Vec<f32>,
+    /// Range minima per row: level `l` holds, for window `(c, r)`, the lowest bottom of
+    /// windows `c..c + 2^l` of row `r` (level 0: the bottoms themselves).
+    sparse: Vec<f32>,
+}
+
+impl Windows {
+    fn sized(n: usize) -> Self {
+        Self {
+            above: Vec::with_capacity(n),
+            below: Vec::with_capacity(n),
+            left: Vec::with_capacity(n),
+            right: Vec::with_capacity(n),
+            sparse: Vec::with_capacity(LEVELS * n),
+            ..Self::default()
+        }
+    }
+
+    /// Lowest bottom of windows `a..=b` of row `r`.
+    #[inline]
+    fn range_min(&self, r: usize, a: usize, b: usize) -> f32 {
+        let n = self.nwc * self.nwr;
+        let len = b - a + 1;
+        let l = (usize::BITS - 1 - len.leading_zeros()) as usize;
+        let row = l * n + r * self.nwc;
+        self.sparse[row + a].min(self.sparse[row + b + 1 - (1 << l)])
+    }
 }
 
 /// The reserved objects of one decision and their windows (see the module docs).
@@ -53,6 +93,8 @@ pub struct Reserve {
     windows: [[Windows; 2]; RESERVE_SLOTS],
     before: [f32; RESERVE_SLOTS],
     rowmax: Vec<f32>,
+    /// Scratch: one row of running maxima.
+    run: Vec<f32>,
 }
 
 /// A rectangle of lattice cells, inclusive: columns `c0..=c1`, rows `r0..=r1`.
@@ -80,10 +122,7 @@ impl Reserve {
         let n = GridSpec::for_box(LATTICE_CELL_M)
             .expect("lattice cell within GridSpec range")
             .len();
-        let windows = || Windows {
-            size: (0, 0),
-            sorted: Vec::with_capacity(n),
-        };
+        let windows = || Windows::sized(n);
         Self {
             count: 0,
             objects: [TypeIdx(0); RESERVE_SLOTS],
@@ -91,6 +130,7 @@ impl Reserve {
             windows: std::array::from_fn(|_| [windows(), windows()]),
             before: [f32::INFINITY; RESERVE_SLOTS],
             rowmax: vec![0.0; n],
+            run: Vec::with_capacity(n),
         }
     }
 
@@ -136,9 +176,7 @@ impl Reserve {
             for (o, size) in [(w, h), (h, w)].into_iter().enumerate() {
                 let mut win = std::mem::take(&mut self.windows[j][o]);
                 self.measure(pooled, size, &mut win);
-                if let Some(&(b, _, _)) = win.sorted.first() {
-                    best = best.min(b + e.z);
-                }
+                best = best.min(win.lowest + e.z);
                 self.windows[j][o] = win;
             }
             self.before[j] = best;
@@ -150,29 +188,105 @@ impl Reserve {
         let (nx, ny) = (spec.nx, spec.ny);
         let (w, h) = size;
         win.size = size;
-        win.sorted.clear();
+        win.nwc = 0;
+        win.nwr = 0;
+        win.lowest = f32::INFINITY;
         if w > nx || h > ny {
             return;
         }
+        let (nwc, nwr) = (nx - w + 1, ny - h + 1);
+        assert!(
+            nwc <= 1 << LEVELS,
+            "lattice rows longer than the range-minimum tables"
+        );
+        let n = nwc * nwr;
+        (win.nwc, win.nwr) = (nwc, nwr);
         let d = pooled.data();
-        // Maximum over w columns starting at each column, row by row; then over h rows.
+        // Maximum over w columns starting at each column, row by row (maxima over runs of
+        // doubling length, then two overlapping runs: exact); then over h rows.
+        let run = &mut self.run;
         for r in 0..ny {
-            for c in 0..=nx - w {
-                let row = &d[r * nx + c..r * nx + c + w];
-                self.rowmax[r * nx + c] = row.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-            }
-        }
-        for r in 0..=ny - h {
-            for c in 0..=nx - w {
-                let mut m = f32::NEG_INFINITY;
-                for rr in r..r + h {
-                    m = m.max(self.rowmax[rr * nx + c]);
+            run.clear();
+            run.extend_from_slice(&d[r * nx..(r + 1) * nx]);
+            let mut len = 1;
+            while 2 * len <= w {
+                for c in 0..=nx - 2 * len {
+                    run[c] = if run[c] > run[c + len] {
+                        run[c]
+                    } else {
+                        run[c + len]
+                    };
                 }
-                win.sorted.push((m, c as u16, r as u16));
+                len *= 2;
+            }
+            for c in 0..nwc {
+                let (a, b) = (run[c], run[c + w - len]);
+                self.rowmax[r * nx + c] = if a > b { a } else { b };
             }
         }
-        win.sorted
-            .sort_by(|a, b| a.0.total_cmp(&b.0).then((a.1, a.2).cmp(&(b.1, b.2))));
+        win.sparse.clear();
+        win.sparse.resize(LEVELS * n, f32::INFINITY);
+        // The same over h rows, on whole rows at a time (heights are finite: validated).
+        let fmax = |a: f32, b: f32| if a > b { a } else { b };
+        let mut len = 1;
+        while 2 * len <= h {
+            for r in 0..=ny - 2 * len {
+                for c in 0..nwc {
+                    self.rowmax[r * nx + c] =
+                        fmax(self.rowmax[r * nx + c], self.rowmax[(r + len) * nx + c]);
+                }
+            }
+            len *= 2;
+        }
+        for r in 0..nwr {
+            for c in 0..nwc {
+                win.sparse[r * nwc + c] =
+                    fmax(self.rowmax[r * nx + c], self.rowmax[(r + h - len) * nx + c]);
+            }
+        }
+        for l in 1..LEVELS {
+            let half = 1 << (l - 1);
+            for r in 0..nwr {
+                for c in 0..nwc {
+                    if c + (1 << l) > nwc {
+                        break;
+                    }
+                    let i = (l - 1) * n + r * nwc + c;
+                    win.sparse[l * n + r * nwc + c] = win.sparse[i].min(win.sparse[i + half]);
+                }
+            }
+        }
+        win.left.clear();
+        win.right.clear();
+        win.left.resize(n, f32::INFINITY);
+        win.right.resize(n, f32::INFINITY);
+        win.above.clear();
+        win.below.clear();
+        win.above.resize(nwr, f32::INFINITY);
+        win.below.resize(nwr, f32::INFINITY);
+        for r in 0..nwr {
+            let b = &win.sparse[r * nwc..(r + 1) * nwc];
+            let mut m = f32::INFINITY;
+            for (l, &v) in win.left[r * nwc..(r + 1) * nwc].iter_mut().zip(b) {
+                *l = m;
+                m = m.min(v);
+            }
+            let row_min = m;
+            let mut m = f32::INFINITY;
+            for c in (0..nwc).rev() {
+                win.right[r * nwc + c] = m;
+                m = m.min(b[c]);
+            }
+            win.lowest = win.lowest.min(row_min);
+            if r + 1 < nwr {
+                win.above[r + 1] = win.above[r].min(row_min);
+            }
+        }
+        for r in (0..nwr.saturating_sub(1)).rev() {
+            let next_min =
+                win.left[(r + 1) * nwc + nwc - 1].min(win.sparse[(r + 1) * nwc + nwc - 1]);
+            win.below[r] = win.below[r + 1].min(next_min);
+        }
     }
 
     /// Number of reserved objects (at most [`RESERVE_SLOTS`]).
@@ -213,25 +327,24 @@ impl Reserve {
         let mut best = f32::INFINITY;
         for win in &self.windows[j] {
             let (w, h) = win.size;
-            let mut free: Option<f32> = None;
-            let mut covered: Option<f32> = None;
-            for &(b, c, r) in &win.sorted {
-                let (c, r) = (c as usize, r as usize);
-                let overlaps = c <= rect.c1 && c + w > rect.c0 && r <= rect.r1 && r + h > rect.r0;
-                if overlaps {
-                    covered.get_or_insert(b);
-                } else {
-                    free.get_or_insert(b);
-                }
-                if free.is_some() && covered.is_some() {
-                    break;
-                }
+            if win.nwc == 0 {
+                continue;
             }
-            let lowest = match (free, covered) {
-                (Some(f), Some(c)) => f.min(c.max(top)),
-                (Some(f), None) => f,
-                (None, Some(c)) => c.max(top),
-                (None, None) => continue,
+            // The windows that overlap the rectangle: a rectangle of window positions.
+            let (c_lo, c_hi) = ((rect.c0 + 1).saturating_sub(w), rect.c1.min(win.nwc - 1));
+            let (r_lo, r_hi) = ((rect.r0 + 1).saturating_sub(h), rect.r1.min(win.nwr - 1));
+            let lowest = if c_lo > c_hi || r_lo > r_hi {
+                win.lowest
+            } else {
+                let mut free = win.above[r_lo].min(win.below[r_hi]);
+                let mut covered = f32::INFINITY;
+                for r in r_lo..=r_hi {
+                    free = free
+                        .min(win.left[r * win.nwc + c_lo])
+                        .min(win.right[r * win.nwc + c_hi]);
+                    covered = covered.min(win.range_min(r, c_lo, c_hi));
+                }
+                free.min(covered.max(top))
             };
             best = best.min(lowest + self.height[j]);
         }
