@@ -19,18 +19,7 @@ const IDS: [&str; 9] = [
 
 /// A world with the first `n` objects of `IDS` placed at fixed, scattered positions.
 fn pile(c: &SharedCatalog, n: usize) -> PackingWorld {
-    let mut w = common::world(c);
-    for (i, id) in IDS[..n].iter().enumerate() {
-        let f = i as f32;
-        w.place(
-            c.by_id(id).unwrap(),
-            0.1 * (f * 1.7).sin(),
-            0.06 * (f * 2.3).cos(),
-            0.4 * f,
-        )
-        .unwrap();
-    }
-    w
+    common::pile(c, &IDS[..n])
 }
 
 #[test]

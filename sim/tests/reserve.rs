@@ -43,18 +43,7 @@ fn brute_best_top(hm: &Heightmap, e: (f32, f32, f32), raise: Option<(CellRect, f
 #[test]
 fn the_best_top_after_every_candidate_matches_the_brute_force_oracle() {
     let c = common::primitives();
-    let ids = ["003", "005", "013", "007", "011", "004", "057"];
-    let mut w = common::world(&c);
-    for (i, id) in ids.iter().enumerate() {
-        let f = i as f32;
-        w.place(
-            c.by_id(id).unwrap(),
-            0.1 * (f * 1.7).sin(),
-            0.06 * (f * 2.3).cos(),
-            0.4 * f,
-        )
-        .unwrap();
-    }
+    let w = common::pile(&c, &["003", "005", "013", "007", "011", "004", "057"]);
     let next = c.by_id("004").unwrap();
     let after: Vec<TypeIdx> = ["005", "003", "013", "057", "011"]
         .iter()

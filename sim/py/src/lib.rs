@@ -107,6 +107,21 @@ struct Out {
     stable: bool,
 }
 
+impl Out {
+    /// The results of a placement step (episode totals are filled in later).
+    fn of_step(r: &herb_sim::env::StepResult<'_>) -> Self {
+        Self {
+            reward: r.reward,
+            terminated: r.terminated,
+            packed: r.info.packed as u32,
+            success: r.info.success,
+            compactness: r.info.outcome.compactness,
+            stable: r.info.outcome.stable,
+            ..Self::default()
+        }
+    }
+}
+
 /// N packing environments stepped together.
 #[pyclass(module = "herb_sim._native")]
 struct VecEnv {
@@ -442,15 +457,7 @@ impl VecEnv {
                     .zip(acts.par_iter())
                     .map(|(s, act)| {
                         let r = s.env.step(*act).map_err(|e| e.to_string())?;
-                        let o = Out {
-                            reward: r.reward,
-                            terminated: r.terminated,
-                            packed: r.info.packed as u32,
-                            success: r.info.success,
-                            compactness: r.info.outcome.compactness,
-                            stable: r.info.outcome.stable,
-                            ..Out::default()
-                        };
+                        let o = Out::of_step(&r);
                         Self::finish_step(sampler, s, o, autoreset)
                     })
                     .collect()
@@ -773,15 +780,7 @@ impl VecEnv {
             .env
             .step_placement(p.x, p.y, p.theta())
             .map_err(|e| e.to_string())?;
-        Ok(Out {
-            reward: r.reward,
-            terminated: r.terminated,
-            packed: r.info.packed as u32,
-            success: r.info.success,
-            compactness: r.info.outcome.compactness,
-            stable: r.info.outcome.stable,
-            ..Out::default()
-        })
+        Ok(Out::of_step(&r))
     }
 
     /// Books a step's reward and, when the episode ended, its return and length, and resets

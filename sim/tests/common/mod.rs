@@ -29,3 +29,19 @@ pub fn meshes() -> Option<SharedCatalog> {
 pub fn world(c: &SharedCatalog) -> PackingWorld {
     PackingWorld::new(c.clone(), WorldConfig::default()).expect("world")
 }
+
+/// **Fixture**: a world with the objects `ids` placed in turn at fixed, scattered positions.
+pub fn pile(c: &SharedCatalog, ids: &[&str]) -> PackingWorld {
+    let mut w = world(c);
+    for (i, id) in ids.iter().enumerate() {
+        let f = i as f32;
+        w.place(
+            c.by_id(id).expect("catalog id"),
+            0.1 * (f * 1.7).sin(),
+            0.06 * (f * 2.3).cos(),
+            0.4 * f,
+        )
+        .expect("place");
+    }
+    w
+}
