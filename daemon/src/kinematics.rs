@@ -20,8 +20,8 @@
 
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 
-/// Joints of the arm.
-pub const DOF: usize = 7;
+/// Joints of the arm: the count the joint messages carry, defined once in `herb_ipc`.
+pub use herb_ipc::DOF;
 
 /// One revolute joint of the chain.
 #[derive(Debug, Clone, Copy, PartialEq)]

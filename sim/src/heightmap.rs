@@ -19,6 +19,9 @@ use rapier3d::math::Vector;
 pub const OUTSIDE_HEIGHT: f32 = BOX_HEIGHT;
 /// Highest value a valid heightmap may hold (m): well above anything that fits the success volume.
 pub const MAX_VALID_HEIGHT: f32 = 1.0;
+/// Lowest and highest valid heightmap value (m) ([`Heightmap::validate`]); the IPC frame's
+/// copy (`herb_ipc::HEIGHT_RANGE_M`) is tied to it by a test.
+pub const HEIGHT_RANGE_M: (f32, f32) = (-0.05, MAX_VALID_HEIGHT);
 
 /// The geometry of a heightmap grid over the box interior.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -123,16 +126,17 @@ impl Heightmap {
                 self.spec.ny
             )));
         }
-        if let Some((i, v)) = self
-            .data
-            .iter()
-            .enumerate()
-            .find(|(_, v)| !(v.is_finite() && (-0.05..=MAX_VALID_HEIGHT).contains(*v)))
+        if let Some((i, v)) =
+            self.data.iter().enumerate().find(|(_, v)| {
+                !(v.is_finite() && (HEIGHT_RANGE_M.0..=HEIGHT_RANGE_M.1).contains(*v))
+            })
         {
             return Err(SimError::Heightmap(format!(
-                "cell (col {}, row {}) holds {v}: values must be finite and within -0.05..={MAX_VALID_HEIGHT} m",
+                "cell (col {}, row {}) holds {v}: values must be finite and within {}..={} m",
                 i % self.spec.nx,
-                i / self.spec.nx
+                i / self.spec.nx,
+                HEIGHT_RANGE_M.0,
+                HEIGHT_RANGE_M.1
             )));
         }
         Ok(())
