@@ -3,7 +3,9 @@
 //! Uses the export fixture `models/fixtures/candidates-smoke.onnx` (a candidate network after
 //! a minute of `models/train.py`; a fixture, not a policy).
 
-use herb_daemon::policy::{DecisionInput, Policy};
+mod common;
+
+use common::decide;
 use herb_daemon::{CandidatePolicy, DecideError, load_policy};
 use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y, SUCCESS_TOP_Z};
 use herb_sim::observation::action_to_placement;
@@ -18,25 +20,6 @@ fn fixtures() -> PathBuf {
 
 fn catalog() -> Catalog {
     Catalog::builtin(&MeshSource::None("test".into())).unwrap()
-}
-
-fn decide(
-    p: &mut dyn Policy,
-    c: &Catalog,
-    hm: &Heightmap,
-    t: TypeIdx,
-    after: &[TypeIdx],
-) -> Result<[f32; 3], DecideError> {
-    let obs = vec![0.0; ObsLayout::LEN];
-    p.decide(&DecisionInput {
-        observation: &obs,
-        heightmap: hm,
-        object: t,
-        shape: c.shape(t),
-        step: 0,
-        catalog: c,
-        after,
-    })
 }
 
 #[test]

@@ -1,7 +1,9 @@
 //! Placement policies: BLBF feasibility and ordering, decisions under adversarial input.
 
-use herb_daemon::DecideError;
-use herb_daemon::policy::{Blbf, DecisionInput, Policy, check_input};
+mod common;
+
+use common::decide;
+use herb_daemon::policy::{Blbf, DecisionInput, check_input};
 use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y};
 use herb_sim::observation::action_to_placement;
 use herb_sim::paths::MeshSource;
@@ -20,19 +22,6 @@ fn inside_walls(c: &Catalog, t: TypeIdx, x: f32, y: f32, theta: f32) -> bool {
     c.shape(t).vertices.iter().all(|&v| {
         let p = rot * v;
         (x + p.x).abs() <= BOX_HALF_X + 1e-4 && (y + p.y).abs() <= BOX_HALF_Y + 1e-4
-    })
-}
-
-fn decide(p: &mut Blbf, c: &Catalog, hm: &Heightmap, t: TypeIdx) -> Result<[f32; 3], DecideError> {
-    let obs = vec![0.0; ObsLayout::LEN];
-    p.decide(&DecisionInput {
-        observation: &obs,
-        heightmap: hm,
-        object: t,
-        shape: c.shape(t),
-        step: 0,
-        catalog: c,
-        after: &[],
     })
 }
 
@@ -74,7 +63,8 @@ fn blbf_never_proposes_a_position_overlapping_the_walls() {
     for k in 0..24 {
         let hm = adversarial(&mut rng, k);
         for t in c.types() {
-            let a = decide(&mut p, &c, &hm, t).expect("an upright object fits between the walls");
+            let a =
+                decide(&mut p, &c, &hm, t, &[]).expect("an upright object fits between the walls");
             assert!(a.iter().all(|v| v.is_finite() && v.abs() <= 1.0), "{a:?}");
             let (x, y, theta) = action_to_placement(a).unwrap();
             assert!(
@@ -141,10 +131,10 @@ fn bad_input_is_rejected_with_a_reason_not_passed_on() {
     let mut p = Blbf::new();
     let mut hm = Heightmap::new(ObsLayout::grid());
     hm.data_mut()[100] = f32::NAN;
-    let e = decide(&mut p, &c, &hm, t).unwrap_err().to_string();
+    let e = decide(&mut p, &c, &hm, t, &[]).unwrap_err().to_string();
     assert!(e.contains("blbf") && e.contains("heightmap"), "{e}");
     hm.data_mut()[100] = 5.0;
-    assert!(decide(&mut p, &c, &hm, t).is_err());
+    assert!(decide(&mut p, &c, &hm, t, &[]).is_err());
     // The input check names what is wrong.
     let good = Heightmap::new(ObsLayout::grid());
     let mut obs = vec![0.0; ObsLayout::LEN];
