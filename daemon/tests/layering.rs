@@ -1,0 +1,185 @@
+//! The workspace's dependency rules (issue 14, item 1), checked on the graph cargo resolves.
+//!
+//! Dependencies point one way: the simulation, the decision core, the CLI and the bindings never
+//! reach IPC, real-time motion or the daemon; the robot side (loopback, adapters, robot crate)
+//! never reaches the learned policies; the wire types reach no other HERB crate. Only normal and
+//! build dependencies count (a test may link whatever it checks against).
+//!
+//! `PENDING` lists the violations the restructuring has not removed yet. Each entry must still be
+//! a violation: once a step removes one, this test fails until the entry is deleted, so the list
+//! only shrinks.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::process::Command;
+
+use serde_json::Value;
+
+/// (package, crates it must never reach, directly or transitively).
+const RULES: &[(&str, &[&str])] = &[
+    (
+        "herb-sim",
+        &[
+            "iceoryx2",
+            "ruckig",
+            "tract-onnx",
+            "herb-ipc",
+            "herb-robot",
+            "herb-adapter",
+            "herb-decide",
+            "herb-daemon",
+        ],
+    ),
+    ("herb-decide", SIM_SIDE_NEVER),
+    ("herb-sim-cli", SIM_SIDE_NEVER),
+    ("herb-sim-py", SIM_SIDE_NEVER),
+    (
+        "herb-ipc",
+        &[
+            "herb-sim",
+            "herb-decide",
+            "herb-robot",
+            "herb-adapter",
+            "herb-daemon",
+        ],
+    ),
+    ("herb-robot", ROBOT_SIDE_NEVER),
+    (
+        "herb-adapter",
+        &[
+            "tract-onnx",
+            "herb-decide",
+            "herb-daemon",
+            "herb-robot",
+            "ruckig",
+        ],
+    ),
+    ("herb-loopback", ROBOT_SIDE_NEVER),
+];
+
+/// What the simulation-side crates (decision core, CLI, bindings) never reach.
+const SIM_SIDE_NEVER: &[&str] = &[
+    "iceoryx2",
+    "ruckig",
+    "herb-ipc",
+    "herb-robot",
+    "herb-adapter",
+    "herb-daemon",
+];
+
+/// What the robot-side crates (robot, adapters, loopback) never reach.
+const ROBOT_SIDE_NEVER: &[&str] = &["tract-onnx", "herb-decide", "herb-daemon"];
+
+/// Violations still to be removed by the restructuring (package, forbidden crate reached).
+const PENDING: &[(&str, &str)] = &[
+    ("herb-sim-cli", "iceoryx2"),
+    ("herb-sim-cli", "ruckig"),
+    ("herb-sim-cli", "herb-ipc"),
+    ("herb-sim-cli", "herb-daemon"),
+    ("herb-sim-py", "iceoryx2"),
+    ("herb-sim-py", "ruckig"),
+    ("herb-sim-py", "herb-ipc"),
+    ("herb-sim-py", "herb-daemon"),
+    ("herb-loopback", "tract-onnx"),
+    ("herb-loopback", "herb-daemon"),
+];
+
+/// Package name -> names of its normal and build dependencies, as cargo resolves them.
+fn resolved_graph() -> BTreeMap<String, BTreeSet<String>> {
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
+    let out = Command::new(env!("CARGO"))
+        .args(["metadata", "--format-version", "1", "--offline"])
+        .current_dir(root)
+        .output()
+        .expect("cargo metadata runs");
+    assert!(
+        out.status.success(),
+        "cargo metadata failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let meta: Value = serde_json::from_slice(&out.stdout).expect("cargo metadata prints JSON");
+    let names: BTreeMap<&str, &str> = meta["packages"]
+        .as_array()
+        .expect("packages")
+        .iter()
+        .map(|p| (p["id"].as_str().unwrap(), p["name"].as_str().unwrap()))
+        .collect();
+    let mut graph = BTreeMap::new();
+    for node in meta["resolve"]["nodes"].as_array().expect("resolve.nodes") {
+        let name = names[node["id"].as_str().unwrap()].to_owned();
+        let deps = node["deps"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|d| {
+                d["dep_kinds"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .any(|k| k["kind"].is_null() || k["kind"] == "build")
+            })
+            .map(|d| names[d["pkg"].as_str().unwrap()].to_owned());
+        graph.entry(name).or_insert_with(BTreeSet::new).extend(deps);
+    }
+    graph
+}
+
+/// Every crate `from` reaches through normal and build dependencies.
+fn reach(graph: &BTreeMap<String, BTreeSet<String>>, from: &str) -> BTreeSet<String> {
+    let mut seen = BTreeSet::new();
+    let mut stack = vec![from.to_owned()];
+    while let Some(p) = stack.pop() {
+        for d in graph.get(&p).into_iter().flatten() {
+            if seen.insert(d.clone()) {
+                stack.push(d.clone());
+            }
+        }
+    }
+    seen
+}
+
+#[test]
+fn dependencies_point_one_way() {
+    let graph = resolved_graph();
+    assert!(
+        graph.contains_key("herb-daemon") && graph.contains_key("herb-sim"),
+        "the workspace graph was not read"
+    );
+    let mut violations = BTreeSet::new();
+    for (package, never) in RULES {
+        if !graph.contains_key(*package) {
+            continue;
+        }
+        let reached = reach(&graph, package);
+        for crate_name in *never {
+            if reached.contains(*crate_name) {
+                violations.insert((package.to_string(), crate_name.to_string()));
+            }
+        }
+    }
+    let pending: BTreeSet<(String, String)> = PENDING
+        .iter()
+        .map(|(p, c)| (p.to_string(), c.to_string()))
+        .collect();
+    let new: Vec<_> = violations.difference(&pending).collect();
+    let fixed: Vec<_> = pending.difference(&violations).collect();
+    assert!(
+        new.is_empty(),
+        "dependency rules broken (package, crate): {new:?}"
+    );
+    assert!(
+        fixed.is_empty(),
+        "no longer violated, delete from PENDING: {fixed:?}"
+    );
+}
+
+#[test]
+fn the_rules_name_real_workspace_packages() {
+    let graph = resolved_graph();
+    let present = RULES.iter().filter(|(p, _)| graph.contains_key(*p)).count();
+    // herb-sim, herb-sim-cli, herb-sim-py, herb-ipc and herb-loopback exist from the start; the
+    // restructuring adds herb-decide, herb-robot and herb-adapter.
+    assert!(
+        present >= 5,
+        "only {present} ruled packages found in the workspace"
+    );
+}
