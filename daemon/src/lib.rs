@@ -9,13 +9,10 @@
 #![warn(missing_docs)]
 
 pub mod candidate;
-pub mod cell;
 pub mod config;
 pub mod controller;
 pub mod error;
 pub mod evaluate;
-pub mod kinematics;
-pub mod motion;
 pub mod onnx;
 pub mod planner;
 pub mod policy;
@@ -23,6 +20,7 @@ pub mod sequence;
 
 pub use candidate::CandidatePolicy;
 pub use error::{DecideError, Result};
+pub use herb_robot::{cell, kinematics, motion};
 pub use onnx::OnnxPolicy;
 
 /// The placement policy named by `spec`: `blbf`, or the path of an ONNX model, loaded as a

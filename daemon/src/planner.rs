@@ -378,9 +378,10 @@ impl Worker {
         buf.pose = pose;
         let h = self.catalog.shape(ty).extents().z as f64;
         let place = pose.map(|v| v as f64);
-        let w = plan_waypoints(&self.cell, &self.arm, &self.ik, h, place, &from)
+        let clear_top = herb_sim::frames::SUCCESS_TOP_Z as f64;
+        let w = plan_waypoints(&self.cell, &self.arm, &self.ik, h, place, &from, clear_top)
             .map_err(|_| Fault::Unreachable)?;
-        let transit = self.cell.transit_z(h);
+        let transit = self.cell.transit_z(h, clear_top);
         let mut cur = from;
         let mut go = |to: &[f64; DOF],
                       then,

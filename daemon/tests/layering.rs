@@ -75,10 +75,12 @@ const PENDING: &[(&str, &str)] = &[
     ("herb-sim-cli", "ruckig"),
     ("herb-sim-cli", "herb-ipc"),
     ("herb-sim-cli", "herb-daemon"),
+    ("herb-sim-cli", "herb-robot"),
     ("herb-sim-py", "iceoryx2"),
     ("herb-sim-py", "ruckig"),
     ("herb-sim-py", "herb-ipc"),
     ("herb-sim-py", "herb-daemon"),
+    ("herb-sim-py", "herb-robot"),
     ("herb-loopback", "tract-onnx"),
     ("herb-loopback", "herb-daemon"),
 ];

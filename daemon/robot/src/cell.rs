@@ -9,7 +9,6 @@
 //! `pick_yaw`. Grasps are top-down at the object's top, `grasp_depth` below it.
 
 use crate::kinematics::{Arm, DOF, IkError, IkOptions, LEFT_TOP_DOWN_NOMINAL, top_down};
-use herb_sim::frames::SUCCESS_TOP_Z;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -99,9 +98,11 @@ impl CellConfig {
         self.grasp_depth.min(0.5 * h)
     }
 
-    /// Tool z (in `base`) for sideways moves while carrying an object of height `h`.
-    pub fn transit_z(&self, h: f64) -> f64 {
-        let floor = self.box_origin[2] + SUCCESS_TOP_Z as f64;
+    /// Tool z (in `base`) for sideways moves while carrying an object of height `h`, whose
+    /// bottom must clear `clear_top` above the box floor (the success volume's top,
+    /// `herb_sim::frames::SUCCESS_TOP_Z`) and the pick station by `transit_clearance`.
+    pub fn transit_z(&self, h: f64, clear_top: f64) -> f64 {
+        let floor = self.box_origin[2] + clear_top;
         floor.max(self.pick_origin[2] + h) + self.transit_clearance + h - self.depth(h)
     }
 }
@@ -135,7 +136,7 @@ pub struct Unreachable {
 
 /// Plans the joint targets for taking an object of height `h` from the pick station and
 /// releasing it with its canonical origin at `place` (B frame: x, y, z in m, yaw in rad),
-/// seeded from `seed`. A parallel gripper may take the object turned by a half turn; the
+/// seeded from `seed`, moving sideways at [`CellConfig::transit_z`] for `clear_top`. A parallel gripper may take the object turned by a half turn; the
 /// grasp and release yaws are chosen together so that the object ends at the decided yaw.
 pub fn plan_waypoints(
     cell: &CellConfig,
@@ -144,9 +145,10 @@ pub fn plan_waypoints(
     h: f64,
     place: [f64; 4],
     seed: &[f64; DOF],
+    clear_top: f64,
 ) -> Result<Waypoints, Unreachable> {
     let depth = cell.depth(h);
-    let transit = cell.transit_z(h);
+    let transit = cell.transit_z(h, clear_top);
     let grasp_xyz = cell.grasp_point(h);
     let b = cell.box_pose();
     let c = b * Point3::new(place[0], place[1], place[2] + 0.5 * h - depth);

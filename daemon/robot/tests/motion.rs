@@ -3,8 +3,8 @@
 //! position stays inside the joint limits, point-to-point moves end exactly at the target, and
 //! brakes from moving states come to a standstill.
 
-use herb_daemon::kinematics::DOF;
-use herb_daemon::motion::{JointLimits, MotionError, MotionPlanner, Setpoint, Setpoints};
+use herb_robot::kinematics::DOF;
+use herb_robot::motion::{JointLimits, MotionError, MotionPlanner, Setpoint, Setpoints};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

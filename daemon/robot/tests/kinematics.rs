@@ -1,7 +1,7 @@
 //! Baxter left-arm kinematics: Jacobian against finite differences, FK/IK round trips over
 //! random configurations and random top-down poses, unreachable targets reported.
 
-use herb_daemon::kinematics::{Arm, DOF, IkError, IkOptions, top_down};
+use herb_robot::kinematics::{Arm, DOF, IkError, IkOptions, top_down};
 use nalgebra::Isometry3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -77,7 +77,7 @@ fn fk_ik_round_trip_over_random_top_down_poses() {
     let arm = Arm::baxter_left();
     let opts = IkOptions::default();
     let mut rng = ChaCha8Rng::seed_from_u64(3);
-    let mut seed = herb_daemon::kinematics::LEFT_TOP_DOWN_NOMINAL;
+    let mut seed = herb_robot::kinematics::LEFT_TOP_DOWN_NOMINAL;
     let (mut ok, n) = (0, 200);
     let mut failures = Vec::new();
     for _ in 0..n {
