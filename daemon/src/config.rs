@@ -5,6 +5,7 @@
 use crate::cell::CellConfig;
 use crate::kinematics::LEFT_ARM;
 use crate::motion::JointLimits;
+pub use herb_robot::rt::RtConfig;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -32,18 +33,6 @@ impl Default for LoopConfig {
             max_trajectory_s: 60.0,
         }
     }
-}
-
-/// Optional real-time setup; each step that is not permitted degrades to a warning.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct RtConfig {
-    /// Lock all memory (mlockall).
-    pub mlockall: bool,
-    /// SCHED_FIFO priority of the loop thread (1-99); 0 keeps the default scheduler.
-    pub fifo_priority: i32,
-    /// CPU to pin the loop thread to; none when absent.
-    pub cpu: Option<usize>,
 }
 
 /// Input timeouts (s).

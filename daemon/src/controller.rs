@@ -37,6 +37,7 @@ use herb_ipc::{
     JointCommand, JointState, MAX_JOB_OBJECTS, NO_OBJECT, PackJobReply, RejectReason, Status,
     StatusEvent, monotonic_ns,
 };
+use herb_robot::rt::{set_timer_slack, sleep_until};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
@@ -923,34 +924,5 @@ impl Controller {
             rejected_inputs: self.rejected,
             max_cycle_ns: self.max_cycle,
         });
-    }
-}
-
-/// Sets the calling thread's timer slack to 1 ns (Linux's default 50 us delays every
-/// wake-up from `clock_nanosleep` by up to that much).
-pub fn set_timer_slack() {
-    // SAFETY: plain prctl on the calling thread.
-    unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong) };
-}
-
-/// Sleeps until `deadline` (CLOCK_MONOTONIC ns), busy-waiting the last `spin_ns`.
-pub fn sleep_until(deadline: u64, spin_ns: u64) {
-    let wake = deadline.saturating_sub(spin_ns);
-    let ts = libc::timespec {
-        tv_sec: (wake / 1_000_000_000) as libc::time_t,
-        tv_nsec: (wake % 1_000_000_000) as libc::c_long,
-    };
-    // SAFETY: clock_nanosleep with an absolute time reads one timespec; EINTR just retries.
-    while unsafe {
-        libc::clock_nanosleep(
-            libc::CLOCK_MONOTONIC,
-            libc::TIMER_ABSTIME,
-            &ts,
-            std::ptr::null_mut(),
-        )
-    } == libc::EINTR
-    {}
-    while spin_ns > 0 && monotonic_ns() < deadline {
-        std::hint::spin_loop();
     }
 }

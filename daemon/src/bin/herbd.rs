@@ -80,46 +80,6 @@ fn config(cli: &Cli) -> Result<Config, String> {
     Ok(c)
 }
 
-/// Real-time setup; every step not permitted is a warning.
-fn realtime(cfg: &Config) {
-    let rt = &cfg.rt;
-    if rt.mlockall {
-        // SAFETY: plain syscall.
-        if unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) } != 0 {
-            eprintln!(
-                "herbd: warning: mlockall failed ({}); memory may page",
-                std::io::Error::last_os_error()
-            );
-        }
-    }
-    if rt.fifo_priority > 0 {
-        let p = libc::sched_param {
-            sched_priority: rt.fifo_priority,
-        };
-        // SAFETY: plain syscall on the calling thread.
-        if unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &p) } != 0 {
-            eprintln!(
-                "herbd: warning: SCHED_FIFO {} not permitted ({}); running with the default scheduler",
-                rt.fifo_priority,
-                std::io::Error::last_os_error()
-            );
-        }
-    }
-    if let Some(cpu) = rt.cpu {
-        // SAFETY: a zeroed cpu_set_t is valid; CPU_SET indexes within it.
-        unsafe {
-            let mut set: libc::cpu_set_t = std::mem::zeroed();
-            libc::CPU_SET(cpu, &mut set);
-            if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
-                eprintln!(
-                    "herbd: warning: pinning to CPU {cpu} failed ({})",
-                    std::io::Error::last_os_error()
-                );
-            }
-        }
-    }
-}
-
 fn us(h: &hdrhistogram::Histogram<u64>, q: f64) -> f64 {
     if h.is_empty() {
         0.0
@@ -252,7 +212,9 @@ fn run(cli: Cli) -> Result<(), String> {
             .map_err(|e| format!("cannot start the reporter: {e}"))?
     };
 
-    realtime(&cfg);
+    for w in herb_robot::rt::apply(&cfg.rt) {
+        eprintln!("herbd: warning: {w}");
+    }
     let _ = sd_notify::notify(false, &[sd_notify::NotifyState::Ready]);
     let last = controller.run();
     done.store(true, Ordering::Relaxed);

@@ -19,15 +19,15 @@
 //! SIGINT/SIGTERM: prints a JSON summary on stdout and exits 0.
 
 use clap::Parser;
-use herb_daemon::cell::CellConfig;
 use herb_daemon::config::Config;
-use herb_daemon::controller::{set_timer_slack, sleep_until};
-use herb_daemon::kinematics::{Arm, DOF, LEFT_TOP_DOWN_NOMINAL};
 use herb_ipc::bus::{Bus, Pub};
 use herb_ipc::{
     GripperAction, GripperCommand, GripperState, Header, HeightmapFrame, JointCommand, JointState,
     NO_OBJECT, Services, SimOutcome, monotonic_ns, zeroed_in_place,
 };
+use herb_robot::cell::CellConfig;
+use herb_robot::kinematics::{Arm, DOF, LEFT_TOP_DOWN_NOMINAL};
+use herb_robot::rt::{set_timer_slack, sleep_until};
 use herb_sim::{Catalog, PackingWorld, TypeIdx, WorldConfig, paths};
 use nalgebra::Isometry3;
 use rapier3d::math::{Pose, Rotation, Vector};
