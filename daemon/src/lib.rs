@@ -1,46 +1,15 @@
-//! HERB's decision core: in which order to pack (the human-like sequence planner, Beam-3 over
-//! a Markov chain of object-type transitions) and where to put each object (placement
-//! policies behind one trait). Used by `herbd`, by the evaluation (`herb-sim eval`) and by
-//! training.
-//!
-//! The observation layout, the z estimate and the object catalog are `herb-sim`'s (one
-//! implementation each); this crate only decides.
+//! `herbd`, HERB's controller: its configuration, the fixed-rate control loop with the job
+//! state machine, and the planner thread that runs the decision core (`herb-decide`) and the
+//! motion planning (`herb-robot`) off the loop.
 
 #![warn(missing_docs)]
 
-pub mod candidate;
 pub mod config;
 pub mod controller;
-pub mod error;
-pub mod evaluate;
-pub mod onnx;
 pub mod planner;
-pub mod policy;
-pub mod sequence;
 
-pub use candidate::CandidatePolicy;
-pub use error::{DecideError, Result};
+pub use herb_decide::{
+    Blbf, CandidatePolicy, DecideError, DecisionInput, OnnxPolicy, Policy, Result, SequenceModel,
+    beam3, candidate, error, evaluate, load_policy, onnx, policy, sequence,
+};
 pub use herb_robot::{cell, kinematics, motion};
-pub use onnx::OnnxPolicy;
-
-/// The placement policy named by `spec`: `blbf`, or the path of an ONNX model, loaded as a
-/// [`CandidatePolicy`] when its inputs are the candidate contract's and as an [`OnnxPolicy`]
-/// (the observation contract) otherwise; either refuses a model that breaks its contract.
-pub fn load_policy(spec: &str, catalog: &herb_sim::Catalog) -> Result<Box<dyn Policy>> {
-    if spec == "blbf" {
-        return Ok(Box::new(Blbf::new()));
-    }
-    let path = std::path::Path::new(spec);
-    let bytes = std::fs::read(path).map_err(|source| DecideError::Io {
-        path: path.to_owned(),
-        source,
-    })?;
-    match candidate::input_names(&bytes) {
-        Ok(names) if names == candidate::INPUT_NAMES => Ok(Box::new(CandidatePolicy::from_bytes(
-            path, &bytes, catalog,
-        )?)),
-        _ => Ok(Box::new(OnnxPolicy::load(path)?)),
-    }
-}
-pub use policy::{Blbf, DecisionInput, Policy};
-pub use sequence::{SequenceModel, beam3};

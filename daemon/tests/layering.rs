@@ -83,6 +83,7 @@ const PENDING: &[(&str, &str)] = &[
     ("herb-sim-py", "herb-robot"),
     ("herb-loopback", "tract-onnx"),
     ("herb-loopback", "herb-daemon"),
+    ("herb-loopback", "herb-decide"),
 ];
 
 /// Package name -> names of its normal and build dependencies, as cargo resolves them.

@@ -1,4 +1,4 @@
-//! The candidate policy (`herb_daemon::candidate`): contract checks at load, decisions that
+//! The candidate policy (`herb_decide::candidate`): contract checks at load, decisions that
 //! stay inside the walls, "no feasible placement" on a full box, and the policy factory.
 //! Uses the export fixture `models/fixtures/candidates-smoke.onnx` (a candidate network after
 //! a minute of `models/train.py`; a fixture, not a policy).
@@ -6,7 +6,7 @@
 mod common;
 
 use common::decide;
-use herb_daemon::{CandidatePolicy, DecideError, load_policy};
+use herb_decide::{CandidatePolicy, DecideError, load_policy};
 use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y, SUCCESS_TOP_Z};
 use herb_sim::observation::action_to_placement;
 use herb_sim::paths::MeshSource;
@@ -15,7 +15,7 @@ use rapier3d::math::Rotation;
 use std::path::{Path, PathBuf};
 
 fn fixtures() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/fixtures")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/fixtures")
 }
 
 fn catalog() -> Catalog {

@@ -6,7 +6,7 @@
 //! comes with inputs from the environment and PyTorch's outputs for them (`<name>.parity.bin`,
 //! little-endian f32, and `<name>.parity.json`); tract must agree within 1e-4.
 
-use herb_daemon::{CandidatePolicy, OnnxPolicy};
+use herb_decide::{CandidatePolicy, OnnxPolicy};
 use herb_sim::ObsLayout;
 use herb_sim::features::{CANDIDATE_LEN, CONTEXT_LEN};
 use herb_sim::lattice::MAX_CANDIDATES;
@@ -82,7 +82,7 @@ fn check(onnx: &Path) {
 
 #[test]
 fn tract_matches_pytorch_on_exported_actors() {
-    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
+    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models");
     let mut files: Vec<PathBuf> = std::fs::read_dir(&models)
         .unwrap()
         .filter_map(|e| e.ok().map(|e| e.path()))

@@ -1,6 +1,6 @@
 //! Beam-3 (HERB paper, Algorithm 1) on hand-built chains, and the fitted model.
 
-use herb_daemon::sequence::{self, SequenceModel, State, beam3, greedy};
+use herb_decide::sequence::{self, SequenceModel, State, beam3, greedy};
 use herb_sim::paths::MeshSource;
 use herb_sim::{Catalog, TypeIdx};
 
@@ -109,7 +109,7 @@ fn repeated_types_unseen_types_one_object_and_empty() {
     assert_eq!(beam3(&m, &[b]).unwrap(), vec![b]);
     assert!(matches!(
         beam3(&m, &[]),
-        Err(herb_daemon::DecideError::EmptyObjectList)
+        Err(herb_decide::DecideError::EmptyObjectList)
     ));
     assert!(beam3(&m, &[TypeIdx(999)]).is_err());
 }
@@ -171,7 +171,7 @@ fn sequence_files_round_trip_and_bad_files_are_clear_errors() {
 #[test]
 fn committed_sequence_model_matches_the_data() {
     let c = catalog();
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/sequence.json");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/sequence.json");
     let committed = SequenceModel::load(&path, &c).expect("models/sequence.json");
     assert_eq!(committed.provenance().episodes, 263);
     assert_eq!(committed.provenance().transitions, 4313);

@@ -3,7 +3,7 @@
 mod common;
 
 use common::decide;
-use herb_daemon::policy::{Blbf, DecisionInput, check_input};
+use herb_decide::policy::{Blbf, DecisionInput, check_input};
 use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y};
 use herb_sim::observation::action_to_placement;
 use herb_sim::paths::MeshSource;

@@ -1,8 +1,8 @@
 //! Shared helpers for the decision-core integration tests.
 #![allow(dead_code)]
 
-use herb_daemon::DecideError;
-use herb_daemon::policy::{DecisionInput, Policy};
+use herb_decide::DecideError;
+use herb_decide::policy::{DecisionInput, Policy};
 use herb_sim::{Catalog, Heightmap, ObsLayout, TypeIdx};
 
 /// One decision of `p` for object `t` over `hm` at step 0 (a zero observation), with `after`

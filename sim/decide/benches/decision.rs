@@ -4,14 +4,14 @@
 //! issue 13, include the placement lattice and features in their decision), plus the BLBF
 //! baseline.
 //!
-//! `cargo bench -p herb-daemon --bench decision`. Every timed decision is recorded in a
+//! `cargo bench -p herb-decide --bench decision`. Every timed decision is recorded in a
 //! histogram; p50/p99 are printed with the network's FLOPs (2 x FMA, tract's cost model) and
 //! file size. The networks have fixed random weights: latency does not depend on the values.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use hdrhistogram::Histogram;
-use herb_daemon::policy::{DecisionInput, Policy};
-use herb_daemon::{Blbf, CandidatePolicy, OnnxPolicy};
+use herb_decide::policy::{DecisionInput, Policy};
+use herb_decide::{Blbf, CandidatePolicy, OnnxPolicy};
 use herb_sim::observation::{Projections, action_to_placement};
 use herb_sim::{Catalog, ObsLayout, PackingWorld, SharedCatalog, TypeIdx, WorldConfig};
 use std::path::PathBuf;
@@ -42,8 +42,8 @@ impl Policy for NullPolicy {
         "null"
     }
     fn begin_episode(&mut self, _seed: u64) {}
-    fn decide(&mut self, input: &DecisionInput) -> herb_daemon::Result<[f32; 3]> {
-        herb_daemon::policy::check_input("null", input)?;
+    fn decide(&mut self, input: &DecisionInput) -> herb_decide::Result<[f32; 3]> {
+        herb_decide::policy::check_input("null", input)?;
         Ok([0.0; 3])
     }
 }
@@ -115,7 +115,9 @@ fn benches(c: &mut Criterion) {
     let catalog: SharedCatalog = Arc::new(Catalog::builtin(&meshes).expect("catalog"));
     let dir = std::env::var_os("HERB_BENCH_MODELS")
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target/onnx-bench"));
+        .unwrap_or_else(|| {
+            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../target/onnx-bench")
+        });
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
         .map(|rd| {
             rd.filter_map(|e| e.ok().map(|e| e.path()))
@@ -138,7 +140,7 @@ fn benches(c: &mut Criterion) {
             .unwrap_or("model")
             .to_owned();
         // Either contract: the observation one (OnnxPolicy) or the candidate one.
-        let mut p = match herb_daemon::load_policy(&f.to_string_lossy(), &catalog) {
+        let mut p = match herb_decide::load_policy(&f.to_string_lossy(), &catalog) {
             Ok(p) => p,
             Err(e) => {
                 eprintln!("skipping {}: {e}", f.display());

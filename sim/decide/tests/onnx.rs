@@ -2,9 +2,9 @@
 //! and decisions that stay finite and in range. The models are FIXTURES with fixed random
 //! weights (models/make_fixtures.py), not trained policies.
 
-use herb_daemon::evaluate::{SequenceMode, run_policy_episode};
-use herb_daemon::policy::{DecisionInput, Policy};
-use herb_daemon::{DecideError, OnnxPolicy};
+use herb_decide::evaluate::{SequenceMode, run_policy_episode};
+use herb_decide::policy::{DecisionInput, Policy};
+use herb_decide::{DecideError, OnnxPolicy};
 use herb_sim::paths::MeshSource;
 use herb_sim::{Catalog, Heightmap, ObsLayout, PackingEnv, RewardMode, WorldConfig};
 use std::path::PathBuf;
@@ -12,7 +12,7 @@ use std::sync::Arc;
 
 fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../models/fixtures")
+        .join("../../models/fixtures")
         .join(name)
 }
 
