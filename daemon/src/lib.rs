@@ -10,6 +10,6 @@ pub mod planner;
 
 pub use herb_decide::{
     Blbf, CandidatePolicy, DecideError, DecisionInput, OnnxPolicy, Policy, Result, SequenceModel,
-    beam3, candidate, error, evaluate, load_policy, onnx, policy, sequence,
+    beam3, candidate, error, load_policy, onnx, policy, sequence,
 };
 pub use herb_robot::{cell, kinematics, motion};

@@ -71,16 +71,6 @@ const ROBOT_SIDE_NEVER: &[&str] = &["tract-onnx", "herb-decide", "herb-daemon"];
 
 /// Violations still to be removed by the restructuring (package, forbidden crate reached).
 const PENDING: &[(&str, &str)] = &[
-    ("herb-sim-cli", "iceoryx2"),
-    ("herb-sim-cli", "ruckig"),
-    ("herb-sim-cli", "herb-ipc"),
-    ("herb-sim-cli", "herb-daemon"),
-    ("herb-sim-cli", "herb-robot"),
-    ("herb-sim-py", "iceoryx2"),
-    ("herb-sim-py", "ruckig"),
-    ("herb-sim-py", "herb-ipc"),
-    ("herb-sim-py", "herb-daemon"),
-    ("herb-sim-py", "herb-robot"),
     ("herb-loopback", "tract-onnx"),
     ("herb-loopback", "herb-daemon"),
     ("herb-loopback", "herb-decide"),

@@ -15,10 +15,11 @@ use std::process::ExitCode;
 use std::sync::Arc;
 use std::time::Instant;
 
+mod evaluate;
 mod plot;
 
-use herb_daemon::evaluate::{SequenceMode, run_policy_episode};
-use herb_daemon::{Blbf, Policy, SequenceModel};
+use evaluate::run_policy_episode;
+use herb_decide::{Blbf, Order, Policy, SequenceModel};
 
 #[derive(Parser)]
 #[command(
@@ -112,14 +113,14 @@ impl EvalMethod {
 
     /// The object order of this method's rows: `--sequence` if given, else largest first for
     /// the BLBF rules and Beam-3 for the others; `None` for the replays (human order).
-    fn order(&self, sequence: Option<SequenceArg>) -> Option<SequenceMode> {
+    fn order(&self, sequence: Option<SequenceArg>) -> Option<Order> {
         if self.sim_method().is_some() {
             return None;
         }
         Some(match (sequence, self) {
             (Some(s), _) => s.into(),
-            (None, Self::Blbf | Self::LatticeBlbf) => SequenceMode::Largest,
-            (None, _) => SequenceMode::Beam3,
+            (None, Self::Blbf | Self::LatticeBlbf) => Order::Largest,
+            (None, _) => Order::Beam3,
         })
     }
 
@@ -159,13 +160,13 @@ enum SequenceArg {
     Random,
 }
 
-impl From<SequenceArg> for SequenceMode {
+impl From<SequenceArg> for Order {
     fn from(s: SequenceArg) -> Self {
         match s {
-            SequenceArg::Beam3 => SequenceMode::Beam3,
-            SequenceArg::Human => SequenceMode::Human,
-            SequenceArg::Largest => SequenceMode::Largest,
-            SequenceArg::Random => SequenceMode::Random,
+            SequenceArg::Beam3 => Order::Beam3,
+            SequenceArg::Human => Order::Human,
+            SequenceArg::Largest => Order::Largest,
+            SequenceArg::Random => Order::Random,
         }
     }
 }
@@ -333,7 +334,7 @@ fn sequence_cmd(data: &DataArgs, a: SequenceArgs) -> AnyResult<()> {
         return Err(format!("bad sessions: {}", list.join("; ")).into());
     }
     let episodes: Vec<Episode> = sessions.iter().map(|s| s.episode(&catalog)).collect();
-    let model = herb_daemon::SequenceModel::fit(
+    let model = herb_decide::SequenceModel::fit(
         &catalog,
         &episodes,
         "BoxED sessions/*/PickPlace_dataset.json: each instance at its first placement, \
@@ -417,7 +418,7 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
     let model = if a
         .method
         .iter()
-        .any(|m| m.order(a.sequence) == Some(SequenceMode::Beam3))
+        .any(|m| m.order(a.sequence) == Some(Order::Beam3))
     {
         Some(SequenceModel::load(&a.sequence_model, &catalog)?)
     } else {
@@ -623,7 +624,7 @@ fn run_policy_method(
     cfg: &WorldConfig,
     episodes: &[Episode],
     m: EvalMethod,
-    mode: SequenceMode,
+    mode: Order,
     model: Option<&SequenceModel>,
     policy_path: Option<&Path>,
     seed: u64,
@@ -634,7 +635,7 @@ fn run_policy_method(
         // Load once up front: a bad model is one clear error, not one per episode.
         (EvalMethod::Herb, Some(p)) => {
             let spec = p.to_string_lossy();
-            herb_daemon::load_policy(&spec, catalog)?;
+            herb_decide::load_policy(&spec, catalog)?;
             let bytes = std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
             eprintln!("policy {}: {:.2} MB", p.display(), bytes as f64 / 1e6);
         }
@@ -645,7 +646,7 @@ fn run_policy_method(
         let mut policy: Box<dyn Policy> = match (m, policy_path) {
             (EvalMethod::Blbf, _) => Box::new(Blbf::new()),
             (EvalMethod::Herb, Some(p)) => {
-                herb_daemon::load_policy(&p.to_string_lossy(), env_catalog.as_ref())
+                herb_decide::load_policy(&p.to_string_lossy(), env_catalog.as_ref())
                     .map_err(|e| e.to_string())?
             }
             _ => return Err(format!("{} is not a decision-core policy", m.name())),
@@ -668,7 +669,7 @@ fn run_lattice_method(
     cfg: &WorldConfig,
     episodes: &[Episode],
     rule: &LatticeRule,
-    mode: SequenceMode,
+    mode: Order,
     model: Option<&SequenceModel>,
     seed: u64,
     jobs: usize,

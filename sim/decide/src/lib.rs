@@ -10,14 +10,15 @@
 
 pub mod candidate;
 pub mod error;
-pub mod evaluate;
 pub mod onnx;
+pub mod order;
 pub mod policy;
 pub mod sequence;
 
 pub use candidate::CandidatePolicy;
 pub use error::{DecideError, Result};
 pub use onnx::OnnxPolicy;
+pub use order::Order;
 pub use policy::{Blbf, DecisionInput, Policy};
 pub use sequence::{SequenceModel, beam3};
 

@@ -2,13 +2,11 @@
 //! and decisions that stay finite and in range. The models are FIXTURES with fixed random
 //! weights (models/make_fixtures.py), not trained policies.
 
-use herb_decide::evaluate::{SequenceMode, run_policy_episode};
 use herb_decide::policy::{DecisionInput, Policy};
 use herb_decide::{DecideError, OnnxPolicy};
 use herb_sim::paths::MeshSource;
-use herb_sim::{Catalog, Heightmap, ObsLayout, PackingEnv, RewardMode, WorldConfig};
+use herb_sim::{Catalog, Heightmap, ObsLayout};
 use std::path::PathBuf;
-use std::sync::Arc;
 
 fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -133,25 +131,4 @@ fn decisions_are_finite_and_in_range_or_rejected() {
         })
         .unwrap_err();
     assert!(matches!(e, DecideError::Rejected { .. }), "{e}");
-}
-
-/// The Table I path with an ONNX policy: a fixture network packs an episode in the world, and
-/// every decision is timed.
-#[test]
-fn a_fixture_network_packs_an_episode_through_the_harness() {
-    let c = Arc::new(Catalog::builtin(&MeshSource::None("test".into())).unwrap());
-    let ids = ["003", "004", "005", "007", "013"];
-    let objects: Vec<_> = ids.iter().map(|i| c.by_id(i).unwrap()).collect();
-    let ep = herb_sim::boxed::Episode {
-        name: "fixture".into(),
-        objects: objects.clone(),
-        human: vec![],
-    };
-    let order = SequenceMode::Largest.order(&c, None, &objects, 0).unwrap();
-    let mut env = PackingEnv::new(c.clone(), WorldConfig::default(), RewardMode::Simple).unwrap();
-    let mut p = OnnxPolicy::load(&fixture("tiny_policy.onnx")).unwrap();
-    let r = run_policy_episode(&mut env, &ep, &order, &mut p, 0).unwrap();
-    assert!(r.placements >= 1);
-    assert_eq!(r.decision_ns.len(), r.placements);
-    assert!(r.decision_ns.iter().all(|&n| n > 0));
 }

@@ -15,8 +15,8 @@
 //!
 //! The Gymnasium classes are in the Python package (`herb_sim/__init__.py`).
 
-use herb_daemon::sequence::{SequenceModel, beam3};
-use herb_daemon::{Blbf, DecisionInput, Policy};
+use herb_decide::sequence::{SequenceModel, beam3};
+use herb_decide::{Blbf, DecisionInput, Policy};
 use herb_sim::features::{self, CANDIDATE_LEN, CONTEXT_LEN, DecisionFeatures};
 use herb_sim::lattice::{Lattice, MAX_CANDIDATES, Placement};
 use herb_sim::paths::{self, MeshSource};
