@@ -48,7 +48,7 @@ pub struct LoopStats {
     pub cycle_ns: Histogram<u64>,
     /// Wake-up lateness relative to the deadline.
     pub jitter_ns: Histogram<u64>,
-    /// Decision latency (observation + policy + z).
+    /// Decision latency (one `herb_decide::Decider::decide` call).
     pub decision_ns: Histogram<u64>,
     /// Deadlines missed (cycles skipped) in the interval.
     pub misses: u64,

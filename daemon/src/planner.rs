@@ -3,7 +3,7 @@
 //! The loop sends it [`Request`]s and receives [`Response`]s over two wait-free SPSC rings
 //! (`rtrb`); trajectory buffers ([`MotionPlan`]) are preallocated once and only move between
 //! the threads, so the loop never allocates. The planner orders a job (Beam-3), decides each
-//! placement from the newest heightmap (observation, policy, z: the decision the latency
+//! placement from the newest heightmap (`herb_decide::Decider`: the decision the latency
 //! budget is about), plans the gripper waypoints, solves inverse kinematics and samples
 //! Ruckig trajectories at the loop period; it also computes brakes on request.
 
@@ -12,16 +12,13 @@ use crate::cell::{CellConfig, lift_to, plan_waypoints};
 use crate::config::Config;
 use crate::kinematics::{Arm, DOF, IkOptions};
 use crate::motion::{MotionPlanner, Setpoint, Setpoints};
-use crate::policy::{DecisionInput, Policy, check_action};
 use crate::sequence::{SequenceModel, beam3};
+use herb_decide::{Decider, HeightmapView};
 use herb_ipc::bus::{Bus, Sub};
 use herb_ipc::{Fault, GripperAction, HeightmapFrame, MAX_JOB_OBJECTS, Services};
-use herb_sim::observation::{Projections, action_to_placement};
-use herb_sim::zestimate::{ZScratch, estimate_z_rotated};
-use herb_sim::{GridSpec, Heightmap, ObsLayout, SharedCatalog, TypeIdx};
+use herb_sim::{SharedCatalog, TypeIdx};
 use iceoryx2::prelude::ipc;
 use iceoryx2::sample::Sample;
-use rapier3d::math::Rotation;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
@@ -54,7 +51,7 @@ pub struct MotionPlan {
     pub object: u16,
     /// Placement in B: x, y, z (m), yaw (rad).
     pub pose: [f32; 4],
-    /// Decision latency (observation + policy + z), ns; 0 when not decided anew.
+    /// Decision latency (one `herb_decide::Decider::decide` call), ns; 0 when not decided anew.
     pub decision_ns: u64,
 }
 
@@ -187,111 +184,6 @@ impl PlannerLink {
     }
 }
 
-/// Decides placements: observation, policy, z (the shared estimate) plus clearance.
-pub struct Decider {
-    policy: Box<dyn Policy>,
-    catalog: SharedCatalog,
-    projections: Projections,
-    obs: Vec<f32>,
-    hm: Option<Heightmap>,
-    zs: ZScratch,
-    clearance_m: f32,
-}
-
-impl std::fmt::Debug for Decider {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Decider")
-            .field("policy", &self.policy.name())
-            .finish()
-    }
-}
-
-impl Decider {
-    /// A decider running `policy` (`blbf` or an ONNX path).
-    pub fn new(
-        policy: &str,
-        catalog: SharedCatalog,
-        clearance_m: f64,
-    ) -> Result<Self, DecideError> {
-        let policy = crate::load_policy(policy, &catalog)?;
-        Ok(Self {
-            policy,
-            projections: Projections::new(&catalog),
-            obs: vec![0.0; ObsLayout::LEN],
-            hm: None,
-            zs: ZScratch::for_catalog(&catalog, ObsLayout::CELL_M),
-            catalog,
-            clearance_m: clearance_m as f32,
-        })
-    }
-
-    /// The policy's name.
-    pub fn policy_name(&self) -> &str {
-        self.policy.name()
-    }
-
-    /// The placement of `object` (step `step` of the episode, `after` the objects still to
-    /// come) on `frame`: B x, y, z of the canonical origin at release, and yaw.
-    pub fn decide(
-        &mut self,
-        frame: &HeightmapFrame,
-        object: TypeIdx,
-        step: usize,
-        after: &[TypeIdx],
-    ) -> Result<[f32; 4], DecideError> {
-        let bad = |reason: String| DecideError::Rejected {
-            policy: "herbd".into(),
-            reason,
-        };
-        frame
-            .validate()
-            .map_err(|e| bad(format!("heightmap frame: {e}")))?;
-        let spec = GridSpec::for_box(frame.cell_m).map_err(|e| bad(e.to_string()))?;
-        if (spec.nx, spec.ny) != (frame.nx as usize, frame.ny as usize) {
-            return Err(bad(format!(
-                "heightmap frame of {} x {} cells of {} m; the box needs {} x {}",
-                frame.nx, frame.ny, frame.cell_m, spec.nx, spec.ny
-            )));
-        }
-        if self.hm.as_ref().map(|h| *h.spec()) != Some(spec) {
-            self.hm = Some(Heightmap::new(spec));
-        }
-        let hm = self.hm.as_mut().expect("set above");
-        // One snapshot of the shared frame (the decision must not change under it).
-        hm.data_mut().copy_from_slice(frame.cells());
-        let hm = &*hm;
-        let observation: &[f32] = if self.policy.needs_observation() {
-            ObsLayout::write(hm, Some(self.projections.get(object)), &mut self.obs)?;
-            &self.obs
-        } else {
-            &[]
-        };
-        let shape = self.catalog.shape(object);
-        let a = self
-            .policy
-            .decide(&DecisionInput {
-                observation,
-                heightmap: hm,
-                object,
-                shape,
-                step,
-                catalog: &self.catalog,
-                after,
-            })
-            .and_then(|a| check_action(self.policy.name(), a))?;
-        let (x, y, theta) = action_to_placement(a)?;
-        let z = estimate_z_rotated(
-            hm,
-            shape,
-            x,
-            y,
-            Rotation::from_rotation_z(theta),
-            &mut self.zs,
-        ) + self.clearance_m;
-        Ok([x, y, z, theta])
-    }
-}
-
 struct Worker {
     decider: Decider,
     catalog: SharedCatalog,
@@ -357,7 +249,6 @@ impl Worker {
         let pose = match place_only {
             Some(p) => p,
             None => {
-                let t0 = Instant::now();
                 if !self.refresh_frame(after, Duration::from_millis(500)) {
                     return Err(Fault::HeightmapTimeout);
                 }
@@ -366,13 +257,22 @@ impl Worker {
                     .as_ref()
                     .expect("refresh_frame found one")
                     .payload();
+                let view = HeightmapView {
+                    nx: frame.nx as usize,
+                    ny: frame.ny as usize,
+                    cell_m: frame.cell_m,
+                    cells: frame.cells(),
+                };
                 let after = self.job_order.get(index as usize + 1..).unwrap_or(&[]);
-                let p = self.decider.decide(frame, ty, index as usize, after);
+                // The decision latency is this call alone (herb_decide::decider).
+                let t0 = Instant::now();
+                let p = self.decider.decide(view, ty, index as usize, after);
                 buf.decision_ns = t0.elapsed().as_nanos() as u64;
                 p.map_err(|e| match e {
                     DecideError::NoFeasiblePlacement => Fault::NoFeasiblePlacement,
                     _ => Fault::Decision,
                 })?
+                .xyz_theta()
             }
         };
         buf.pose = pose;
@@ -486,9 +386,12 @@ pub fn spawn(
                     .map_err(|e| e.to_string())?;
                 let sequence = SequenceModel::load(&cfg.models.sequence, &catalog)
                     .map_err(|e| e.to_string())?;
-                let decider =
-                    Decider::new(&cfg.models.policy, catalog.clone(), cfg.models.clearance_m)
-                        .map_err(|e| e.to_string())?;
+                let decider = Decider::load(
+                    &cfg.models.policy,
+                    catalog.clone(),
+                    cfg.models.clearance_m as f32,
+                )
+                .map_err(|e| e.to_string())?;
                 let limits = cfg.limits;
                 Ok(Worker {
                     decider,

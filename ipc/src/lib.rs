@@ -528,7 +528,8 @@ pub struct Status {
     pub reserved: u32,
     /// Placement in the box frame: x, y, z (m) of the object's canonical origin, yaw (rad).
     pub pose: [f32; 4],
-    /// Decision latency of this object (observation + policy + z), ns.
+    /// Decision latency of this object, ns: herbd's one decision call (check and copy the
+    /// heightmap, observation, policy, z estimate), not the wait for a frame.
     pub decision_ns: u64,
     /// Loop cycles run.
     pub cycles: u64,

@@ -57,7 +57,8 @@ pub struct EpisodeResult {
     pub compactness_per_step: Vec<f32>,
     /// Simulated physics steps in all.
     pub physics_steps: u64,
-    /// Decision latency of each placement (ns): policy plus z estimate; empty for replays.
+    /// Decision latency of each placement (ns): one `herb_decide::Decider::decide` call for the
+    /// decision-core policies; empty for replays.
     pub decision_ns: Vec<u64>,
     /// Why the episode failed: the bound crossed (`"floor"`, `"+x wall"`, `"top"`...), and
     /// whether the object outside was the one just placed or an earlier one knocked out.

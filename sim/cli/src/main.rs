@@ -19,7 +19,7 @@ mod evaluate;
 mod plot;
 
 use evaluate::run_policy_episode;
-use herb_decide::{Blbf, Order, Policy, SequenceModel};
+use herb_decide::{Blbf, Decider, Order, Policy, SequenceModel};
 
 #[derive(Parser)]
 #[command(
@@ -643,7 +643,7 @@ fn run_policy_method(
     }
     let env_catalog = catalog.clone();
     let make = || -> Result<_, String> {
-        let mut policy: Box<dyn Policy> = match (m, policy_path) {
+        let policy: Box<dyn Policy> = match (m, policy_path) {
             (EvalMethod::Blbf, _) => Box::new(Blbf::new()),
             (EvalMethod::Herb, Some(p)) => {
                 herb_decide::load_policy(&p.to_string_lossy(), env_catalog.as_ref())
@@ -651,12 +651,13 @@ fn run_policy_method(
             }
             _ => return Err(format!("{} is not a decision-core policy", m.name())),
         };
+        let mut decider = Decider::new(policy, env_catalog.clone(), cfg.clearance_m);
         Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
             let s = seed.wrapping_add(i as u64);
             let order = mode
                 .order(env.world().catalog(), model, &ep.objects, s)
                 .map_err(|e| e.to_string())?;
-            run_policy_episode(env, ep, &order, policy.as_mut(), s).map_err(|e| e.to_string())
+            run_policy_episode(env, ep, &order, &mut decider, s).map_err(|e| e.to_string())
         })
     };
     Ok(eval::run_all_with(catalog, cfg, episodes, jobs, make)?)

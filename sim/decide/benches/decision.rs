@@ -1,5 +1,7 @@
-//! Decision latency (issue 3): observation build + policy inference + z estimate, on one core,
-//! for each ONNX network in `$HERB_BENCH_MODELS` (default `target/onnx-bench`, written by
+//! Decision latency, on one core, timed exactly as herbd times it: one
+//! `herb_decide::Decider::decide` call (heightmap check and copy, observation when the policy
+//! reads one, policy inference, action check, z estimate; `sim/decide/src/decider.rs`), for
+//! each ONNX network in `$HERB_BENCH_MODELS` (default `target/onnx-bench`, written by
 //! `python3 models/make_fixtures.py --bench target/onnx-bench`; candidate-contract policies,
 //! issue 13, include the placement lattice and features in their decision), plus the BLBF
 //! baseline.
@@ -11,9 +13,8 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use hdrhistogram::Histogram;
 use herb_decide::policy::{DecisionInput, Policy};
-use herb_decide::{Blbf, CandidatePolicy, OnnxPolicy};
-use herb_sim::observation::{Projections, action_to_placement};
-use herb_sim::{Catalog, ObsLayout, PackingWorld, SharedCatalog, TypeIdx, WorldConfig};
+use herb_decide::{Blbf, CandidatePolicy, Decider, OnnxPolicy};
+use herb_sim::{Catalog, PackingWorld, SharedCatalog, TypeIdx, WorldConfig};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -62,44 +63,29 @@ fn report(name: &str, h: &Histogram<u64>, extra: &str) {
 fn bench_policy(
     c: &mut Criterion,
     name: &str,
-    policy: &mut dyn Policy,
+    policy: Box<dyn Policy>,
     catalog: &SharedCatalog,
     extra: &str,
 ) {
-    let (mut world, next) = scene(catalog);
+    let (world, next) = scene(catalog);
     // The rest of the job (read by candidate policies' context features).
     let after: Vec<TypeIdx> = ["003", "005", "004", "011"]
         .iter()
         .map(|id| catalog.by_id(id).expect("id"))
         .collect();
-    let projections = Projections::new(catalog);
-    let mut obs = vec![0.0f32; ObsLayout::LEN];
+    let mut decider = Decider::new(policy, catalog.clone(), world.config().clearance_m);
     let mut h = Histogram::<u64>::new_with_bounds(1, 10_000_000_000, 3).expect("histogram");
     c.bench_function(&format!("decision/{name}"), |b| {
         b.iter_custom(|iters| {
             let mut total = Duration::ZERO;
             for _ in 0..iters {
+                // Exactly what herbd times: one decision call (herb_decide::decider).
                 let t0 = Instant::now();
-                // As herbd's planner: the observation only for policies that read it.
-                if policy.needs_observation() {
-                    ObsLayout::write(world.heightmap(), Some(projections.get(next)), &mut obs)
-                        .expect("observation");
-                }
-                let a = policy
-                    .decide(&DecisionInput {
-                        observation: &obs,
-                        heightmap: world.heightmap(),
-                        object: next,
-                        shape: catalog.shape(next),
-                        step: 5,
-                        catalog,
-                        after: &after,
-                    })
+                let d = decider
+                    .decide(world.heightmap().into(), next, 5, &after)
                     .expect("decision");
-                let (x, y, theta) = action_to_placement(a).expect("action");
-                let z = world.estimate_z(next, x, y, theta);
                 let dt = t0.elapsed();
-                std::hint::black_box(z);
+                std::hint::black_box(d);
                 total += dt;
                 h.record(dt.as_nanos() as u64).ok();
             }
@@ -140,7 +126,7 @@ fn benches(c: &mut Criterion) {
             .unwrap_or("model")
             .to_owned();
         // Either contract: the observation one (OnnxPolicy) or the candidate one.
-        let mut p = match herb_decide::load_policy(&f.to_string_lossy(), &catalog) {
+        let p = match herb_decide::load_policy(&f.to_string_lossy(), &catalog) {
             Ok(p) => p,
             Err(e) => {
                 eprintln!("skipping {}: {e}", f.display());
@@ -157,21 +143,21 @@ fn benches(c: &mut Criterion) {
             2.0 * fma as f64 / 1e6,
             bytes as f64 / 1e6
         );
-        bench_policy(c, &name, p.as_mut(), &catalog, &extra);
+        bench_policy(c, &name, p, &catalog, &extra);
     }
     bench_policy(
         c,
         "blbf",
-        &mut Blbf::new(),
+        Box::new(Blbf::new()),
         &catalog,
         "; PackIt SO(2) heuristic",
     );
     bench_policy(
         c,
         "null",
-        &mut NullPolicy,
+        Box::new(NullPolicy),
         &catalog,
-        "; no network: observation build, input checks, z estimate",
+        "; no network: heightmap check and copy, observation, input checks, z estimate",
     );
 }
 

@@ -9,6 +9,7 @@
 #![warn(missing_docs)]
 
 pub mod candidate;
+pub mod decider;
 pub mod error;
 pub mod onnx;
 pub mod order;
@@ -16,6 +17,7 @@ pub mod policy;
 pub mod sequence;
 
 pub use candidate::CandidatePolicy;
+pub use decider::{Decider, Decision, HeightmapView};
 pub use error::{DecideError, Result};
 pub use onnx::OnnxPolicy;
 pub use order::Order;

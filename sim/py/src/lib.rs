@@ -10,13 +10,13 @@
 //! observation is the new episode's first).
 //!
 //! [`VecEnv::expert_actions`] labels every environment's current state with the BLBF
-//! heuristic's action (the daemon's `Blbf`, the same code the `blbf` rows of Table I run), for
+//! heuristic's action (`Blbf` through herbd's `Decider`, the same path the `blbf` rows of Table I run), for
 //! demonstration-guided training.
 //!
 //! The Gymnasium classes are in the Python package (`herb_sim/__init__.py`).
 
 use herb_decide::sequence::{SequenceModel, beam3};
-use herb_decide::{Blbf, DecisionInput, Policy};
+use herb_decide::{Blbf, Decider};
 use herb_sim::features::{self, CANDIDATE_LEN, CONTEXT_LEN, DecisionFeatures};
 use herb_sim::lattice::{Lattice, MAX_CANDIDATES, Placement};
 use herb_sim::paths::{self, MeshSource};
@@ -80,8 +80,8 @@ struct Slot {
     running: bool,
     ret: f32,
     len: u32,
-    /// The expert for [`VecEnv::expert_actions`] (its search scratch).
-    blbf: Blbf,
+    /// The expert for [`VecEnv::expert_actions`]: BLBF through herbd's decision path.
+    expert: Decider<Blbf>,
     /// The lattice rule of [`VecEnv::step_rule`], made on first use.
     rule: Option<LatticeRule>,
     /// The candidate inputs of the current state, once computed.
@@ -312,7 +312,11 @@ impl VecEnv {
                     running: false,
                     ret: 0.0,
                     len: 0,
-                    blbf: Blbf::new(),
+                    expert: Decider::new(
+                        Box::new(Blbf::new()),
+                        catalog.clone(),
+                        WorldConfig::default().clearance_m,
+                    ),
                     rule: None,
                     feats: DecisionFeatures::default(),
                     feats_fresh: false,
@@ -390,19 +394,17 @@ impl VecEnv {
                     .par_iter_mut()
                     .map(|s| {
                         let object = s.env.next_object()?;
-                        let world = s.env.world();
-                        // The daemon's decision itself (`Policy::decide`): the labels are the
+                        // herbd's decision itself (`Decider::decide`): the labels are the
                         // actions the `blbf` rows of Table I send.
-                        let input = DecisionInput {
-                            observation: s.env.observation(),
-                            heightmap: world.heightmap(),
-                            object,
-                            shape: world.catalog().shape(object),
-                            step: s.len as usize,
-                            catalog: world.catalog(),
-                            after: s.env.remaining().get(1..).unwrap_or(&[]),
-                        };
-                        s.blbf.decide(&input).ok()
+                        s.expert
+                            .decide(
+                                s.env.world().heightmap().into(),
+                                object,
+                                s.len as usize,
+                                s.env.remaining().get(1..).unwrap_or(&[]),
+                            )
+                            .ok()
+                            .map(|d| d.action)
                     })
                     .collect()
             })
