@@ -3,7 +3,6 @@
 //! names the bad one; nothing is acted on before it passes.
 
 use crate::cell::CellConfig;
-use crate::kinematics::LEFT_ARM;
 use crate::motion::JointLimits;
 pub use herb_robot::rt::RtConfig;
 use serde::{Deserialize, Serialize};
@@ -203,7 +202,7 @@ impl Config {
         }
         self.cell.validate()?;
         self.limits
-            .validate(&LEFT_ARM.map(|j| j.lower), &LEFT_ARM.map(|j| j.upper))
+            .validate_baxter_left()
             .map_err(|e| format!("limits: {e}"))
     }
 }

@@ -84,6 +84,12 @@ impl JointLimits {
         Ok(())
     }
 
+    /// [`Self::validate`] against the URDF limits of Baxter's left arm.
+    pub fn validate_baxter_left(&self) -> Result<(), String> {
+        let j = crate::kinematics::LEFT_ARM;
+        self.validate(&j.map(|s| s.lower), &j.map(|s| s.upper))
+    }
+
     /// True when every angle of `q` is within the position limits.
     pub fn contains(&self, q: &[f64; DOF]) -> bool {
         (0..DOF).all(|i| q[i] >= self.lower[i] && q[i] <= self.upper[i])

@@ -19,12 +19,13 @@
 //! SIGINT/SIGTERM: prints a JSON summary on stdout and exits 0.
 
 use clap::Parser;
-use herb_daemon::config::Config;
-use herb_ipc::bus::{Bus, Pub};
+use herb_adapter::{ArmPorts, CameraPort, Heightmap};
+use herb_ipc::bus::Bus;
 use herb_ipc::{
-    GripperAction, GripperCommand, GripperState, Header, HeightmapFrame, JointCommand, JointState,
-    NO_OBJECT, Services, SimOutcome, monotonic_ns, zeroed_in_place,
+    GripperAction, GripperCommand, GripperState, Header, JointCommand, JointState, NO_OBJECT,
+    Services, SimOutcome, monotonic_ns,
 };
+use herb_loopback::config::LoopbackConfig;
 use herb_robot::cell::CellConfig;
 use herb_robot::kinematics::{Arm, DOF, LEFT_TOP_DOWN_NOMINAL};
 use herb_robot::rt::{set_timer_slack, sleep_until};
@@ -140,8 +141,6 @@ struct Sim {
     target: [f64; DOF],
     closed: bool,
     held: Option<(TypeIdx, Isometry3<f64>)>,
-    commands: u64,
-    rejected: u64,
     max_excess: f64,
     releases: u64,
     last_outcome: Option<SimOutcome>,
@@ -149,8 +148,9 @@ struct Sim {
 }
 
 impl Sim {
-    fn command(&mut self, c: &JointCommand) {
-        self.commands += 1;
+    /// A joint command as received, with the adapter's verdict: the largest excess over the
+    /// limits is recorded for every one, only valid ones are followed.
+    fn command(&mut self, c: &JointCommand, valid: bool) {
         for i in 0..DOF {
             let p = c.position[i];
             if p.is_finite() {
@@ -158,17 +158,18 @@ impl Sim {
                 self.max_excess = self.max_excess.max(excess);
             }
         }
-        match c.validate(&self.lower, &self.upper) {
-            Ok(()) => self.target = c.position,
-            Err(_) => self.rejected += 1,
+        if valid {
+            self.target = c.position;
         }
     }
 
-    fn gripper(&mut self, c: &GripperCommand, release: &mpsc::Sender<(TypeIdx, Pose)>) {
-        let Ok(action) = c.validate(self.catalog.len()) else {
-            self.rejected += 1;
-            return;
-        };
+    /// A valid gripper command.
+    fn gripper(
+        &mut self,
+        c: &GripperCommand,
+        action: GripperAction,
+        release: &mpsc::Sender<(TypeIdx, Pose)>,
+    ) {
         match action {
             GripperAction::Close if !self.closed => {
                 self.closed = true;
@@ -197,29 +198,24 @@ impl Sim {
     }
 }
 
-fn publish_frame(p: &Pub<HeightmapFrame>, seq: u64, r: &Released) {
-    if let Ok(mut s) = p.loan_uninit() {
-        let f = zeroed_in_place(s.payload_mut());
-        f.header = Header {
-            seq,
-            stamp_ns: r.stamp_ns,
-            ..Header::now(seq)
-        };
-        f.nx = r.nx;
-        f.ny = r.ny;
-        f.cell_m = r.cell_m;
-        f.objects = r.objects;
-        f.data[..r.heightmap.len()].copy_from_slice(&r.heightmap);
-        // SAFETY: zeroed_in_place initialised every byte.
-        let s = unsafe { s.assume_init() };
-        let _ = s.send();
+fn publish_frame(camera: &CameraPort, seq: u64, r: &Released) {
+    let frame = Heightmap {
+        stamp_ns: r.stamp_ns,
+        nx: r.nx,
+        ny: r.ny,
+        cell_m: r.cell_m,
+        objects: r.objects,
+        cells: &r.heightmap,
+    };
+    if let Err(e) = camera.publish(seq, &frame) {
+        eprintln!("herb-loopback: heightmap not published: {e}");
     }
 }
 
 fn run(cli: Cli) -> Result<serde_json::Value, String> {
     let mut cfg = match &cli.config {
-        Some(p) => Config::load(p)?,
-        None => Config::default(),
+        Some(p) => LoopbackConfig::load(p)?,
+        None => LoopbackConfig::default(),
     };
     if let Some(p) = &cli.prefix {
         cfg.ipc_prefix = p.clone();
@@ -243,21 +239,8 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         ctrlc::set_handler(move || s.store(true, Ordering::Relaxed)).map_err(|e| e.to_string())?;
     }
     let bus = Bus::open("herb-loopback", &services).map_err(|e| e.to_string())?;
-    let cmd_sub = bus
-        .subscriber::<JointCommand>(&services.joint_command())
-        .map_err(|e| e.to_string())?;
-    let grip_sub = bus
-        .subscriber::<GripperCommand>(&services.gripper_command())
-        .map_err(|e| e.to_string())?;
-    let js_pub = bus
-        .publisher::<JointState>(&services.joint_state())
-        .map_err(|e| e.to_string())?;
-    let gs_pub = bus
-        .publisher::<GripperState>(&services.gripper_state())
-        .map_err(|e| e.to_string())?;
-    let hm_pub = bus
-        .publisher::<HeightmapFrame>(&services.heightmap())
-        .map_err(|e| e.to_string())?;
+    let mut arm = ArmPorts::open(&bus).map_err(|e| e.to_string())?;
+    let camera = CameraPort::open(&bus).map_err(|e| e.to_string())?;
     let out_pub = bus
         .publisher::<SimOutcome>(&services.sim_outcome())
         .map_err(|e| e.to_string())?;
@@ -282,8 +265,6 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         target: LEFT_TOP_DOWN_NOMINAL,
         closed: false,
         held: None,
-        commands: 0,
-        rejected: 0,
         max_excess: 0.0,
         releases: 0,
         last_outcome: None,
@@ -315,12 +296,10 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         if now > next {
             next = now + period;
         }
-        while let Ok(Some(c)) = cmd_sub.receive() {
-            sim.command(c.payload());
-        }
-        while let Ok(Some(c)) = grip_sub.receive() {
-            sim.gripper(c.payload(), &rel_tx);
-        }
+        let (lower, upper) = (sim.lower, sim.upper);
+        arm.drain_joint_commands(&lower, &upper, |c, valid| sim.command(c, valid));
+        let types = sim.catalog.len();
+        arm.drain_gripper_commands(types, |c, a| sim.gripper(c, a, &rel_tx));
         // Track the target.
         let a = if cli.lag_s > 0.0 {
             (dt / cli.lag_s).min(1.0)
@@ -333,12 +312,12 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             sim.q[i] = nq;
         }
         seq += 1;
-        let _ = js_pub.send_copy(JointState {
+        arm.publish_joint_state(JointState {
             header: Header::now(seq),
             position: sim.q,
             velocity: sim.qd,
         });
-        let _ = gs_pub.send_copy(GripperState {
+        arm.publish_gripper_state(GripperState {
             header: Header::now(seq),
             closed: sim.closed as u32,
             holding: sim.held.is_some() as u32,
@@ -360,13 +339,13 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
                             compactness: o.compactness,
                             release,
                             max_limit_excess_rad: sim.max_excess,
-                            commands: sim.commands,
-                            commands_rejected: sim.rejected,
+                            commands: arm.joint.received,
+                            commands_rejected: arm.joint.rejected,
                         };
                         let _ = out_pub.send_copy(m);
                         sim.last_outcome = Some(m);
                     }
-                    publish_frame(&hm_pub, seq, &r);
+                    publish_frame(&camera, seq, &r);
                     last_frame = now;
                     latest = Some(r);
                 }
@@ -382,15 +361,16 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             && let Some(r) = &mut latest
         {
             r.stamp_ns = now;
-            publish_frame(&hm_pub, seq, r);
+            publish_frame(&camera, seq, r);
             last_frame = now;
         }
     }
     std::thread::sleep(Duration::from_millis(1));
     let o = sim.last_outcome;
     Ok(serde_json::json!({ "loopback_final": {
-        "commands": sim.commands,
-        "commands_rejected": sim.rejected,
+        "commands": arm.joint.received,
+        "commands_rejected": arm.joint.rejected,
+        "gripper_commands_rejected": arm.gripper.rejected,
         "max_limit_excess_rad": sim.max_excess,
         "releases": sim.releases,
         "objects_in_box": o.map_or(0, |o| o.objects),

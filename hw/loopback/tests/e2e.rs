@@ -7,6 +7,8 @@
 //! 2. The loopback is killed mid-motion: the daemon reports the joint-state timeout, brakes,
 //!    holds, and resumes the job when the loopback is restarted; the job completes.
 
+use herb_robot::kinematics::LEFT_ARM;
+use herb_robot::motion::JointLimits;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -41,11 +43,31 @@ fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
+/// Joint limits for tests: the shipped position limits, and faster motion than the shipped
+/// defaults (the URDF speed limits instead of 60 % of them, 3 x the accelerations and 6 x the
+/// jerks) so an episode takes about a minute.
+fn fast_limits() -> JointLimits {
+    let mut l = JointLimits::baxter_left();
+    l.velocity = LEFT_ARM.map(|j| j.max_velocity);
+    l.acceleration = l.acceleration.map(|a| 3.0 * a);
+    l.jerk = l.jerk.map(|j| 6.0 * j);
+    l.validate_baxter_left()
+        .expect("test limits within the URDF's");
+    l
+}
+
 /// A configuration for tests: a unique prefix, placement `policy` (`blbf` or an ONNX path),
-/// and faster motion than the shipped defaults (still within the URDF speed limits) so an
-/// episode takes about a minute.
+/// and [`fast_limits`].
 fn config(dir: &Path, prefix: &str, policy: &str) -> PathBuf {
+    #[derive(serde::Serialize)]
+    struct Limits {
+        limits: JointLimits,
+    }
     let p = dir.join(format!("{prefix}.toml"));
+    let limits = toml::to_string(&Limits {
+        limits: fast_limits(),
+    })
+    .unwrap();
     let text = format!(
         r#"ipc_prefix = "{prefix}"
 [loop]
@@ -53,13 +75,7 @@ report_interval_s = 5.0
 [models]
 sequence = "{seq}"
 policy = "{policy}"
-[limits]
-lower = [-1.65167993878, -2.097, -3.00417993878, 0.0, -3.009, -1.5207963267948966, -3.009]
-upper = [1.65167993878, 0.997, 3.00417993878, 2.568, 3.009, 2.044, 3.009]
-velocity = [1.5, 1.5, 1.5, 1.5, 4.0, 4.0, 4.0]
-acceleration = [6.0, 6.0, 6.0, 6.0, 12.0, 12.0, 12.0]
-jerk = [60.0, 60.0, 60.0, 60.0, 120.0, 120.0, 120.0]
-"#,
+{limits}"#,
         seq = repo().join("models/sequence.json").display()
     );
     std::fs::write(&p, text).unwrap();

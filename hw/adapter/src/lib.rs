@@ -1,0 +1,251 @@
+//! The iceoryx2 side of a hardware-adapter process (the rapier loopback today; the Baxter and
+//! depth-camera bridges next): the ports an arm adapter and a camera adapter open, validation
+//! of every command herbd sends before the hardware sees it, and the counters an adapter
+//! reports. An adapter combines this crate with its hardware's own side (a simulation, a ROS
+//! connection) and, where it needs the arm's model, `herb-robot`.
+
+#![warn(missing_docs)]
+
+use herb_ipc::bus::{Bus, BusError, Pub, Sub};
+use herb_ipc::{
+    DOF, GripperAction, GripperCommand, GripperState, HEIGHTMAP_MAX_CELLS, Header, HeightmapFrame,
+    JointCommand, JointState, Services, zeroed_in_place,
+};
+
+/// What came in on one command service.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Counters {
+    /// Samples received.
+    pub received: u64,
+    /// Samples refused by validation (never acted on).
+    pub rejected: u64,
+    /// Header stamp of the newest valid sample (CLOCK_MONOTONIC ns); 0 before the first.
+    pub last_valid_stamp_ns: u64,
+}
+
+impl Counters {
+    fn count(&mut self, header: &Header, valid: bool) {
+        self.received += 1;
+        if valid {
+            self.last_valid_stamp_ns = self.last_valid_stamp_ns.max(header.stamp_ns);
+        } else {
+            self.rejected += 1;
+        }
+    }
+
+    /// True when a valid sample arrived within `max_age_ns` of `now_ns`.
+    pub fn fresh(&self, now_ns: u64, max_age_ns: u64) -> bool {
+        self.last_valid_stamp_ns != 0
+            && now_ns.saturating_sub(self.last_valid_stamp_ns) <= max_age_ns
+    }
+}
+
+/// The arm adapter's ports: joint and gripper commands in, joint and gripper states out.
+pub struct ArmPorts {
+    joint_commands: Sub<JointCommand>,
+    gripper_commands: Sub<GripperCommand>,
+    joint_state: Pub<JointState>,
+    gripper_state: Pub<GripperState>,
+    /// Joint commands.
+    pub joint: Counters,
+    /// Gripper commands.
+    pub gripper: Counters,
+}
+
+impl std::fmt::Debug for ArmPorts {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ArmPorts")
+            .field("joint", &self.joint)
+            .field("gripper", &self.gripper)
+            .finish()
+    }
+}
+
+impl ArmPorts {
+    /// Opens the four services under `bus`'s prefix.
+    pub fn open(bus: &Bus) -> Result<Self, BusError> {
+        let s: &Services = bus.services();
+        Ok(Self {
+            joint_commands: bus.subscriber(&s.joint_command())?,
+            gripper_commands: bus.subscriber(&s.gripper_command())?,
+            joint_state: bus.publisher(&s.joint_state())?,
+            gripper_state: bus.publisher(&s.gripper_state())?,
+            joint: Counters::default(),
+            gripper: Counters::default(),
+        })
+    }
+
+    /// Receives every pending joint command. Each is checked against the position limits
+    /// `lower`..`upper` (and its header) and handed to `f` with the verdict; the hardware must
+    /// act only on valid ones. Returns how many arrived.
+    pub fn drain_joint_commands(
+        &mut self,
+        lower: &[f64; DOF],
+        upper: &[f64; DOF],
+        mut f: impl FnMut(&JointCommand, bool),
+    ) -> usize {
+        let mut n = 0;
+        while let Ok(Some(sample)) = self.joint_commands.receive() {
+            let c = sample.payload();
+            let valid = c.validate(lower, upper).is_ok();
+            self.joint.count(&c.header, valid);
+            f(c, valid);
+            n += 1;
+        }
+        n
+    }
+
+    /// Receives every pending gripper command; valid ones (header, action, an object type
+    /// below `catalog_len`) go to `f` with their action, invalid ones are only counted.
+    /// Returns how many arrived.
+    pub fn drain_gripper_commands(
+        &mut self,
+        catalog_len: usize,
+        mut f: impl FnMut(&GripperCommand, GripperAction),
+    ) -> usize {
+        let mut n = 0;
+        while let Ok(Some(sample)) = self.gripper_commands.receive() {
+            let c = sample.payload();
+            let action = c.validate(catalog_len);
+            self.gripper.count(&c.header, action.is_ok());
+            if let Ok(a) = action {
+                f(c, a);
+            }
+            n += 1;
+        }
+        n
+    }
+
+    /// Publishes the measured joint state (best effort: a full queue drops it).
+    pub fn publish_joint_state(&self, s: JointState) {
+        let _ = self.joint_state.send_copy(s);
+    }
+
+    /// Publishes the gripper state (best effort).
+    pub fn publish_gripper_state(&self, s: GripperState) {
+        let _ = self.gripper_state.send_copy(s);
+    }
+}
+
+/// One heightmap to publish: a row-major grid over the box interior.
+#[derive(Debug, Clone, Copy)]
+pub struct Heightmap<'a> {
+    /// Capture time (CLOCK_MONOTONIC ns).
+    pub stamp_ns: u64,
+    /// Columns (along B x).
+    pub nx: u32,
+    /// Rows (along B y).
+    pub ny: u32,
+    /// Cell side (m).
+    pub cell_m: f32,
+    /// Objects in the box, if the source knows (else 0).
+    pub objects: u32,
+    /// `nx * ny` heights above the inner floor (m).
+    pub cells: &'a [f32],
+}
+
+/// The camera adapter's port: heightmap frames out, written in place in shared memory.
+pub struct CameraPort {
+    heightmap: Pub<HeightmapFrame>,
+}
+
+impl std::fmt::Debug for CameraPort {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CameraPort").finish()
+    }
+}
+
+/// Why a frame was not published.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PublishError {
+    /// The grid does not match its cells or does not fit a frame.
+    BadGrid {
+        /// Columns.
+        nx: u32,
+        /// Rows.
+        ny: u32,
+        /// Cells given.
+        cells: usize,
+    },
+    /// No shared-memory sample could be loaned (subscribers hold them all).
+    Loan(String),
+    /// The transport refused the sample.
+    Send(String),
+}
+
+impl std::fmt::Display for PublishError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::BadGrid { nx, ny, cells } => write!(
+                f,
+                "{cells} cells for a {nx} x {ny} grid (a frame holds at most {HEIGHTMAP_MAX_CELLS})"
+            ),
+            Self::Loan(e) => write!(f, "no sample to loan: {e}"),
+            Self::Send(e) => write!(f, "send failed: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for PublishError {}
+
+impl CameraPort {
+    /// Opens the heightmap service under `bus`'s prefix.
+    pub fn open(bus: &Bus) -> Result<Self, BusError> {
+        Ok(Self {
+            heightmap: bus.publisher(&bus.services().heightmap())?,
+        })
+    }
+
+    /// Publishes `hm` as frame `seq`, stamped with its capture time.
+    pub fn publish(&self, seq: u64, hm: &Heightmap<'_>) -> Result<(), PublishError> {
+        let n = hm.nx as usize * hm.ny as usize;
+        if n == 0 || n != hm.cells.len() || n > HEIGHTMAP_MAX_CELLS {
+            return Err(PublishError::BadGrid {
+                nx: hm.nx,
+                ny: hm.ny,
+                cells: hm.cells.len(),
+            });
+        }
+        let mut s = self
+            .heightmap
+            .loan_uninit()
+            .map_err(|e| PublishError::Loan(format!("{e:?}")))?;
+        let f = zeroed_in_place(s.payload_mut());
+        f.header = Header {
+            seq,
+            stamp_ns: hm.stamp_ns,
+            ..Header::now(seq)
+        };
+        f.nx = hm.nx;
+        f.ny = hm.ny;
+        f.cell_m = hm.cell_m;
+        f.objects = hm.objects;
+        f.data[..n].copy_from_slice(hm.cells);
+        // SAFETY: zeroed_in_place initialised every byte.
+        let s = unsafe { s.assume_init() };
+        s.send()
+            .map(|_| ())
+            .map_err(|e| PublishError::Send(format!("{e:?}")))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counters_count_refusals_and_track_the_newest_valid_stamp() {
+        let mut c = Counters::default();
+        assert!(!c.fresh(1_000, u64::MAX), "nothing received is never fresh");
+        let at = |stamp_ns| Header {
+            stamp_ns,
+            ..Header::now(1)
+        };
+        c.count(&at(500), true);
+        c.count(&at(900), false);
+        c.count(&at(400), true);
+        assert_eq!((c.received, c.rejected, c.last_valid_stamp_ns), (3, 1, 500));
+        assert!(c.fresh(600, 100));
+        assert!(!c.fresh(601, 100));
+    }
+}
