@@ -2,8 +2,8 @@
 //! command-line overrides applied by the binary. [`Config::validate`] checks every value and
 //! names the bad one; nothing is acted on before it passes.
 
-use crate::cell::CellConfig;
-use crate::motion::JointLimits;
+use herb_robot::cell::CellConfig;
+use herb_robot::motion::JointLimits;
 pub use herb_robot::rt::RtConfig;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};

@@ -27,8 +27,6 @@
 //! published, and one outside is replaced by holding the last command (counted).
 
 use crate::config::Config;
-use crate::kinematics::DOF;
-use crate::motion::Setpoint;
 use crate::planner::{MotionPlan, PlannerLink, Request, Response};
 use hdrhistogram::Histogram;
 use herb_ipc::bus::{Bus, JobServer, Pub, Sub};
@@ -37,6 +35,8 @@ use herb_ipc::{
     JointCommand, JointState, MAX_JOB_OBJECTS, NO_OBJECT, PackJobReply, RejectReason, Status,
     StatusEvent, monotonic_ns,
 };
+use herb_robot::kinematics::DOF;
+use herb_robot::motion::Setpoint;
 use herb_robot::rt::{set_timer_slack, sleep_until};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};

@@ -7,9 +7,3 @@
 pub mod config;
 pub mod controller;
 pub mod planner;
-
-pub use herb_decide::{
-    Blbf, CandidatePolicy, DecideError, DecisionInput, OnnxPolicy, Policy, Result, SequenceModel,
-    beam3, candidate, error, load_policy, onnx, policy, sequence,
-};
-pub use herb_robot::{cell, kinematics, motion};

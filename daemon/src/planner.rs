@@ -7,15 +7,15 @@
 //! budget is about), plans the gripper waypoints, solves inverse kinematics and samples
 //! Ruckig trajectories at the loop period; it also computes brakes on request.
 
-use crate::DecideError;
-use crate::cell::{CellConfig, lift_to, plan_waypoints};
 use crate::config::Config;
-use crate::kinematics::{Arm, DOF, IkOptions};
-use crate::motion::{MotionPlanner, Setpoint, Setpoints};
-use crate::sequence::{SequenceModel, beam3};
+use herb_decide::DecideError;
+use herb_decide::sequence::{SequenceModel, beam3};
 use herb_decide::{Decider, HeightmapView};
 use herb_ipc::bus::{Bus, Sub};
 use herb_ipc::{Fault, GripperAction, HeightmapFrame, MAX_JOB_OBJECTS, Services};
+use herb_robot::cell::{CellConfig, lift_to, plan_waypoints};
+use herb_robot::kinematics::{Arm, DOF, IkOptions};
+use herb_robot::motion::{MotionPlanner, Setpoint, Setpoints};
 use herb_sim::{SharedCatalog, TypeIdx};
 use iceoryx2::prelude::ipc;
 use iceoryx2::sample::Sample;

@@ -1,7 +1,7 @@
 //! Contract constants defined on both sides of the IPC boundary agree (issue 14, item 4): the
 //! wire's copies in `herb_ipc` and their sources in the simulation and the robot code.
 
-use herb_daemon::kinematics::{DOF, LEFT_ARM};
+use herb_robot::kinematics::{DOF, LEFT_ARM};
 use herb_sim::heightmap::HEIGHT_RANGE_M;
 use herb_sim::{GridSpec, ObsLayout};
 
