@@ -21,13 +21,16 @@ import numpy as np
 import onnx
 from onnx import TensorProto, helper, numpy_helper
 
+import herb_sim  # the contract's names and shapes (the Rust side's, through the bindings)
+
 OPSET = 17  # tract 0.23 is tested against opsets 9..18
 IR_VERSION = 8
-SHAPE = [1, 2, 224, 224]
+SHAPE = list(herb_sim.MODEL_INPUT_SHAPE)  # [1, 2, 224, 224]
+S = herb_sim.OBS_SIZE
 
 
-def build(name, pool, convs, fcs, seed=0, in_name="obs", in_shape=SHAPE, out_name="action",
-          n_out=3, global_pool=False):
+def build(name, pool, convs, fcs, seed=0, in_name=herb_sim.INPUT_NAME, in_shape=SHAPE,
+          out_name=herb_sim.OUTPUT_NAME, n_out=herb_sim.MODEL_OUTPUT_SHAPE[1], global_pool=False):
     """A NatureCNN-style actor: optional AvgPool(pool), convs [(out_ch, kernel, stride)],
     optional global average pool, flatten, ReLU MLP `fcs`, a linear layer to `n_out`, tanh."""
     rng = np.random.default_rng(seed)
@@ -96,7 +99,7 @@ TINY = dict(pool=8, convs=[(4, 3, 2)], fcs=[], global_pool=True)
 FIXTURES = {
     "tiny_policy": dict(TINY),
     "bad_input_name": dict(TINY, in_name="x"),
-    "bad_input_shape": dict(TINY, in_shape=[1, 1, 224, 224]),
+    "bad_input_shape": dict(TINY, in_shape=[1, 1, S, S]),
     "bad_output_shape": dict(TINY, n_out=2),
 }
 
@@ -107,7 +110,7 @@ def reference_outputs(model):
     ev = ReferenceEvaluator(model)
     zeros = np.zeros(SHAPE, dtype=np.float32)
     ramp = ((np.arange(np.prod(SHAPE)) % 255) / 255.0).astype(np.float32).reshape(SHAPE)
-    return {name: [float(v) for v in ev.run(None, {"obs": obs})[0].ravel()]
+    return {name: [float(v) for v in ev.run(None, {herb_sim.INPUT_NAME: obs})[0].ravel()]
             for name, obs in [("zeros", zeros), ("ramp", ramp)]}
 
 
@@ -136,7 +139,7 @@ def main():
     with open(os.path.join(out, "tiny_policy_expected.json"), "w") as f:
         json.dump({"source": "onnx.reference.ReferenceEvaluator on tiny_policy.onnx",
                    "zeros": expected["zeros"], "ramp": expected["ramp"],
-                   "ramp_definition": "((i mod 255) / 255) for i in 0..2*224*224, row-major"},
+                   "ramp_definition": f"((i mod 255) / 255) for i in 0..{SHAPE[1]}*{S}*{S}, row-major"},
                   f, indent=2)
         f.write("\n")
 

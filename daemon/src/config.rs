@@ -2,6 +2,7 @@
 //! command-line overrides applied by the binary. [`Config::validate`] checks every value and
 //! names the bad one; nothing is acted on before it passes.
 
+use herb_decide::PolicySpec;
 use herb_robot::cell::CellConfig;
 use herb_robot::motion::JointLimits;
 pub use herb_robot::rt::RtConfig;
@@ -70,7 +71,7 @@ impl Default for Timeouts {
 #[serde(deny_unknown_fields, default)]
 pub struct ModelsConfig {
     /// `blbf` (the PackIt SO(2) baseline) or the path of an ONNX policy.
-    pub policy: String,
+    pub policy: PolicySpec,
     /// The sequence model (Beam-3 transition counts).
     pub sequence: PathBuf,
     /// BoxED folder for the object meshes; absent: `HERB_BOXED` or `../shared/boxed`,
@@ -83,7 +84,7 @@ pub struct ModelsConfig {
 impl Default for ModelsConfig {
     fn default() -> Self {
         Self {
-            policy: "blbf".into(),
+            policy: PolicySpec::Blbf,
             sequence: PathBuf::from("models/sequence.json"),
             boxed: None,
             clearance_m: herb_sim::WorldConfig::default().clearance_m as f64,
@@ -190,9 +191,6 @@ impl Config {
                 return Err(format!("timeouts.{name} {v} outside 0.001..=600 s"));
             }
         }
-        if self.models.policy.is_empty() {
-            return Err("models.policy is empty".into());
-        }
         if !(self.models.clearance_m.is_finite() && (0.0..=0.05).contains(&self.models.clearance_m))
         {
             return Err(format!(
@@ -263,5 +261,10 @@ mod tests {
         c = Config::default();
         c.ipc_prefix = "/x".into();
         assert!(c.validate().is_err());
+        let e = Config::from_toml("[models]\npolicy = \"\"\n", "x").unwrap_err();
+        assert!(e.contains("policy: empty"), "{e}");
+        let c = Config::from_toml("[models]\npolicy = \"m/p.onnx\"\n", "x").unwrap();
+        assert_eq!(c.models.policy, PolicySpec::Onnx("m/p.onnx".into()));
+        assert_eq!(c.models.policy.to_string(), "m/p.onnx");
     }
 }

@@ -45,7 +45,7 @@ from train import Actor, load_config, make_env, pool_u8  # noqa: E402
 
 BOX_HALF_X, BOX_HALF_Y = herb_sim.BOX_HALF_X, herb_sim.BOX_HALF_Y  # the sim's frames
 GRID = 28
-SPAN = herb_sim.OBS_CELL_M * 224  # the observation's side (0.35 m)
+SPAN = herb_sim.OBS_CELL_M * herb_sim.OBS_SIZE  # the observation's side (0.35 m)
 CELL = SPAN / GRID  # 12.5 mm
 
 

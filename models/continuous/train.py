@@ -53,7 +53,9 @@ import torch.nn.functional as F
 import herb_sim
 
 NETS = {2: "herbnet112", 4: "herblite56"}
-CONTRACT = dict(input="obs", input_shape=[1, 2, 224, 224], output="action", output_shape=[1, 3])
+CONTRACT = dict(input=herb_sim.INPUT_NAME, input_shape=list(herb_sim.MODEL_INPUT_SHAPE),
+                output=herb_sim.OUTPUT_NAME, output_shape=list(herb_sim.MODEL_OUTPUT_SHAPE))
+C_OBS, S_OBS = herb_sim.OBS_CHANNELS, herb_sim.OBS_SIZE  # [2, 224, 224]
 
 
 def load_config(path):
@@ -101,7 +103,7 @@ def make_env(c, seed, boxed=None, threads=None):
 
 def pooled_shape(pool):
     """Shape of one stored (pooled) observation."""
-    return (2, 224 // pool, 224 // pool)
+    return (C_OBS, S_OBS // pool, S_OBS // pool)
 
 
 def extractor(pool):
@@ -181,8 +183,8 @@ class Critic(nn.Module):
 
 def pool_u8(obs, pool):
     """[N, 2, 224, 224] float in [0, 1] -> [N, 2, 224/pool, 224/pool] uint8."""
-    n, m = obs.shape[0], 224 // pool
-    p = obs.reshape(n, 2, m, pool, m, pool).mean(axis=(3, 5))
+    n, m = obs.shape[0], S_OBS // pool
+    p = obs.reshape(n, C_OBS, m, pool, m, pool).mean(axis=(3, 5))
     return np.rint(p * 255.0).astype(np.uint8)
 
 

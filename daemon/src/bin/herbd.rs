@@ -29,7 +29,7 @@ struct Cli {
     prefix: Option<String>,
     /// Policy: `blbf` or an ONNX file.
     #[arg(long)]
-    policy: Option<String>,
+    policy: Option<herb_decide::PolicySpec>,
     /// Sequence model (Beam-3 transition counts).
     #[arg(long)]
     sequence_model: Option<PathBuf>,

@@ -1,14 +1,13 @@
 //! `herb-sim`: the packing world's command line (evaluation, one-episode packing, catalog).
 
-use clap::{Args, Parser, Subcommand, ValueEnum};
+use clap::builder::{PossibleValuesParser, TypedValueParser};
+use clap::{Args, Parser, Subcommand};
 use herb_sim::boxed::{self, Episode};
 use herb_sim::catalog::Catalog;
-use herb_sim::eval::{self, Method};
+use herb_sim::eval::{self, Method as Replay};
 use herb_sim::hull::fit_canonical;
-use herb_sim::lattice::Lattice;
 use herb_sim::paths::{self, MeshSource};
-use herb_sim::reserve::Reserve;
-use herb_sim::teacher::{GeoLookahead, LatticeRule, Lookahead, run_lattice_episode};
+use herb_sim::teacher::{LatticeRule, run_lattice_episode};
 use herb_sim::{PackingEnv, RewardMode, SharedCatalog, WorldConfig};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -19,7 +18,24 @@ mod evaluate;
 mod plot;
 
 use evaluate::run_policy_episode;
-use herb_decide::{Blbf, Decider, Order, Policy, SequenceModel};
+use herb_decide::{Blbf, Decider, Method, Order, Policy, PolicySpec, SequenceModel};
+
+/// The replays `herb-sim pack` shows.
+const REPLAYS: [Method; 3] = [Method::Human, Method::HumanPose, Method::Random];
+
+/// A clap parser accepting the names of `methods` (listed in `--help` and in errors).
+fn method_parser(
+    methods: &[Method],
+) -> impl clap::builder::TypedValueParser<Value = Method> + use<> {
+    PossibleValuesParser::new(methods.iter().map(|m| m.name()))
+        .map(|s| s.parse::<Method>().expect("a listed name"))
+}
+
+/// A clap parser accepting the names of [`Order::ALL`].
+fn order_parser() -> impl clap::builder::TypedValueParser<Value = Order> {
+    PossibleValuesParser::new(Order::ALL.map(|o| o.name()))
+        .map(|s| s.parse::<Order>().expect("a listed name"))
+}
 
 #[derive(Parser)]
 #[command(
@@ -53,124 +69,6 @@ struct DataArgs {
     quiet: bool,
 }
 
-#[derive(Clone, Copy, ValueEnum)]
-enum MethodArg {
-    Human,
-    HumanPose,
-    Random,
-}
-
-impl From<MethodArg> for Method {
-    fn from(m: MethodArg) -> Self {
-        match m {
-            MethodArg::Human => Method::Human,
-            MethodArg::HumanPose => Method::HumanPose,
-            MethodArg::Random => Method::Random,
-        }
-    }
-}
-
-/// Evaluation methods: the packing world's replays and random actions, and the decision
-/// core's policies.
-#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
-enum EvalMethod {
-    /// Beam-3 order (default) and the ONNX policy given by --policy.
-    Herb,
-    /// The PackIt SO(2) heuristic, largest first (default order).
-    Blbf,
-    /// Human order, the humans' planar placements.
-    Human,
-    /// Human order, the humans' full orientations.
-    HumanPose,
-    /// Human order, uniform random actions.
-    Random,
-    /// The BLBF rule restricted to the placement lattice (largest first by default).
-    LatticeBlbf,
-    /// The lookahead teacher: the best of --lookahead-k lattice candidates by the return of a
-    /// lattice-BLBF rollout to the episode's end (Beam-3 order by default).
-    Lookahead,
-    /// The lattice BLBF rule keeping room for later objects (Beam-3 order by default).
-    LatticeReserve,
-    /// The geometric lookahead teacher: the best of --lookahead-k lattice candidates by a
-    /// physics-free lattice-BLBF rollout (Beam-3 order by default).
-    GeoLookahead,
-}
-
-impl EvalMethod {
-    fn name(&self) -> &'static str {
-        match self {
-            Self::Herb => "herb",
-            Self::Blbf => "blbf",
-            Self::Human => "human",
-            Self::HumanPose => "human-pose",
-            Self::Random => "random",
-            Self::LatticeBlbf => "lattice-blbf",
-            Self::Lookahead => "lookahead",
-            Self::LatticeReserve => "lattice-reserve",
-            Self::GeoLookahead => "geo-lookahead",
-        }
-    }
-
-    /// The object order of this method's rows: `--sequence` if given, else largest first for
-    /// the BLBF rules and Beam-3 for the others; `None` for the replays (human order).
-    fn order(&self, sequence: Option<SequenceArg>) -> Option<Order> {
-        if self.sim_method().is_some() {
-            return None;
-        }
-        Some(match (sequence, self) {
-            (Some(s), _) => s.into(),
-            (None, Self::Blbf | Self::LatticeBlbf) => Order::Largest,
-            (None, _) => Order::Beam3,
-        })
-    }
-
-    /// The lattice rule of a lattice method (`None` for the others).
-    fn rule(&self, catalog: &Catalog, k: usize, reward: RewardMode) -> Option<LatticeRule> {
-        Some(match self {
-            Self::LatticeBlbf => LatticeRule::Blbf(Box::new(Lattice::new(catalog))),
-            Self::Lookahead => LatticeRule::Lookahead(Box::new(Lookahead::new(catalog, k, reward))),
-            Self::LatticeReserve => {
-                LatticeRule::Reserve(Box::new((Lattice::new(catalog), Reserve::new())))
-            }
-            Self::GeoLookahead => LatticeRule::Geo(Box::new(GeoLookahead::new(catalog, k))),
-            Self::Herb | Self::Blbf | Self::Human | Self::HumanPose | Self::Random => return None,
-        })
-    }
-
-    fn sim_method(&self) -> Option<Method> {
-        match self {
-            Self::Human => Some(Method::Human),
-            Self::HumanPose => Some(Method::HumanPose),
-            Self::Random => Some(Method::Random),
-            Self::Herb
-            | Self::Blbf
-            | Self::LatticeBlbf
-            | Self::Lookahead
-            | Self::LatticeReserve
-            | Self::GeoLookahead => None,
-        }
-    }
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum SequenceArg {
-    Beam3,
-    Human,
-    Largest,
-    Random,
-}
-
-impl From<SequenceArg> for Order {
-    fn from(s: SequenceArg) -> Self {
-        match s {
-            SequenceArg::Beam3 => Order::Beam3,
-            SequenceArg::Human => Order::Human,
-            SequenceArg::Largest => Order::Largest,
-            SequenceArg::Random => Order::Random,
-        }
-    }
-}
-
 #[derive(Subcommand)]
 enum Cmd {
     /// Run methods over all BoxED episodes and write the Table I metrics (Markdown, CSV, plots).
@@ -188,12 +86,12 @@ enum Cmd {
 #[derive(Args)]
 struct EvalArgs {
     /// Method (repeat for several rows).
-    #[arg(long, value_enum)]
-    method: Vec<EvalMethod>,
+    #[arg(long, value_parser = method_parser(&Method::ALL))]
+    method: Vec<Method>,
     /// Object order for herb and blbf (defaults: beam3 for herb, largest for blbf); the
     /// replays and random use the human order.
-    #[arg(long, value_enum)]
-    sequence: Option<SequenceArg>,
+    #[arg(long, value_parser = order_parser())]
+    sequence: Option<Order>,
     /// The ONNX placement policy for herb (repeat for one herb row per policy, labelled by
     /// file stem).
     #[arg(long)]
@@ -240,8 +138,8 @@ struct PackArgs {
     #[arg(long, default_value = "p1_s1")]
     session: String,
     /// Placement method.
-    #[arg(long, value_enum, default_value = "human")]
-    method: MethodArg,
+    #[arg(long, default_value = "human", value_parser = method_parser(&REPLAYS))]
+    method: Method,
     /// Seed for the random method.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -397,7 +295,8 @@ fn pack_cmd(data: &DataArgs, a: PackArgs) -> AnyResult<()> {
     let root = need_root(root)?;
     let s = boxed::load_session(&root, &session, &catalog)?;
     let ep = s.episode(&catalog);
-    pack_one(&catalog, &ep, method.into(), seed, &png)
+    let replay = method.replay().expect("the parser accepts replays only");
+    pack_one(&catalog, &ep, replay, seed, &png)
 }
 
 /// `herb-sim eval`: methods over the BoxED episodes, the Table I metrics (Markdown, CSV, plots).
@@ -432,11 +331,11 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
         "method,sequence,episode,objects,packed,success,placements,stable,final_compactness,physics_steps,latency_mean_ms\n",
     );
     // One run per (method, policy): herb once per policy, the others once.
-    let runs: Vec<(EvalMethod, Option<&Path>)> = a
+    let runs: Vec<(Method, Option<&Path>)> = a
         .method
         .iter()
         .flat_map(|&m| match m {
-            EvalMethod::Herb => a.policy.iter().map(|p| (m, Some(p.as_path()))).collect(),
+            Method::Herb => a.policy.iter().map(|p| (m, Some(p.as_path()))).collect(),
             _ => vec![(m, None)],
         })
         .collect();
@@ -450,7 +349,7 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
             ),
             (_, None) => m.name().to_string(),
         };
-        let (label, seq_name, results) = match (m.sim_method(), m.order(a.sequence)) {
+        let (label, seq_name, results) = match (m.replay(), m.order(a.sequence)) {
             (Some(sm), _) => (
                 name.clone(),
                 "human",
@@ -458,7 +357,8 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
             ),
             (None, mode) => {
                 let mode = mode.expect("every method without a replay has an order");
-                let results = match m.rule(&catalog, a.lookahead_k, lookahead_reward) {
+                let results = match m.lattice_rule(&catalog, a.lookahead_k, lookahead_reward, None)
+                {
                     Some(rule) => run_lattice_method(
                         &catalog,
                         &cfg,
@@ -483,7 +383,7 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
                 };
                 // The table names the teacher's k; the CSV keeps the method's name.
                 let shown = match m {
-                    EvalMethod::Lookahead => format!("lookahead (teacher, k = {})", a.lookahead_k),
+                    Method::Lookahead => format!("lookahead (teacher, k = {})", a.lookahead_k),
                     _ => name.clone(),
                 };
                 (format!("{shown} ({})", mode.name()), mode.name(), results)
@@ -506,7 +406,7 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
         csv_text.push_str(&csv_rows(&name, seq_name, &results));
         rows.push(eval::summarize(&label, &results));
         all_results.push((label.clone(), results));
-        if let (Some(ep_name), Some(sm)) = (&a.png_episode, m.sim_method()) {
+        if let (Some(ep_name), Some(sm)) = (&a.png_episode, m.replay()) {
             let ep = episodes
                 .iter()
                 .find(|e| &e.name == ep_name)
@@ -562,13 +462,13 @@ fn check_eval_args(a: &EvalArgs) -> AnyResult<()> {
     if a.method.is_empty() {
         return Err("give at least one --method (see herb-sim eval --help)".into());
     }
-    if a.method.contains(&EvalMethod::Herb) && a.policy.is_empty() {
+    if a.method.contains(&Method::Herb) && a.policy.is_empty() {
         return Err("herb needs --policy <model.onnx> (e.g. models/policy-cs06.onnx)".into());
     }
-    if !a.policy.is_empty() && !a.method.contains(&EvalMethod::Herb) {
+    if !a.policy.is_empty() && !a.method.contains(&Method::Herb) {
         return Err("--policy is used by --method herb only".into());
     }
-    if a.sequence.is_some() && a.method.iter().any(|m| m.sim_method().is_some()) {
+    if a.sequence.is_some() && a.method.iter().any(|m| m.replay().is_some()) {
         return Err(
             "--sequence applies to herb, blbf and the lattice rules only (replays and random use the human order)"
                 .into(),
@@ -623,7 +523,7 @@ fn run_policy_method(
     catalog: &SharedCatalog,
     cfg: &WorldConfig,
     episodes: &[Episode],
-    m: EvalMethod,
+    m: Method,
     mode: Order,
     model: Option<&SequenceModel>,
     policy_path: Option<&Path>,
@@ -631,11 +531,10 @@ fn run_policy_method(
     jobs: usize,
 ) -> AnyResult<Vec<Result<eval::EpisodeResult, String>>> {
     match (m, policy_path) {
-        (EvalMethod::Herb, None) => return Err("herb needs --policy <model.onnx>".into()),
+        (Method::Herb, None) => return Err("herb needs --policy <model.onnx>".into()),
         // Load once up front: a bad model is one clear error, not one per episode.
-        (EvalMethod::Herb, Some(p)) => {
-            let spec = p.to_string_lossy();
-            herb_decide::load_policy(&spec, catalog)?;
+        (Method::Herb, Some(p)) => {
+            herb_decide::load_policy(&PolicySpec::Onnx(p.to_owned()), catalog)?;
             let bytes = std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
             eprintln!("policy {}: {:.2} MB", p.display(), bytes as f64 / 1e6);
         }
@@ -644,9 +543,9 @@ fn run_policy_method(
     let env_catalog = catalog.clone();
     let make = || -> Result<_, String> {
         let policy: Box<dyn Policy> = match (m, policy_path) {
-            (EvalMethod::Blbf, _) => Box::new(Blbf::new()),
-            (EvalMethod::Herb, Some(p)) => {
-                herb_decide::load_policy(&p.to_string_lossy(), env_catalog.as_ref())
+            (Method::Blbf, _) => Box::new(Blbf::new()),
+            (Method::Herb, Some(p)) => {
+                herb_decide::load_policy(&PolicySpec::Onnx(p.to_owned()), env_catalog.as_ref())
                     .map_err(|e| e.to_string())?
             }
             _ => return Err(format!("{} is not a decision-core policy", m.name())),
@@ -698,7 +597,7 @@ fn write_file(p: &Path, text: &str) -> AnyResult<()> {
 fn pack_quiet(
     catalog: &SharedCatalog,
     ep: &Episode,
-    m: Method,
+    m: Replay,
     seed: u64,
     png: &Path,
 ) -> AnyResult<()> {
@@ -711,7 +610,7 @@ fn pack_quiet(
 fn pack_one(
     catalog: &SharedCatalog,
     ep: &Episode,
-    m: Method,
+    m: Replay,
     seed: u64,
     png: &Path,
 ) -> AnyResult<()> {

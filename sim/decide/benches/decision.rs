@@ -126,7 +126,8 @@ fn benches(c: &mut Criterion) {
             .unwrap_or("model")
             .to_owned();
         // Either contract: the observation one (OnnxPolicy) or the candidate one.
-        let p = match herb_decide::load_policy(&f.to_string_lossy(), &catalog) {
+        let p = match herb_decide::load_policy(&herb_decide::PolicySpec::Onnx(f.clone()), &catalog)
+        {
             Ok(p) => p,
             Err(e) => {
                 eprintln!("skipping {}: {e}", f.display());

@@ -95,9 +95,12 @@ impl<P: Policy + ?Sized> std::fmt::Debug for Decider<P> {
 }
 
 impl Decider {
-    /// A decider running the policy named by `spec` (`blbf` or an ONNX path, see
-    /// [`crate::load_policy`]).
-    pub fn load(spec: &str, catalog: SharedCatalog, clearance_m: f32) -> Result<Self> {
+    /// A decider running the policy `spec` names (see [`crate::load_policy`]).
+    pub fn load(
+        spec: &crate::PolicySpec,
+        catalog: SharedCatalog,
+        clearance_m: f32,
+    ) -> Result<Self> {
         let policy = crate::load_policy(spec, &catalog)?;
         Ok(Self::new(policy, catalog, clearance_m))
     }

@@ -11,6 +11,7 @@
 pub mod candidate;
 pub mod decider;
 pub mod error;
+pub mod method;
 pub mod onnx;
 pub mod order;
 pub mod policy;
@@ -19,19 +20,66 @@ pub mod sequence;
 pub use candidate::CandidatePolicy;
 pub use decider::{Decider, Decision, HeightmapView};
 pub use error::{DecideError, Result};
+pub use method::Method;
 pub use onnx::OnnxPolicy;
 pub use order::Order;
 pub use policy::{Blbf, DecisionInput, Policy};
 pub use sequence::{SequenceModel, beam3};
 
-/// The placement policy named by `spec`: `blbf`, or the path of an ONNX model, loaded as a
-/// [`CandidatePolicy`] when its inputs are the candidate contract's and as an [`OnnxPolicy`]
-/// (the observation contract) otherwise; either refuses a model that breaks its contract.
-pub fn load_policy(spec: &str, catalog: &herb_sim::Catalog) -> Result<Box<dyn Policy>> {
-    if spec == "blbf" {
-        return Ok(Box::new(Blbf::new()));
+/// Which placement policy to run: the BLBF heuristic or an ONNX network. Written as `blbf` or
+/// the model's path (in herbd's configuration, on command lines).
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub enum PolicySpec {
+    /// The PackIt SO(2) heuristic ([`Blbf`]).
+    Blbf,
+    /// An ONNX network of either contract, by path.
+    Onnx(std::path::PathBuf),
+}
+
+impl std::str::FromStr for PolicySpec {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "" => Err("policy: empty (give blbf or the path of an ONNX model)".into()),
+            "blbf" => Ok(Self::Blbf),
+            path => Ok(Self::Onnx(path.into())),
+        }
     }
-    let path = std::path::Path::new(spec);
+}
+
+impl TryFrom<String> for PolicySpec {
+    type Error = String;
+
+    fn try_from(s: String) -> std::result::Result<Self, String> {
+        s.parse()
+    }
+}
+
+impl From<PolicySpec> for String {
+    fn from(p: PolicySpec) -> String {
+        p.to_string()
+    }
+}
+
+impl std::fmt::Display for PolicySpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Blbf => f.write_str("blbf"),
+            Self::Onnx(p) => write!(f, "{}", p.display()),
+        }
+    }
+}
+
+/// The placement policy `spec` names. An ONNX model is loaded as a [`CandidatePolicy`] when its
+/// inputs are the candidate contract's and as an [`OnnxPolicy`] (the observation contract)
+/// otherwise; either refuses a model that breaks its contract.
+pub fn load_policy(spec: &PolicySpec, catalog: &herb_sim::Catalog) -> Result<Box<dyn Policy>> {
+    let path = match spec {
+        PolicySpec::Blbf => return Ok(Box::new(Blbf::new())),
+        PolicySpec::Onnx(p) => p.as_path(),
+    };
     let bytes = std::fs::read(path).map_err(|source| DecideError::Io {
         path: path.to_owned(),
         source,

@@ -9,7 +9,7 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
 /// How the objects of an episode are ordered.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Order {
     /// Beam-3 over the human transition model.
     Beam3,
@@ -22,7 +22,10 @@ pub enum Order {
 }
 
 impl Order {
-    /// Name used on the command line and in tables.
+    /// Every order.
+    pub const ALL: [Order; 4] = [Self::Beam3, Self::Human, Self::Largest, Self::Random];
+
+    /// Name used on the command line, in the bindings and in tables.
     pub fn name(&self) -> &'static str {
         match self {
             Self::Beam3 => "beam3",
@@ -69,5 +72,25 @@ impl Order {
                 Ok(v)
             }
         }
+    }
+}
+
+impl std::fmt::Display for Order {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Order {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|o| o.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<_> = Self::ALL.iter().map(|o| o.name()).collect();
+                format!("order {s:?}: expected one of {}", names.join(", "))
+            })
     }
 }

@@ -6,7 +6,7 @@
 mod common;
 
 use common::decide;
-use herb_decide::{CandidatePolicy, DecideError, load_policy};
+use herb_decide::{CandidatePolicy, DecideError, PolicySpec, load_policy};
 use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y, SUCCESS_TOP_Z};
 use herb_sim::observation::action_to_placement;
 use herb_sim::paths::MeshSource;
@@ -67,7 +67,7 @@ fn decisions_are_candidates_inside_the_walls() {
 fn a_full_box_is_no_feasible_placement_not_a_nan_or_a_wall() {
     let c = catalog();
     let mut p = load_policy(
-        &fixtures().join("candidates-smoke.onnx").to_string_lossy(),
+        &PolicySpec::Onnx(fixtures().join("candidates-smoke.onnx")),
         &c,
     )
     .unwrap();
@@ -88,10 +88,10 @@ fn models_of_the_other_contract_or_corrupt_files_are_refused_by_name() {
         "{e}"
     );
     // ... while the factory loads each contract as its own policy.
-    let p = load_policy(&fixtures().join("tiny_policy.onnx").to_string_lossy(), &c).unwrap();
+    let p = load_policy(&PolicySpec::Onnx(fixtures().join("tiny_policy.onnx")), &c).unwrap();
     assert_eq!(p.name(), "onnx");
     let p = load_policy(
-        &fixtures().join("candidates-smoke.onnx").to_string_lossy(),
+        &PolicySpec::Onnx(fixtures().join("candidates-smoke.onnx")),
         &c,
     )
     .unwrap();
@@ -100,7 +100,7 @@ fn models_of_the_other_contract_or_corrupt_files_are_refused_by_name() {
     let bytes = std::fs::read(fixtures().join("candidates-smoke.onnx")).unwrap();
     let path = std::env::temp_dir().join(format!("herb-trunc-{}.onnx", std::process::id()));
     std::fs::write(&path, &bytes[..bytes.len() / 3]).unwrap();
-    let e = match load_policy(&path.to_string_lossy(), &c) {
+    let e = match load_policy(&PolicySpec::Onnx(path.clone()), &c) {
         Err(e) => e,
         Ok(_) => panic!("a truncated model loaded"),
     };

@@ -16,12 +16,11 @@
 //! The Gymnasium classes are in the Python package (`herb_sim/__init__.py`).
 
 use herb_decide::sequence::{SequenceModel, beam3};
-use herb_decide::{Blbf, Decider};
+use herb_decide::{Blbf, Decider, Method, Order};
 use herb_sim::features::{self, CANDIDATE_LEN, CONTEXT_LEN, DecisionFeatures};
 use herb_sim::lattice::{Lattice, MAX_CANDIDATES, Placement};
 use herb_sim::paths::{self, MeshSource};
-use herb_sim::reserve::Reserve;
-use herb_sim::teacher::{GeoLookahead, LatticeRule, Lookahead};
+use herb_sim::teacher::{LatticeRule, Lookahead};
 use herb_sim::{Catalog, ObsLayout, PackingEnv, RewardMode, SharedCatalog, TypeIdx, WorldConfig};
 use numpy::ndarray::{Array1, Array2, Array3, Array4};
 use numpy::{
@@ -40,13 +39,6 @@ use std::sync::Arc;
 
 fn value_err(e: impl std::fmt::Display) -> PyErr {
     PyValueError::new_err(e.to_string())
-}
-
-/// How episodes are ordered.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Order {
-    Beam3,
-    Random,
 }
 
 /// Samples training episodes.
@@ -262,12 +254,12 @@ impl VecEnv {
             )));
         }
         let reward = RewardMode::parse(reward).map_err(value_err)?;
-        let order = match sequence {
-            "beam3" => Order::Beam3,
-            "random" => Order::Random,
-            s => {
+        // Sampled episodes have no human order to keep and no reason to go largest first.
+        let order = match sequence.parse::<Order>() {
+            Ok(o @ (Order::Beam3 | Order::Random)) => o,
+            _ => {
                 return Err(value_err(format!(
-                    "sequence {s:?}: expected beam3 or random"
+                    "sequence {sequence:?}: expected beam3 or random"
                 )));
             }
         };
@@ -289,7 +281,7 @@ impl VecEnv {
                     SequenceModel::load(&p, &catalog).map_err(value_err)?,
                 ))
             }
-            Order::Random => None,
+            _ => None,
         };
         let sampler = Sampler {
             catalog_len: catalog.len() as u16,
@@ -692,18 +684,14 @@ impl VecEnv {
             return Err(value_err("horizon 0: need at least 1 object"));
         }
         let horizon = horizon.unwrap_or(usize::MAX);
-        if ![
-            "lattice-blbf",
-            "lookahead",
-            "lattice-reserve",
-            "geo-lookahead",
-        ]
-        .contains(&rule)
-        {
-            return Err(value_err(format!(
-                "rule {rule:?}: expected lattice-blbf, lookahead, lattice-reserve or geo-lookahead"
-            )));
-        }
+        let method = match rule.parse::<Method>() {
+            Ok(m) if m.is_lattice_rule() => m,
+            _ => {
+                return Err(value_err(format!(
+                    "rule {rule:?}: expected lattice-blbf, lookahead, lattice-reserve or geo-lookahead"
+                )));
+            }
+        };
         let n = self.slots.len();
         let active: Vec<bool> = match active {
             Some(a) => a.as_array().iter().copied().collect(),
@@ -728,30 +716,18 @@ impl VecEnv {
                         if !on {
                             return Ok(Out::default());
                         }
-                        let fits = match &s.rule {
-                            Some(LatticeRule::Blbf(_)) => rule == "lattice-blbf",
-                            Some(LatticeRule::Lookahead(t)) => {
-                                rule == "lookahead" && t.k() == k && t.horizon() == horizon
+                        let fits = match (&s.rule, method) {
+                            (Some(LatticeRule::Blbf(_)), Method::LatticeBlbf) => true,
+                            (Some(LatticeRule::Lookahead(t)), Method::Lookahead) => {
+                                t.k() == k && t.horizon() == horizon
                             }
-                            Some(LatticeRule::Reserve(_)) => rule == "lattice-reserve",
-                            Some(LatticeRule::Geo(t)) => rule == "geo-lookahead" && t.k() == k,
-                            None => false,
+                            (Some(LatticeRule::Reserve(_)), Method::LatticeReserve) => true,
+                            (Some(LatticeRule::Geo(t)), Method::GeoLookahead) => t.k() == k,
+                            _ => false,
                         };
                         if !fits {
-                            s.rule = Some(if rule == "lookahead" {
-                                LatticeRule::Lookahead(Box::new(
-                                    Lookahead::new(&catalog, k, s.env.reward_mode())
-                                        .with_horizon(horizon),
-                                ))
-                            } else if rule == "geo-lookahead" {
-                                LatticeRule::Geo(Box::new(GeoLookahead::new(&catalog, k)))
-                            } else if rule == "lattice-reserve" {
-                                let l = Lattice::new(&catalog);
-                                let r = Reserve::new();
-                                LatticeRule::Reserve(Box::new((l, r)))
-                            } else {
-                                LatticeRule::Blbf(Box::new(Lattice::new(&catalog)))
-                            });
+                            let reward = s.env.reward_mode();
+                            s.rule = method.lattice_rule(&catalog, k, reward, Some(horizon));
                         }
                         let r = s.rule.as_mut().expect("set above");
                         let p = r.decide(&s.env).map_err(|e| e.to_string())?;
@@ -909,6 +885,11 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(half_turn_candidates, m)?)?;
     m.add_function(wrap_pyfunction!(half_turn_context, m)?)?;
     m.add("OBS_LEN", ObsLayout::LEN)?;
+    m.add("MODEL_INPUT_SHAPE", ObsLayout::INPUT_SHAPE.to_vec())?;
+    m.add("OBS_SIZE", ObsLayout::SIZE)?;
+    m.add("OBS_CHANNELS", ObsLayout::CHANNELS)?;
+    m.add("HEIGHT_SCALE_M", ObsLayout::HEIGHT_SCALE_M)?;
+    m.add("MODEL_OUTPUT_SHAPE", ObsLayout::OUTPUT_SHAPE.to_vec())?;
     m.add("INPUT_NAME", ObsLayout::INPUT_NAME)?;
     m.add("OUTPUT_NAME", ObsLayout::OUTPUT_NAME)?;
     m.add("OBS_CELL_M", ObsLayout::CELL_M)?;

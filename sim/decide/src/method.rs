@@ -1,0 +1,143 @@
+//! The ways Table I places objects, named once for the CLI, the bindings and the tables.
+
+use crate::order::Order;
+use herb_sim::RewardMode;
+use herb_sim::catalog::Catalog;
+use herb_sim::eval::Method as Replay;
+use herb_sim::lattice::Lattice;
+use herb_sim::reserve::Reserve;
+use herb_sim::teacher::{GeoLookahead, LatticeRule, Lookahead};
+
+/// A placement method: a decision-core policy, a replay of the humans, random actions, or one
+/// of the lattice rules (the teachers and their baselines).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Method {
+    /// HERB: Beam-3 order (default) and an ONNX placement policy.
+    Herb,
+    /// The PackIt SO(2) heuristic, largest first (default order).
+    Blbf,
+    /// Human order, the humans' planar placements.
+    Human,
+    /// Human order, the humans' full orientations.
+    HumanPose,
+    /// Human order, uniform random actions.
+    Random,
+    /// The BLBF rule restricted to the placement lattice (largest first by default).
+    LatticeBlbf,
+    /// The lookahead teacher: the best of k lattice candidates by the return of a lattice-BLBF
+    /// rollout to the episode's end (Beam-3 order by default).
+    Lookahead,
+    /// The lattice BLBF rule keeping room for later objects (Beam-3 order by default).
+    LatticeReserve,
+    /// The geometric lookahead teacher: the best of k lattice candidates by a physics-free
+    /// lattice-BLBF rollout (Beam-3 order by default).
+    GeoLookahead,
+}
+
+impl Method {
+    /// Every method, in the order of the tables.
+    pub const ALL: [Method; 9] = [
+        Self::Herb,
+        Self::Blbf,
+        Self::Human,
+        Self::HumanPose,
+        Self::Random,
+        Self::LatticeBlbf,
+        Self::Lookahead,
+        Self::LatticeReserve,
+        Self::GeoLookahead,
+    ];
+
+    /// Name on the command line, in the bindings and in the tables.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Herb => "herb",
+            Self::Blbf => "blbf",
+            Self::Human => "human",
+            Self::HumanPose => "human-pose",
+            Self::Random => "random",
+            Self::LatticeBlbf => "lattice-blbf",
+            Self::Lookahead => "lookahead",
+            Self::LatticeReserve => "lattice-reserve",
+            Self::GeoLookahead => "geo-lookahead",
+        }
+    }
+
+    /// The packing world's replay this method is (`None` for the deciding methods).
+    pub fn replay(&self) -> Option<Replay> {
+        match self {
+            Self::Human => Some(Replay::Human),
+            Self::HumanPose => Some(Replay::HumanPose),
+            Self::Random => Some(Replay::Random),
+            _ => None,
+        }
+    }
+
+    /// The object order of this method's rows: `chosen` if given, else largest first for the
+    /// BLBF rules and Beam-3 for the others; `None` for the replays (human order).
+    pub fn order(&self, chosen: Option<Order>) -> Option<Order> {
+        if self.replay().is_some() {
+            return None;
+        }
+        Some(match (chosen, self) {
+            (Some(o), _) => o,
+            (None, Self::Blbf | Self::LatticeBlbf) => Order::Largest,
+            (None, _) => Order::Beam3,
+        })
+    }
+
+    /// True for the lattice rules ([`Self::lattice_rule`]).
+    pub fn is_lattice_rule(&self) -> bool {
+        matches!(
+            self,
+            Self::LatticeBlbf | Self::Lookahead | Self::LatticeReserve | Self::GeoLookahead
+        )
+    }
+
+    /// A fresh lattice rule for a lattice method (`None` for the others): the teachers weigh
+    /// `k` candidates, the lookahead teacher by `reward` over `horizon` objects (all when
+    /// `None`).
+    pub fn lattice_rule(
+        &self,
+        catalog: &Catalog,
+        k: usize,
+        reward: RewardMode,
+        horizon: Option<usize>,
+    ) -> Option<LatticeRule> {
+        Some(match self {
+            Self::LatticeBlbf => LatticeRule::Blbf(Box::new(Lattice::new(catalog))),
+            Self::Lookahead => {
+                let t = Lookahead::new(catalog, k, reward);
+                LatticeRule::Lookahead(Box::new(match horizon {
+                    Some(h) => t.with_horizon(h),
+                    None => t,
+                }))
+            }
+            Self::LatticeReserve => {
+                LatticeRule::Reserve(Box::new((Lattice::new(catalog), Reserve::new())))
+            }
+            Self::GeoLookahead => LatticeRule::Geo(Box::new(GeoLookahead::new(catalog, k))),
+            _ => return None,
+        })
+    }
+}
+
+impl std::fmt::Display for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Method {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<_> = Self::ALL.iter().map(|m| m.name()).collect();
+                format!("method {s:?}: expected one of {}", names.join(", "))
+            })
+    }
+}

@@ -1,0 +1,48 @@
+//! The names of methods, orders and policies: one spelling each, parsed back to the same value,
+//! and unknown names refused with the list of known ones.
+
+use herb_decide::{Method, Order, PolicySpec};
+
+#[test]
+fn every_method_and_order_parses_back_from_its_name() {
+    for m in Method::ALL {
+        assert_eq!(m.name().parse::<Method>(), Ok(m));
+        assert_eq!(m.to_string(), m.name());
+    }
+    for o in Order::ALL {
+        assert_eq!(o.name().parse::<Order>(), Ok(o));
+    }
+    let e = "blfb".parse::<Method>().unwrap_err();
+    assert!(e.contains("blfb") && e.contains("lattice-reserve"), "{e}");
+    let e = "biggest".parse::<Order>().unwrap_err();
+    assert!(e.contains("largest"), "{e}");
+}
+
+#[test]
+fn replays_keep_the_human_order_and_the_others_default_as_documented() {
+    for m in Method::ALL {
+        let expected = match m {
+            Method::Human | Method::HumanPose | Method::Random => None,
+            Method::Blbf | Method::LatticeBlbf => Some(Order::Largest),
+            _ => Some(Order::Beam3),
+        };
+        assert_eq!(m.order(None), expected, "{m}");
+        assert_eq!(m.replay().is_some(), expected.is_none(), "{m}");
+        if expected.is_some() {
+            assert_eq!(m.order(Some(Order::Random)), Some(Order::Random));
+        }
+    }
+}
+
+#[test]
+fn policies_are_blbf_or_a_model_path() {
+    assert_eq!("blbf".parse(), Ok(PolicySpec::Blbf));
+    assert_eq!(
+        "models/policy-cs06.onnx".parse(),
+        Ok(PolicySpec::Onnx("models/policy-cs06.onnx".into()))
+    );
+    assert!("".parse::<PolicySpec>().unwrap_err().contains("empty"));
+    for s in ["blbf", "a/b.onnx"] {
+        assert_eq!(s.parse::<PolicySpec>().unwrap().to_string(), s);
+    }
+}
