@@ -4,10 +4,11 @@
 
 use herb_decide::PolicySpec;
 use herb_robot::cell::CellConfig;
+pub use herb_robot::config_file::ConfigFile;
 use herb_robot::motion::JointLimits;
 pub use herb_robot::rt::RtConfig;
 use serde::{Deserialize, Serialize};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// The control loop.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -128,27 +129,14 @@ impl Default for Config {
 }
 
 impl Config {
-    /// Parses TOML text (`origin` names it in errors) and validates it.
-    pub fn from_toml(text: &str, origin: &str) -> Result<Self, String> {
-        let c: Self = toml::from_str(text).map_err(|e| format!("{origin}: {e}"))?;
-        c.validate().map_err(|e| format!("{origin}: {e}"))?;
-        Ok(c)
-    }
-
-    /// Reads and validates a TOML file.
-    pub fn load(path: &Path) -> Result<Self, String> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| format!("cannot read config {}: {e}", path.display()))?;
-        Self::from_toml(&text, &path.display().to_string())
-    }
-
     /// Loop period (s).
     pub fn period_s(&self) -> f64 {
         1.0 / self.loop_.rate_hz
     }
+}
 
-    /// Checks every value; the error names the first bad one.
-    pub fn validate(&self) -> Result<(), String> {
+impl ConfigFile for Config {
+    fn validate(&self) -> Result<(), String> {
         herb_ipc::Services::new(&self.ipc_prefix).map_err(|e| e.to_string())?;
         let l = &self.loop_;
         if !(l.rate_hz.is_finite() && (10.0..=10_000.0).contains(&l.rate_hz)) {
@@ -208,6 +196,7 @@ impl Config {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::path::Path;
 
     #[test]
     fn the_shipped_example_is_the_defaults() {

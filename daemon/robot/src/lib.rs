@@ -6,6 +6,7 @@
 #![warn(missing_docs)]
 
 pub mod cell;
+pub mod config_file;
 pub mod kinematics;
 pub mod motion;
 pub mod rt;

@@ -2,7 +2,7 @@
 //! `herb_daemon::config` for the configuration.
 
 use clap::Parser;
-use herb_daemon::config::Config;
+use herb_daemon::config::{Config, ConfigFile};
 use herb_daemon::controller::{Controller, LoopStats, Ports, Shared};
 use herb_daemon::planner;
 use herb_ipc::bus::Bus;

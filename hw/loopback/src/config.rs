@@ -5,9 +5,10 @@
 //! unknown keys are errors, as in herbd.
 
 use herb_robot::cell::CellConfig;
+pub use herb_robot::config_file::ConfigFile;
 use herb_robot::motion::JointLimits;
 use serde::Deserialize;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// The loopback's view of herbd's configuration.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -43,23 +44,9 @@ impl Default for LoopbackConfig {
     }
 }
 
-impl LoopbackConfig {
-    /// Parses and validates TOML text; errors name `origin` and the bad value.
-    pub fn from_toml(text: &str, origin: &str) -> Result<Self, String> {
-        let c: Self = toml::from_str(text).map_err(|e| format!("{origin}: {e}"))?;
-        c.validate().map_err(|e| format!("{origin}: {e}"))?;
-        Ok(c)
-    }
-
-    /// Reads and validates a file.
-    pub fn load(path: &Path) -> Result<Self, String> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| format!("cannot read config {}: {e}", path.display()))?;
-        Self::from_toml(&text, &path.display().to_string())
-    }
-
-    /// Checks the prefix, the cell and the limits (herbd's checks of the same tables).
-    pub fn validate(&self) -> Result<(), String> {
+/// Checks the prefix, the cell and the limits (herbd's checks of the same tables).
+impl ConfigFile for LoopbackConfig {
+    fn validate(&self) -> Result<(), String> {
         herb_ipc::Services::new(&self.ipc_prefix).map_err(|e| e.to_string())?;
         self.cell.validate()?;
         self.limits

@@ -25,7 +25,7 @@ use herb_ipc::{
     GripperAction, GripperCommand, GripperState, Header, JointCommand, JointState, NO_OBJECT,
     Services, SimOutcome, monotonic_ns,
 };
-use herb_loopback::config::LoopbackConfig;
+use herb_loopback::config::{ConfigFile, LoopbackConfig};
 use herb_robot::cell::CellConfig;
 use herb_robot::kinematics::{Arm, DOF, LEFT_TOP_DOWN_NOMINAL};
 use herb_robot::rt::{set_timer_slack, sleep_until};

@@ -3,7 +3,7 @@
 //! tables.
 
 use herb_daemon::config::Config;
-use herb_loopback::config::LoopbackConfig;
+use herb_loopback::config::{ConfigFile, LoopbackConfig};
 use std::path::Path;
 
 #[test]

@@ -132,12 +132,6 @@ impl std::str::FromStr for Method {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, String> {
-        Self::ALL
-            .into_iter()
-            .find(|m| m.name() == s)
-            .ok_or_else(|| {
-                let names: Vec<_> = Self::ALL.iter().map(|m| m.name()).collect();
-                format!("method {s:?}: expected one of {}", names.join(", "))
-            })
+        crate::order::parse_name("method", s, &Self::ALL, Self::name)
     }
 }

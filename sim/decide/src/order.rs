@@ -85,12 +85,19 @@ impl std::str::FromStr for Order {
     type Err = String;
 
     fn from_str(s: &str) -> std::result::Result<Self, String> {
-        Self::ALL
-            .into_iter()
-            .find(|o| o.name() == s)
-            .ok_or_else(|| {
-                let names: Vec<_> = Self::ALL.iter().map(|o| o.name()).collect();
-                format!("order {s:?}: expected one of {}", names.join(", "))
-            })
+        parse_name("order", s, &Self::ALL, Self::name)
     }
+}
+
+/// The member of `all` whose `name` is `s`; else an error naming `what` and listing the names.
+pub(crate) fn parse_name<T: Copy>(
+    what: &str,
+    s: &str,
+    all: &[T],
+    name: fn(&T) -> &'static str,
+) -> std::result::Result<T, String> {
+    all.iter().copied().find(|t| name(t) == s).ok_or_else(|| {
+        let names: Vec<_> = all.iter().map(name).collect();
+        format!("{what} {s:?}: expected one of {}", names.join(", "))
+    })
 }
