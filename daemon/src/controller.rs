@@ -921,7 +921,7 @@ impl Controller {
             decision_ns,
             cycles: self.cycles,
             deadline_misses: self.misses,
-            rejected_inputs: self.rejected,
+            rejected_inputs: self.rejected + self.planner.rejected_frames(),
             max_cycle_ns: self.max_cycle,
         });
     }

@@ -20,7 +20,7 @@ use herb_sim::{SharedCatalog, TypeIdx};
 use iceoryx2::prelude::ipc;
 use iceoryx2::sample::Sample;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -168,6 +168,7 @@ pub struct PlannerLink {
     /// Its responses.
     pub rx: rtrb::Consumer<Response>,
     thread: std::thread::Thread,
+    rejected_frames: Arc<AtomicU64>,
 }
 
 impl PlannerLink {
@@ -182,6 +183,12 @@ impl PlannerLink {
             Err(rtrb::PushError::Full(r)) => Err(r),
         }
     }
+
+    /// Heightmap frames the planner dropped as invalid (a cell not finite or out of range, or
+    /// a bad header or grid): never decided on, counted with the loop's rejected inputs.
+    pub fn rejected_frames(&self) -> u64 {
+        self.rejected_frames.load(Ordering::Relaxed)
+    }
 }
 
 struct Worker {
@@ -194,20 +201,25 @@ struct Worker {
     motion: MotionPlanner,
     hm_sub: Sub<HeightmapFrame>,
     latest: Option<Sample<ipc::Service, HeightmapFrame, ()>>,
+    /// Frames dropped as invalid (shared with the loop's statistics).
+    rejected_frames: Arc<AtomicU64>,
     /// The current job's order (from the last `Order` request).
     job_order: Vec<TypeIdx>,
     _bus: Bus,
 }
 
 impl Worker {
-    /// Keeps the newest valid frame in `latest`, waiting up to `wait` for one stamped after
+    /// Keeps the newest valid frame in `latest` (every cell checked: a bad frame is dropped and
+    /// counted, the previous good one stays), waiting up to `wait` for one stamped after
     /// `after`; true when it has one.
     fn refresh_frame(&mut self, after: u64, wait: Duration) -> bool {
         let t0 = Instant::now();
         loop {
             while let Ok(Some(s)) = self.hm_sub.receive() {
-                if s.payload().validate_meta().is_ok() {
+                if s.payload().validate().is_ok() {
                     self.latest = Some(s);
+                } else {
+                    self.rejected_frames.fetch_add(1, Ordering::Relaxed);
                 }
             }
             let fresh = self
@@ -375,6 +387,8 @@ pub fn spawn(
     let (resp_tx, rx) = rtrb::RingBuffer::<Response>::new(8);
     let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
     let cfg = cfg.clone();
+    let shared_rejects = Arc::new(AtomicU64::new(0));
+    let rejected_frames = shared_rejects.clone();
     let handle = std::thread::Builder::new()
         .name("herbd-planner".into())
         .spawn(move || {
@@ -403,6 +417,7 @@ pub fn spawn(
                     motion: MotionPlanner::new(limits, cfg.period_s()),
                     hm_sub,
                     latest: None,
+                    rejected_frames: rejected_frames.clone(),
                     job_order: Vec::with_capacity(MAX_JOB_OBJECTS),
                     _bus: bus,
                 })
@@ -431,7 +446,15 @@ pub fn spawn(
         .map_err(|e| format!("cannot start the planner thread: {e}"))?;
     let thread = handle.thread().clone();
     match ready_rx.recv() {
-        Ok(Ok(())) => Ok((PlannerLink { tx, rx, thread }, handle)),
+        Ok(Ok(())) => Ok((
+            PlannerLink {
+                tx,
+                rx,
+                thread,
+                rejected_frames: shared_rejects,
+            },
+            handle,
+        )),
         Ok(Err(e)) => Err(e),
         Err(_) => Err("the planner thread died while starting".into()),
     }

@@ -535,7 +535,8 @@ pub struct Status {
     pub cycles: u64,
     /// Deadlines missed by the loop (cycles that overran and were skipped).
     pub deadline_misses: u64,
-    /// Invalid payloads received and dropped.
+    /// Invalid payloads received and dropped (by the loop, and heightmap frames with a bad cell
+    /// dropped by the planner before any decision).
     pub rejected_inputs: u64,
     /// Worst cycle time since start (ns).
     pub max_cycle_ns: u64,

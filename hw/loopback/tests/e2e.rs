@@ -488,6 +488,83 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
     assert_eq!(counted, want, "rejections counted");
 }
 
+/// Heightmap frames with a valid header and grid but a NaN cell, injected by a second publisher
+/// every 20 ms between the camera's frames, are dropped and counted; herbd decides on the
+/// camera's good frames and the job completes (issue 18, item 3: they used to fail the job with
+/// a `Decision` fault, uncounted).
+#[test]
+fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
+    use herb_adapter::{CameraPort, Heightmap};
+    use herb_ipc::{Services, Status, StatusEvent, monotonic_ns};
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let (dir, prefix, cfg) = setup("nanframe");
+    let cfg_s = cfg.to_str().unwrap();
+    let _lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s],
+        &dir.join("loopback.log"),
+    );
+    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let services = Services::new(&prefix).unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let injector = {
+        let (services, stop) = (services.clone(), stop.clone());
+        std::thread::spawn(move || {
+            let bus = herb_ipc::bus::Bus::open("e2e-injector", &services).unwrap();
+            let camera = CameraPort::open(&bus).unwrap();
+            let spec = herb_sim::GridSpec::for_box(herb_sim::ObsLayout::CELL_M).unwrap();
+            let mut cells = vec![0.0f32; spec.len()];
+            cells[spec.len() / 2] = f32::NAN;
+            let mut sent = 0u64;
+            while !stop.load(Ordering::Relaxed) {
+                let frame = Heightmap {
+                    stamp_ns: monotonic_ns(),
+                    nx: spec.nx as u32,
+                    ny: spec.ny as u32,
+                    cell_m: spec.cell,
+                    objects: 0,
+                    cells: &cells,
+                };
+                if camera.publish(sent + 1, &frame).is_ok() {
+                    sent += 1;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            sent
+        })
+    };
+    let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
+    let status = bus.subscriber::<Status>(&services.status()).unwrap();
+    let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, true);
+    let ctl_out = Follow::new(&mut ctl);
+    let st = ctl.wait_for(Duration::from_secs(150));
+    stop.store(true, Ordering::Relaxed);
+    let sent = injector.join().unwrap();
+    let mut summary = None;
+    while let Ok(l) = ctl_out.rx.recv_timeout(Duration::from_millis(200)) {
+        if let Ok(j) = serde_json::from_str::<serde_json::Value>(&l) {
+            summary = Some(j);
+        }
+    }
+    let summary = summary.expect("JSON summary");
+    assert!(st.success(), "the job completes: {summary}");
+    assert_eq!(summary["placed"], 2, "{summary}");
+    assert_eq!(summary["faults"], serde_json::json!([]), "no fault: {summary}");
+    assert!(sent > 10, "the injector sent {sent} frames");
+    let mut counted = 0;
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_secs(5) && counted == 0 {
+        while let Ok(Some(s)) = status.receive() {
+            if s.payload().event == StatusEvent::Heartbeat as u32 {
+                counted = s.payload().rejected_inputs;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(counted > 0, "bad frames counted in rejected_inputs");
+}
+
 #[test]
 fn sigterm_mid_motion_brakes_reports_and_exits_zero() {
     let (dir, prefix, cfg) = setup("sigterm");
