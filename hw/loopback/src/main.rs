@@ -282,9 +282,9 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         }
     );
     let period = (1e9 / cli.rate_hz) as u64;
-    let dt = 1.0 / cli.rate_hz;
     set_timer_slack();
     let mut next = monotonic_ns() + period;
+    let mut last_cycle = monotonic_ns();
     let mut seq = 0u64;
     let mut latest: Option<Released> = None;
     let mut last_frame = 0u64;
@@ -293,6 +293,11 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         sleep_until(next, 0);
         next += period;
         let now = monotonic_ns();
+        // The real time since the last cycle (a late or stalled cycle is longer than the
+        // period): tracking and the reported speed use it, so a late cycle reports the arm's
+        // speed, not the distance covered divided by the nominal period.
+        let dt = (now.saturating_sub(last_cycle) as f64 * 1e-9).max(1e-6);
+        last_cycle = now;
         if now > next {
             next = now + period;
         }

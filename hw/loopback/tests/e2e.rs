@@ -550,7 +550,11 @@ fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
     let summary = summary.expect("JSON summary");
     assert!(st.success(), "the job completes: {summary}");
     assert_eq!(summary["placed"], 2, "{summary}");
-    assert_eq!(summary["faults"], serde_json::json!([]), "no fault: {summary}");
+    assert_eq!(
+        summary["faults"],
+        serde_json::json!([]),
+        "no fault: {summary}"
+    );
     assert!(sent > 10, "the injector sent {sent} frames");
     let mut counted = 0;
     let t0 = Instant::now();
@@ -563,6 +567,58 @@ fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
         std::thread::sleep(Duration::from_millis(20));
     }
     assert!(counted > 0, "bad frames counted in rejected_inputs");
+}
+
+/// The loopback stalled mid-motion (SIGSTOP for 50 ms, six times; herbd's joint-state timeout
+/// is 100 ms): its next joint state reports the speed over the real elapsed time, so herbd
+/// rejects none of its own adapter's states (issue 18, item 5: the speed was the distance over
+/// a nominal 1 ms, above the 20 rad/s the wire allows).
+#[test]
+fn a_stalled_loopback_reports_real_speeds_and_nothing_is_rejected() {
+    use herb_ipc::{Services, Status, StatusEvent};
+    let (dir, prefix, cfg) = setup("stall");
+    let cfg_s = cfg.to_str().unwrap();
+    let lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s],
+        &dir.join("loopback.log"),
+    );
+    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let services = Services::new(&prefix).unwrap();
+    let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
+    let status = bus.subscriber::<Status>(&services.status()).unwrap();
+    // The newest heartbeat's count of rejected inputs.
+    let rejected_now = || {
+        let mut rejected = None;
+        let t0 = Instant::now();
+        while t0.elapsed() < Duration::from_secs(5) && rejected.is_none() {
+            while let Ok(Some(s)) = status.receive() {
+                if s.payload().event == StatusEvent::Heartbeat as u32 {
+                    rejected = Some(s.payload().rejected_inputs);
+                }
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        rejected.expect("a heartbeat")
+    };
+    let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, true);
+    let mut ctl_out = Follow::new(&mut ctl);
+    ctl_out.wait_for("object  1/2", Duration::from_secs(60));
+    // Before the stalls (herbctl's first tries may have been refused NotReady, and counted).
+    let before = rejected_now();
+    for _ in 0..6 {
+        std::thread::sleep(Duration::from_millis(150));
+        lb.signal(libc::SIGSTOP);
+        std::thread::sleep(Duration::from_millis(50));
+        lb.signal(libc::SIGCONT);
+    }
+    let st = ctl.wait_for(Duration::from_secs(120));
+    assert!(st.success(), "the job completes");
+    assert_eq!(
+        rejected_now(),
+        before,
+        "herbd rejected its adapter's joint states"
+    );
 }
 
 #[test]
