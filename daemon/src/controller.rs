@@ -407,19 +407,18 @@ impl Controller {
     fn serve_jobs(&mut self, now: u64) {
         while let Ok(Some(req)) = self.ports.jobs.receive() {
             let r = *req.payload();
-            let verdict = if self.stopping {
-                Err((RejectReason::ShuttingDown, 0))
-            } else if self.phase != Phase::Idle {
-                Err((RejectReason::Busy, 0))
-            } else {
-                r.validate(self.catalog_len).and_then(|()| {
-                    if self.inputs_fresh(now) {
-                        Ok(())
-                    } else {
-                        Err((RejectReason::NotReady, 0))
-                    }
-                })
-            };
+            // A malformed request is answered with what is wrong with it, whatever the state.
+            let verdict = r.validate(self.catalog_len).and_then(|()| {
+                if self.stopping {
+                    Err((RejectReason::ShuttingDown, 0))
+                } else if self.phase != Phase::Idle {
+                    Err((RejectReason::Busy, 0))
+                } else if !self.inputs_fresh(now) {
+                    Err((RejectReason::NotReady, 0))
+                } else {
+                    Ok(())
+                }
+            });
             if verdict.is_err() {
                 self.rejected += 1;
             }

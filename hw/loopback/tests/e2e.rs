@@ -472,9 +472,17 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
         reason(submit(&client, PackJobRequest::new(8, &[1]))).0,
         RejectReason::Busy
     );
+    // A bad job while busy is answered with what is wrong with it, not Busy (issue 18, 6).
+    let mut old = PackJobRequest::new(9, &[1]);
+    old.header.version = 0;
+    assert_eq!(reason(submit(&client, old)).0, RejectReason::Malformed);
+    assert_eq!(
+        reason(submit(&client, PackJobRequest::new(10, &[1, 999]))),
+        (RejectReason::UnknownObject, 1)
+    );
 
-    // The daemon counts what it rejected: 6 jobs, the NotReady ones, and the NaN state.
-    let want = 6 + not_ready + 1;
+    // The daemon counts what it rejected: 8 jobs, the NotReady ones, and the NaN state.
+    let want = 8 + not_ready + 1;
     let t0 = Instant::now();
     let mut counted = 0;
     while t0.elapsed() < Duration::from_secs(5) && counted < want {
