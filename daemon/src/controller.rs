@@ -590,7 +590,11 @@ impl Controller {
                         let (ty, pose, dns) = (plan.object as u32, plan.pose, plan.decision_ns);
                         self.active = Some(plan);
                         self.phase = Phase::Streaming { seg: 0, cursor: 0 };
-                        self.emit(StatusEvent::Decided, ty, pose, dns);
+                        // A replan of a decided placement (after a resume while holding the
+                        // object) carries no new decision and is not announced again.
+                        if dns > 0 {
+                            self.emit(StatusEvent::Decided, ty, pose, dns);
+                        }
                     } else {
                         self.recycle(plan);
                     }

@@ -629,6 +629,64 @@ fn a_stalled_loopback_reports_real_speeds_and_nothing_is_rejected() {
     );
 }
 
+/// The loopback stalled for 300 ms while the gripper holds an object (joint-state timeout,
+/// brake, resume with the object still held): the placement is replanned, not decided again,
+/// so every object is announced `Decided` once, with its decision time (issue 18, item 6: the
+/// replan was announced as a second `Decided` with `decision_ns` 0).
+#[test]
+fn a_resume_while_holding_announces_no_second_decision() {
+    use herb_ipc::{GripperState, Services, Status, StatusEvent};
+    let (dir, prefix, cfg) = setup("holdresume");
+    let cfg_s = cfg.to_str().unwrap();
+    let lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s],
+        &dir.join("loopback.log"),
+    );
+    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let services = Services::new(&prefix).unwrap();
+    let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
+    let status = bus.subscriber::<Status>(&services.status()).unwrap();
+    let grip = bus
+        .subscriber::<GripperState>(&services.gripper_state())
+        .unwrap();
+    let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, true);
+    let (mut decided, mut resumed, mut stalled, mut ended) = (Vec::new(), 0, false, None);
+    let t0 = Instant::now();
+    while ended.is_none() && t0.elapsed() < Duration::from_secs(120) {
+        while let Ok(Some(s)) = status.receive() {
+            let s = *s.payload();
+            match StatusEvent::from_code(s.event) {
+                Some(StatusEvent::Decided) => decided.push((s.object_index, s.decision_ns)),
+                Some(StatusEvent::Resumed) => resumed += 1,
+                Some(e @ (StatusEvent::JobDone | StatusEvent::JobFailed)) => ended = Some(e),
+                _ => {}
+            }
+        }
+        let mut holding = false;
+        while let Ok(Some(g)) = grip.receive() {
+            holding = g.payload().holding == 1;
+        }
+        if holding && !stalled {
+            stalled = true;
+            lb.signal(libc::SIGSTOP);
+            std::thread::sleep(Duration::from_millis(300));
+            lb.signal(libc::SIGCONT);
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    assert!(ctl.wait_for(Duration::from_secs(30)).success());
+    assert_eq!(ended, Some(StatusEvent::JobDone));
+    assert!(stalled && resumed >= 1, "the stall faulted and resumed");
+    assert_eq!(decided.len(), 2, "one Decided per object: {decided:?}");
+    assert!(decided.iter().all(|&(_, ns)| ns > 0), "{decided:?}");
+    assert_eq!(
+        decided.iter().map(|d| d.0).collect::<Vec<_>>(),
+        vec![0, 1],
+        "{decided:?}"
+    );
+}
+
 #[test]
 fn sigterm_mid_motion_brakes_reports_and_exits_zero() {
     let (dir, prefix, cfg) = setup("sigterm");
