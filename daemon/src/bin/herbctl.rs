@@ -180,10 +180,25 @@ fn pack(
             *into = Heightmap::from_data(spec, f.cells().to_vec()).ok();
         }
     };
+    let mut heard = Instant::now();
     while ok.is_none() {
         if Instant::now() > deadline {
             return Err(format!(
                 "timed out after {timeout} s; {placed}/{total} placed"
+            ));
+        }
+        if heard.elapsed() > DAEMON_LOST_AFTER {
+            let at = last.map_or(String::from("no status yet"), |s| {
+                format!(
+                    "object {}/{total} ({}), state {:?}",
+                    s.object_index + 1,
+                    name(catalog, s.object_type),
+                    JobState::from_code(s.state).unwrap_or(JobState::Idle)
+                )
+            });
+            return Err(format!(
+                "daemon lost: no status from herbd for {:.1} s (it heartbeats at 10 Hz); job {job_id}: {placed}/{total} placed, last known {at}",
+                heard.elapsed().as_secs_f64()
             ));
         }
         while let Ok(Some(s)) = status.receive() {
@@ -191,6 +206,7 @@ fn pack(
             if s.validate().is_err() || s.job_id != job_id {
                 continue;
             }
+            heard = Instant::now();
             last = Some(s);
             total = s.objects_total;
             let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
@@ -340,6 +356,10 @@ fn status(cli: &Cli, timeout: f64) -> Result<bool, String> {
     }
     Err("no heartbeat from herbd".into())
 }
+
+/// How long without a status message from herbd (it heartbeats at 10 Hz) before a client
+/// following a job says the daemon is lost: five heartbeat periods.
+const DAEMON_LOST_AFTER: Duration = Duration::from_millis(500);
 
 fn main() -> ExitCode {
     let cli = Cli::parse();

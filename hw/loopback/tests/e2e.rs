@@ -687,6 +687,36 @@ fn a_resume_while_holding_announces_no_second_decision() {
     );
 }
 
+/// herbd killed (SIGKILL: no last status can be sent) mid-job: herbctl notices the lost
+/// heartbeat within a second and says "daemon lost" with the job's last known progress, instead
+/// of waiting for its own timeout (issue 18, item 4).
+#[test]
+fn a_killed_daemon_is_reported_lost_by_the_client() {
+    let (dir, prefix, cfg) = setup("lost");
+    let cfg_s = cfg.to_str().unwrap();
+    let _lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s],
+        &dir.join("loopback.log"),
+    );
+    let hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, false);
+    let mut ctl_out = Follow::new(&mut ctl);
+    ctl_out.wait_for("object  1/2", Duration::from_secs(60));
+    hd.signal(libc::SIGKILL);
+    let t0 = Instant::now();
+    let st = ctl.wait_for(Duration::from_secs(10));
+    let took = t0.elapsed();
+    assert!(!st.success(), "the job did not finish");
+    assert!(took < Duration::from_secs(3), "noticed after {took:?}");
+    let err = std::fs::read_to_string(dir.join("herbctl.log")).unwrap();
+    assert!(err.contains("daemon lost"), "{err}");
+    assert!(
+        err.contains("0/2 placed") && err.contains("object 1/2"),
+        "{err}"
+    );
+}
+
 #[test]
 fn sigterm_mid_motion_brakes_reports_and_exits_zero() {
     let (dir, prefix, cfg) = setup("sigterm");
