@@ -8,6 +8,7 @@
 //! heightmap at once. Room is left for peers that were killed and not yet cleaned up.
 
 use crate::{PackJobReply, PackJobRequest, Payload, Services};
+use iceoryx2::node::NodeView;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::{client::Client, server::Server};
@@ -50,6 +51,48 @@ fn queue_depth(leaf: &str) -> usize {
     }
 }
 
+/// How many publishers a service takes: one for the services that command the robot or speak
+/// for it (joint and gripper commands from herbd, joint and gripper states from the arm's
+/// adapter), so no second process can drive the arm or impersonate it; four for the others.
+fn max_publishers(leaf: &str) -> usize {
+    const SOLE: [&str; 4] = [
+        "/joint_command",
+        "/gripper_command",
+        "/joint_state",
+        "/gripper_state",
+    ];
+    if SOLE.iter().any(|s| leaf.ends_with(s)) {
+        1
+    } else {
+        4
+    }
+}
+
+/// The iceoryx2 node name of the daemon serving `prefix`: how a second daemon finds it.
+pub fn daemon_node_name(prefix: &str) -> String {
+    format!("herbd@{prefix}")
+}
+
+/// The process ids of live nodes called `name`, this process's own excluded.
+pub fn live_nodes_named(name: &str) -> Result<Vec<u32>, BusError> {
+    let me = std::process::id();
+    let mut found = Vec::new();
+    Node::<ipc::Service>::list(Config::global_config(), |state| {
+        if let NodeState::Alive(view) = state
+            && let Some(d) = view.details()
+            && d.name().as_str() == name
+        {
+            let pid = d.process_id().value() as u32;
+            if pid != me {
+                found.push(pid);
+            }
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| err("node list", e))?;
+    Ok(found)
+}
+
 /// A node and the service names of one HERB instance. Not `Send`: open one per thread.
 pub struct Bus {
     node: Node<ipc::Service>,
@@ -65,8 +108,9 @@ impl std::fmt::Debug for Bus {
 }
 
 impl Bus {
-    /// Opens a node named `name` for the services under `services`. iceoryx2 does not take
-    /// over SIGINT/SIGTERM (the processes handle them), and logs only errors.
+    /// Opens a node named `name` for the services under `services`, first removing what dead
+    /// processes left behind. iceoryx2 does not take over SIGINT/SIGTERM (the processes handle
+    /// them), and logs only errors.
     pub fn open(name: &str, services: &Services) -> Result<Self, BusError> {
         set_log_level(LogLevel::Error);
         let node_name: NodeName = name.try_into().map_err(|e| err(name, e))?;
@@ -75,6 +119,9 @@ impl Bus {
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
             .map_err(|e| err("node", e))?;
+        // Ports of processes that died without closing them (SIGKILL, a crash) would hold the
+        // one publisher slot of a robot service: remove them before opening any.
+        node.try_cleanup_dead_nodes();
         Ok(Self {
             node,
             services: services.clone(),
@@ -97,7 +144,7 @@ impl Bus {
         self.node
             .service_builder(&sn)
             .publish_subscribe::<T>()
-            .max_publishers(4)
+            .max_publishers(max_publishers(name))
             .max_subscribers(8)
             .history_size(1)
             .subscriber_max_buffer_size(queue_depth(name))
@@ -143,7 +190,7 @@ impl Bus {
             .service_builder(&sn)
             .request_response::<PackJobRequest, PackJobReply>()
             .max_clients(8)
-            .max_servers(2)
+            .max_servers(1) // one daemon per prefix
             .open_or_create()
             .map_err(|e| err(&name, e))
     }

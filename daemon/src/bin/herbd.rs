@@ -5,7 +5,7 @@ use clap::Parser;
 use herb_daemon::config::{Config, ConfigFile};
 use herb_daemon::controller::{Controller, LoopStats, Ports, Shared};
 use herb_daemon::planner;
-use herb_ipc::bus::Bus;
+use herb_ipc::bus::{Bus, daemon_node_name, live_nodes_named};
 use herb_ipc::{Fault, JobState, Services, Status, StatusEvent};
 use herb_sim::{Catalog, paths};
 use std::path::PathBuf;
@@ -144,6 +144,15 @@ fn describe(s: &Status) -> Option<String> {
 fn run(cli: Cli) -> Result<(), String> {
     let cfg = config(&cli)?;
     let services = Services::new(&cfg.ipc_prefix).map_err(|e| e.to_string())?;
+    // One daemon per prefix: two would answer the same jobs and drive the same arm.
+    let node_name = daemon_node_name(&cfg.ipc_prefix);
+    let running = live_nodes_named(&node_name).map_err(|e| e.to_string())?;
+    if let Some(pid) = running.first() {
+        return Err(format!(
+            "another herbd (pid {pid}) already serves prefix {:?}; stop it first or use another ipc_prefix",
+            cfg.ipc_prefix
+        ));
+    }
     let root = paths::boxed_root(cfg.models.boxed.as_deref());
     let meshes = paths::mesh_source(None, root.as_deref());
     let catalog = Arc::new(Catalog::builtin(&meshes).map_err(|e| format!("catalog: {e}"))?);
@@ -155,7 +164,7 @@ fn run(cli: Cli) -> Result<(), String> {
     }
     let planner_stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
     let (link, planner_thread) = planner::spawn(&cfg, catalog.clone(), planner_stop.clone())?;
-    let bus = Bus::open("herbd", &services).map_err(|e| e.to_string())?;
+    let bus = Bus::open(&node_name, &services).map_err(|e| e.to_string())?;
     let ports = Ports::open(bus).map_err(|e| e.to_string())?;
     let (controller, mut stats_link) =
         Controller::new(&cfg, ports, link, shared.clone(), catalog.len());

@@ -407,7 +407,7 @@ fn submit(
 #[test]
 fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
     use herb_ipc::{
-        Header, JointState, PackJobRequest, RejectReason, Services, Status, StatusEvent,
+        JointCommand, JointState, PackJobRequest, RejectReason, Services, Status, StatusEvent,
     };
     let (dir, prefix, cfg) = setup("bad");
     let cfg_s = cfg.to_str().unwrap();
@@ -444,17 +444,16 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
     nan_count.count = u32::MAX;
     assert_eq!(reason(submit(&client, nan_count)).0, RejectReason::TooMany);
 
-    // A NaN joint state from a rogue publisher is dropped and counted.
-    let rogue = bus
-        .publisher::<JointState>(&services.joint_state())
-        .unwrap();
-    let mut js = JointState {
-        header: Header::now(1),
-        position: [0.0; 7],
-        velocity: [0.0; 7],
-    };
-    js.position[2] = f64::NAN;
-    rogue.send_copy(js).unwrap();
+    // No second process may speak for the arm or command it: the robot services take one
+    // publisher each (the adapter's, herbd's), so a rogue one is refused (issue 18, item 2).
+    assert!(
+        bus.publisher::<JointState>(&services.joint_state())
+            .is_err()
+    );
+    assert!(
+        bus.publisher::<JointCommand>(&services.joint_command())
+            .is_err()
+    );
 
     // A valid job is accepted once herbd hears the adapter (NotReady before); a second one
     // while it runs is Busy (not queued).
@@ -481,8 +480,8 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
         (RejectReason::UnknownObject, 1)
     );
 
-    // The daemon counts what it rejected: 8 jobs, the NotReady ones, and the NaN state.
-    let want = 8 + not_ready + 1;
+    // The daemon counts what it rejected: 8 jobs and the NotReady ones.
+    let want = 8 + not_ready;
     let t0 = Instant::now();
     let mut counted = 0;
     while t0.elapsed() < Duration::from_secs(5) && counted < want {
@@ -715,6 +714,41 @@ fn a_killed_daemon_is_reported_lost_by_the_client() {
         err.contains("0/2 placed") && err.contains("object 1/2"),
         "{err}"
     );
+}
+
+/// A second herbd on a prefix in use exits non-zero naming the running one, and the first goes
+/// on serving (issue 18, item 1: both used to answer jobs and drive the same arm).
+#[test]
+fn a_second_daemon_on_a_prefix_in_use_refuses_to_start() {
+    let (dir, prefix, cfg) = setup("second");
+    let cfg_s = cfg.to_str().unwrap();
+    let _lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s],
+        &dir.join("loopback.log"),
+    );
+    let first = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    // Up once it has said which policy it runs (its start-up line).
+    let t0 = Instant::now();
+    while !std::fs::read_to_string(dir.join("herbd.log")).is_ok_and(|l| l.contains("Hz, prefix")) {
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "herbd did not start"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let mut second = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd2.log"));
+    let st = second.wait_for(Duration::from_secs(10));
+    assert!(!st.success(), "the second herbd must not run");
+    let err = std::fs::read_to_string(dir.join("herbd2.log")).unwrap();
+    let pid = first.0.id().to_string();
+    assert!(
+        err.contains("another herbd") && err.contains(&pid),
+        "names the running one (pid {pid}): {err}"
+    );
+    // The first still serves: a job completes.
+    let mut ctl = pack_objects(&dir, &prefix, "003", 120, false);
+    assert!(ctl.wait_for(Duration::from_secs(120)).success());
 }
 
 #[test]
