@@ -31,7 +31,7 @@ use crate::planner::{MotionPlan, PlannerLink, Request, Response};
 use hdrhistogram::Histogram;
 use herb_ipc::bus::{Bus, JobServer, Pub, Sub};
 use herb_ipc::{
-    Fault, GripperAction, GripperCommand, GripperState, Header, HeightmapFrame, JobState,
+    Fault, GripperAction, GripperCommand, GripperState, Header, HeightmapFrame, InOrder, JobState,
     JointCommand, JointState, MAX_JOB_OBJECTS, NO_OBJECT, PackJobReply, RejectReason, Status,
     StatusEvent, monotonic_ns,
 };
@@ -193,6 +193,10 @@ pub struct Controller {
     // inputs
     js: Option<JointState>,
     js_at: u64,
+    /// Order of the joint states (per publisher: sequence and stamp grow).
+    js_order: InOrder,
+    /// Order of the gripper states.
+    gs_order: InOrder,
     gs: Option<GripperState>,
     gs_at: u64,
     hm_rx_at: u64,
@@ -275,6 +279,8 @@ impl Controller {
             report_every: (cfg.loop_.report_interval_s * cfg.loop_.rate_hz).round() as u64,
             js: None,
             js_at: 0,
+            js_order: InOrder::default(),
+            gs_order: InOrder::default(),
             gs: None,
             gs_at: 0,
             hm_rx_at: 0,
@@ -371,10 +377,15 @@ impl Controller {
     }
 
     fn drain_inputs(&mut self, now: u64) {
+        // Valid, not from the future, and after the publisher's last accepted sample.
         while let Ok(Some(s)) = self.ports.js.receive() {
             let m = *s.payload();
+            let origin = s.header().publisher_id().value();
             match m.validate() {
-                Ok(()) if m.header.stamp_ns <= now + 1_000_000 => {
+                Ok(())
+                    if m.header.stamp_ns <= now + 1_000_000
+                        && self.js_order.accept(origin, &m.header) =>
+                {
                     self.js = Some(m);
                     self.js_at = m.header.stamp_ns;
                 }
@@ -383,8 +394,12 @@ impl Controller {
         }
         while let Ok(Some(s)) = self.ports.gs.receive() {
             let m = *s.payload();
+            let origin = s.header().publisher_id().value();
             match m.validate() {
-                Ok(()) if m.header.stamp_ns <= now + 1_000_000 => {
+                Ok(())
+                    if m.header.stamp_ns <= now + 1_000_000
+                        && self.gs_order.accept(origin, &m.header) =>
+                {
                     self.gs = Some(m);
                     self.gs_at = m.header.stamp_ns;
                 }

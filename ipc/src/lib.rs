@@ -829,6 +829,30 @@ impl Default for Services {
     }
 }
 
+/// The order of one service's samples. From one publisher, each sample's sequence number and
+/// stamp must be greater than the last accepted one's; a new publisher (a restarted adapter,
+/// whose sequence starts over) is accepted and becomes the reference.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct InOrder {
+    last: Option<(u128, u64, u64)>,
+}
+
+impl InOrder {
+    /// Whether a sample from `publisher` (iceoryx2's unique publisher id) with `header` comes
+    /// after the last accepted one; a sample that repeats or goes back in sequence or stamp is
+    /// refused (the caller drops and counts it) and changes nothing.
+    pub fn accept(&mut self, publisher: u128, header: &Header) -> bool {
+        let ok = match self.last {
+            Some((p, seq, stamp)) if p == publisher => header.seq > seq && header.stamp_ns >= stamp,
+            _ => true,
+        };
+        if ok {
+            self.last = Some((publisher, header.seq, header.stamp_ns));
+        }
+        ok
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1028,5 +1052,23 @@ mod tests {
         assert!(Services::new("/abs").is_err());
         assert!(Services::new("a b").is_err());
         assert_eq!(Services::default().status(), "herb/status");
+    }
+
+    #[test]
+    fn samples_in_order_per_publisher_and_a_new_publisher_starts_over() {
+        let h = |seq, stamp_ns| Header {
+            seq,
+            stamp_ns,
+            ..Header::now(seq)
+        };
+        let mut o = InOrder::default();
+        assert!(o.accept(7, &h(1, 100)));
+        assert!(o.accept(7, &h(2, 100)), "same stamp, later sequence");
+        assert!(!o.accept(7, &h(2, 200)), "repeated sequence");
+        assert!(!o.accept(7, &h(1, 300)), "sequence backwards");
+        assert!(!o.accept(7, &h(3, 50)), "stamp backwards");
+        assert!(o.accept(7, &h(3, 300)), "refusals changed nothing");
+        assert!(o.accept(9, &h(1, 400)), "a restarted publisher starts over");
+        assert!(!o.accept(9, &h(1, 500)));
     }
 }

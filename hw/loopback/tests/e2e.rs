@@ -751,6 +751,64 @@ fn a_second_daemon_on_a_prefix_in_use_refuses_to_start() {
     assert!(ctl.wait_for(Duration::from_secs(120)).success());
 }
 
+/// Joint states from the arm's publisher whose sequence or stamp goes backwards are refused and
+/// counted, not acted on (issue 18, item 2). The test process plays the arm's adapter.
+#[test]
+fn joint_states_going_backwards_are_rejected_and_counted() {
+    use herb_ipc::{Header, JointState, Services, Status, StatusEvent, monotonic_ns};
+    let (dir, prefix, cfg) = setup("order");
+    let cfg_s = cfg.to_str().unwrap();
+    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let services = Services::new(&prefix).unwrap();
+    let bus = herb_ipc::bus::Bus::open("e2e-fake-arm", &services).unwrap();
+    let arm = bus
+        .publisher::<JointState>(&services.joint_state())
+        .unwrap();
+    let status = bus.subscriber::<Status>(&services.status()).unwrap();
+    let state = |seq, stamp_ns| JointState {
+        header: Header {
+            seq,
+            stamp_ns,
+            ..Header::now(seq)
+        },
+        position: [0.0; 7],
+        velocity: [0.0; 7],
+    };
+    let rejected_after = |arm: &herb_ipc::bus::Pub<JointState>, next: &mut u64| {
+        // Keep the arm alive for a few heartbeats and read the newest count.
+        let mut counted = None;
+        for _ in 0..60 {
+            *next += 1;
+            arm.send_copy(state(*next, monotonic_ns())).unwrap();
+            while let Ok(Some(s)) = status.receive() {
+                if s.payload().event == StatusEvent::Heartbeat as u32 {
+                    counted = Some(s.payload().rejected_inputs);
+                }
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        counted.expect("herbd heartbeats")
+    };
+    let mut next = 0;
+    let t0 = Instant::now();
+    while status.receive().ok().flatten().is_none() {
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "herbd did not start"
+        );
+        arm.send_copy(state(next + 1, monotonic_ns())).unwrap();
+        next += 1;
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let before = rejected_after(&arm, &mut next);
+    arm.send_copy(state(next - 5, monotonic_ns())).unwrap(); // sequence backwards
+    next += 1;
+    arm.send_copy(state(next, monotonic_ns() - 50_000_000))
+        .unwrap(); // stamp backwards
+    let after = rejected_after(&arm, &mut next);
+    assert_eq!(after - before, 2, "two out-of-order states refused");
+}
+
 #[test]
 fn sigterm_mid_motion_brakes_reports_and_exits_zero() {
     let (dir, prefix, cfg) = setup("sigterm");
