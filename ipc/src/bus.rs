@@ -40,33 +40,58 @@ fn err(what: &str, e: impl std::fmt::Debug) -> BusError {
     }
 }
 
-/// Per-subscriber queue depth of each service.
-fn queue_depth(leaf: &str) -> usize {
-    if leaf.ends_with("/status") || leaf.ends_with("/outcome") {
-        256 // events must not be lost by a client that polls at 50 Hz
-    } else if leaf.ends_with("/heightmap") {
-        2 // 200 KB frames: only the newest matters
-    } else {
-        16
-    }
+/// The quality of service of a publish-subscribe service, which every process opening it must
+/// request alike (`ipc/CONTRACT.md` lists them for clients in other languages).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Qos {
+    /// Publishers the service takes at most.
+    pub max_publishers: usize,
+    /// Subscribers it takes at most.
+    pub max_subscribers: usize,
+    /// Samples a new subscriber receives from before it connected.
+    pub history_size: usize,
+    /// Samples queued per subscriber; the oldest is overwritten when full (safe overflow).
+    pub subscriber_max_buffer_size: usize,
+    /// Samples a subscriber may hold at once.
+    pub subscriber_max_borrowed_samples: usize,
 }
 
-/// How many publishers a service takes: one for the services that command the robot or speak
-/// for it (joint and gripper commands from herbd, joint and gripper states from the arm's
-/// adapter), so no second process can drive the arm or impersonate it; four for the others.
-fn max_publishers(leaf: &str) -> usize {
+/// The QoS of the publish-subscribe service whose name ends in `leaf` (a [`Services`] name).
+///
+/// One publisher for the services that command the robot or speak for it (joint and gripper
+/// commands from herbd, joint and gripper states from the arm's adapter), so no second process
+/// can drive the arm or impersonate it; four for the others. Queues: 256 for events a client
+/// must not lose while polling at 50 Hz (status, outcome), 2 for the 200 KB heightmap frames
+/// (only the newest matters), 16 for the rest.
+pub fn qos(leaf: &str) -> Qos {
     const SOLE: [&str; 4] = [
         "/joint_command",
         "/gripper_command",
         "/joint_state",
         "/gripper_state",
     ];
-    if SOLE.iter().any(|s| leaf.ends_with(s)) {
-        1
+    let depth = if leaf.ends_with("/status") || leaf.ends_with("/outcome") {
+        256
+    } else if leaf.ends_with("/heightmap") {
+        2
     } else {
-        4
+        16
+    };
+    Qos {
+        max_publishers: if SOLE.iter().any(|s| leaf.ends_with(s)) {
+            1
+        } else {
+            4
+        },
+        max_subscribers: 8,
+        history_size: 1,
+        subscriber_max_buffer_size: depth,
+        subscriber_max_borrowed_samples: 2,
     }
 }
+
+/// Clients the pack-job service takes at most; it takes one server (one daemon per prefix).
+pub const PACK_JOB_MAX_CLIENTS: usize = 8;
 
 /// The iceoryx2 node name of the daemon serving `prefix`: how a second daemon finds it.
 pub fn daemon_node_name(prefix: &str) -> String {
@@ -141,14 +166,15 @@ impl Bus {
         BusError,
     > {
         let sn: ServiceName = name.try_into().map_err(|e| err(name, e))?;
+        let q = qos(name);
         self.node
             .service_builder(&sn)
             .publish_subscribe::<T>()
-            .max_publishers(max_publishers(name))
-            .max_subscribers(8)
-            .history_size(1)
-            .subscriber_max_buffer_size(queue_depth(name))
-            .subscriber_max_borrowed_samples(2)
+            .max_publishers(q.max_publishers)
+            .max_subscribers(q.max_subscribers)
+            .history_size(q.history_size)
+            .subscriber_max_buffer_size(q.subscriber_max_buffer_size)
+            .subscriber_max_borrowed_samples(q.subscriber_max_borrowed_samples)
             .enable_safe_overflow(true)
             .open_or_create()
             .map_err(|e| err(name, e))
@@ -189,7 +215,7 @@ impl Bus {
         self.node
             .service_builder(&sn)
             .request_response::<PackJobRequest, PackJobReply>()
-            .max_clients(8)
+            .max_clients(PACK_JOB_MAX_CLIENTS)
             .max_servers(1) // one daemon per prefix
             .open_or_create()
             .map_err(|e| err(&name, e))

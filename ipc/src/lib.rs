@@ -281,6 +281,13 @@ pub enum GripperAction {
     Close = 1,
 }
 
+impl GripperAction {
+    /// The action for a wire code, if defined.
+    pub fn from_code(c: u32) -> Option<Self> {
+        [Self::Open, Self::Close].get(c as usize).copied()
+    }
+}
+
 /// A gripper command from `herbd`, published when it changes and repeated every 100 ms.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
@@ -303,11 +310,7 @@ impl GripperCommand {
         if self.object_type != NO_OBJECT && self.object_type as usize >= catalog_len {
             return Err(Invalid::new("object_type", Reason::OutOfRange));
         }
-        match self.action {
-            0 => Ok(GripperAction::Open),
-            1 => Ok(GripperAction::Close),
-            _ => Err(Invalid::new("action", Reason::UnknownCode)),
-        }
+        GripperAction::from_code(self.action).ok_or(Invalid::new("action", Reason::UnknownCode))
     }
 }
 

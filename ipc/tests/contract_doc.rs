@@ -1,0 +1,286 @@
+//! `ipc/CONTRACT.md` cannot drift from the Rust types: its generated blocks (payload layouts,
+//! code tables, services and their QoS) are rendered here from the types themselves and must
+//! match the file. `HERB_UPDATE_CONTRACT=1 cargo test -p herb-ipc --test contract_doc` rewrites
+//! the blocks after a deliberate change of the wire.
+
+use herb_ipc::bus::{PACK_JOB_MAX_CLIENTS, qos};
+use herb_ipc::*;
+use std::fmt::Write;
+use std::mem::{align_of, offset_of, size_of};
+use std::path::Path;
+
+/// The size and short type name of a field, from an accessor (no value needed).
+fn field<T, F>(_: fn(&T) -> &F) -> (usize, String) {
+    let full = std::any::type_name::<F>();
+    // `[f64; 7]`, `u32`, `herb_ipc::Header` -> `Header`.
+    let short = full
+        .split(['[', ';', ']'])
+        .map(|part| part.rsplit("::").next().unwrap_or(part))
+        .collect::<Vec<_>>();
+    let name = if full.starts_with('[') {
+        format!("[{}; {}]", short[1], short[2].trim())
+    } else {
+        short[0].to_string()
+    };
+    (size_of::<F>(), name)
+}
+
+/// One table row per field: payload, field, type, byte offset, size, unit or meaning.
+macro_rules! layout {
+    ($out:expr, $t:ident, $( $f:ident : $unit:expr ),+ $(,)?) => {{
+        $(
+            let (size, ty) = field::<$t, _>(|v| &v.$f);
+            writeln!(
+                $out,
+                "| `{}` | `{}` | `{}` | {} | {} | {} |",
+                stringify!($t),
+                stringify!($f),
+                ty,
+                offset_of!($t, $f),
+                size,
+                $unit
+            )
+            .unwrap();
+        )+
+        writeln!(
+            $out,
+            "| `{}` | (whole) | align {} | 0 | {} | type name `herb::v1::{}` |",
+            stringify!($t),
+            align_of::<$t>(),
+            size_of::<$t>(),
+            stringify!($t)
+        )
+        .unwrap();
+    }};
+}
+
+fn layouts() -> String {
+    let mut s = String::from(
+        "| payload | field | type | offset (bytes) | size (bytes) | unit, meaning |\n| --- | --- | --- | ---: | ---: | --- |\n",
+    );
+    layout!(s, Header,
+        version: "protocol version, must be `PROTOCOL_VERSION`",
+        reserved: "zero",
+        seq: "per-publisher sequence number, from 1, strictly increasing",
+        stamp_ns: "ns, CLOCK_MONOTONIC, when the content was produced (measured, captured)");
+    layout!(s, JointState,
+        header: "",
+        position: "rad, joints s0 s1 e0 e1 w0 w1 w2",
+        velocity: "rad/s");
+    layout!(s, JointCommand,
+        header: "stamp: the loop cycle's start",
+        position: "rad",
+        velocity: "rad/s, feed-forward",
+        acceleration: "rad/s^2, feed-forward");
+    layout!(s, GripperCommand,
+        header: "",
+        action: "`GripperAction` code",
+        object_type: "catalog type index expected at the pick station, or `NO_OBJECT`");
+    layout!(s, GripperState,
+        header: "",
+        closed: "1 closed, 0 open",
+        holding: "1 when an object is held",
+        object_type: "held object's catalog type index if known, else `NO_OBJECT`",
+        reserved: "zero");
+    layout!(s, HeightmapFrame,
+        header: "stamp: capture time",
+        nx: "columns, along box x",
+        ny: "rows, along box y",
+        cell_m: "m, cell side",
+        objects: "objects in the box if the source knows, else 0",
+        data: "m above the inner floor; row-major, row 0 at +y, column 0 at -x; first nx*ny used");
+    layout!(s, Status,
+        header: "",
+        job_id: "the job (0 when idle)",
+        event: "`StatusEvent` code",
+        state: "`JobState` code",
+        fault: "`Fault` code, the current or last fault",
+        objects_total: "objects in the job",
+        objects_done: "objects released",
+        object_index: "index in the packing order of the object this event is about",
+        object_type: "its catalog type index, or `NO_OBJECT`",
+        reserved: "zero",
+        pose: "m, m, m, rad: x, y, z of the canonical origin in the box frame, yaw",
+        decision_ns: "ns, the decision's latency (Decided)",
+        cycles: "loop cycles run",
+        deadline_misses: "loop cycles that overran",
+        rejected_inputs: "invalid or out-of-order inputs dropped",
+        max_cycle_ns: "ns, worst cycle since start");
+    layout!(s, PackJobRequest,
+        header: "",
+        job_id: "chosen by the client, non-zero",
+        count: "objects used",
+        reserved: "zero",
+        objects: "catalog type indices (not ids); first `count` used");
+    layout!(s, PackJobReply,
+        header: "",
+        job_id: "the request's",
+        accepted: "1 when accepted",
+        reason: "`RejectReason` code",
+        detail: "e.g. the position of an unknown object",
+        reserved: "zero");
+    layout!(s, SimOutcome,
+        header: "",
+        objects: "objects in the box after the release",
+        object_type: "released object's catalog type index",
+        all_inside: "1 when every object is inside the success volume",
+        stable: "1 when the released object's tilt is within the threshold",
+        tilt_rad: "rad",
+        compactness: "C of the box after settling",
+        release: "m, m, m, rad: release pose in the box frame",
+        max_limit_excess_rad: "rad, largest joint-limit excess among received commands",
+        commands: "joint commands received",
+        commands_rejected: "joint commands rejected");
+    s
+}
+
+/// Every defined code of each enum, by probing its decoder.
+fn codes() -> String {
+    let mut s = String::from("| enum | name | code |\n| --- | --- | ---: |\n");
+    let mut add = |e: &str, name: Option<String>, c: u32| {
+        if let Some(n) = name {
+            writeln!(s, "| `{e}` | `{n}` | {c} |").unwrap();
+        }
+    };
+    for c in 0..64 {
+        add(
+            "GripperAction",
+            GripperAction::from_code(c).map(|v| format!("{v:?}")),
+            c,
+        );
+    }
+    for c in 0..64 {
+        add(
+            "JobState",
+            JobState::from_code(c).map(|v| format!("{v:?}")),
+            c,
+        );
+    }
+    for c in 0..64 {
+        add(
+            "StatusEvent",
+            StatusEvent::from_code(c).map(|v| format!("{v:?}")),
+            c,
+        );
+    }
+    for c in 0..64 {
+        add("Fault", Fault::from_code(c).map(|v| format!("{v:?}")), c);
+    }
+    for c in 0..64 {
+        add(
+            "RejectReason",
+            RejectReason::from_code(c).map(|v| format!("{v:?}")),
+            c,
+        );
+    }
+    s
+}
+
+fn constants() -> String {
+    format!(
+        "| constant | value |\n| --- | --- |\n| `PROTOCOL_VERSION` | {PROTOCOL_VERSION} |\n| `DOF` | {DOF} |\n| `HEIGHTMAP_MAX_CELLS` | {HEIGHTMAP_MAX_CELLS} |\n| `MAX_JOB_OBJECTS` | {MAX_JOB_OBJECTS} |\n| `NO_OBJECT` | {NO_OBJECT} (0x{NO_OBJECT:X}) |\n| `HEIGHT_RANGE_M` | {} .. {} m |\n| `MAX_JOINT_ABS_RAD` | {MAX_JOINT_ABS_RAD} rad |\n| `MAX_JOINT_SPEED` | {MAX_JOINT_SPEED} rad/s |\n",
+        HEIGHT_RANGE_M.0, HEIGHT_RANGE_M.1
+    )
+}
+
+fn services() -> String {
+    let sv = Services::new("herb").unwrap();
+    let mut s = String::from(
+        "| service (prefix `herb`) | pattern | payload | publisher(s) | subscribers | max publishers | max subscribers | history | queue per subscriber | borrowed per subscriber |\n| --- | --- | --- | --- | --- | ---: | ---: | ---: | ---: | ---: |\n",
+    );
+    for (name, payload, from, to) in [
+        (sv.joint_state(), "JointState", "arm adapter", "herbd"),
+        (sv.joint_command(), "JointCommand", "herbd", "arm adapter"),
+        (sv.gripper_state(), "GripperState", "arm adapter", "herbd"),
+        (
+            sv.gripper_command(),
+            "GripperCommand",
+            "herbd",
+            "arm adapter",
+        ),
+        (
+            sv.heightmap(),
+            "HeightmapFrame",
+            "camera adapter",
+            "herbd, clients",
+        ),
+        (sv.status(), "Status", "herbd", "clients"),
+        (
+            sv.sim_outcome(),
+            "SimOutcome",
+            "loopback (sim only)",
+            "tests, clients",
+        ),
+    ] {
+        let q = qos(&name);
+        writeln!(
+            s,
+            "| `{name}` | publish-subscribe | `{payload}` | {from} | {to} | {} | {} | {} | {} | {} |",
+            q.max_publishers,
+            q.max_subscribers,
+            q.history_size,
+            q.subscriber_max_buffer_size,
+            q.subscriber_max_borrowed_samples
+        )
+        .unwrap();
+    }
+    writeln!(
+        s,
+        "| `{}` | request-response | `PackJobRequest` -> `PackJobReply` | clients | herbd (the one server) | - | - | - | - | - |",
+        sv.pack_job()
+    )
+    .unwrap();
+    writeln!(
+        s,
+        "\nThe pack-job service takes at most {PACK_JOB_MAX_CLIENTS} clients and 1 server."
+    )
+    .unwrap();
+    s
+}
+
+/// The text between `<!-- NAME:begin -->` and `<!-- NAME:end -->`.
+fn block<'a>(doc: &'a str, name: &str) -> (usize, usize, &'a str) {
+    let (b, e) = (
+        format!("<!-- {name}:begin -->\n"),
+        format!("<!-- {name}:end -->"),
+    );
+    let i = doc
+        .find(&b)
+        .unwrap_or_else(|| panic!("CONTRACT.md has no {name} block"))
+        + b.len();
+    let j = i + doc[i..]
+        .find(&e)
+        .unwrap_or_else(|| panic!("{name} block not closed"));
+    (i, j, &doc[i..j])
+}
+
+#[test]
+fn the_contract_document_matches_the_types() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("CONTRACT.md");
+    let mut doc = std::fs::read_to_string(&path).expect("ipc/CONTRACT.md");
+    let update = std::env::var_os("HERB_UPDATE_CONTRACT").is_some();
+    let mut stale = Vec::new();
+    for (name, want) in [
+        ("layout", layouts()),
+        ("codes", codes()),
+        ("constants", constants()),
+        ("services", services()),
+    ] {
+        let (i, j, have) = block(&doc, name);
+        if have != want {
+            if update {
+                doc.replace_range(i..j, &want);
+            } else {
+                stale.push(format!("{name}:\n{want}"));
+            }
+        }
+    }
+    if update {
+        std::fs::write(&path, doc).unwrap();
+    }
+    assert!(
+        stale.is_empty(),
+        "ipc/CONTRACT.md is out of date; the types say:\n{}\n(HERB_UPDATE_CONTRACT=1 rewrites the blocks)",
+        stale.join("\n")
+    );
+}
