@@ -897,6 +897,7 @@ impl Controller {
                 self.seq += 1;
                 let _ = self.ports.grip.send_copy(GripperCommand {
                     header: Header::now(self.seq),
+                    job_id: self.job_id,
                     action: self.grip_cmd as u32,
                     object_type: self.grip_object,
                 });

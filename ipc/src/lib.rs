@@ -295,6 +295,8 @@ impl GripperAction {
 pub struct GripperCommand {
     /// Header.
     pub header: Header,
+    /// The job this command serves (0 outside a job).
+    pub job_id: u64,
     /// [`GripperAction`] code.
     pub action: u32,
     /// The catalog type index `herbd` expects at the pick station, or [`NO_OBJECT`]. Real
@@ -712,6 +714,9 @@ impl PackJobReply {
 pub struct SimOutcome {
     /// Header.
     pub header: Header,
+    /// The job whose gripper command released the object (0 outside a job): a subscriber
+    /// receiving the last outcome from history tells an earlier job's from its own.
+    pub job_id: u64,
     /// Objects in the box after this release.
     pub objects: u32,
     /// The released object's catalog type.
@@ -989,6 +994,7 @@ mod tests {
 
         let g = GripperCommand {
             header: Header::now(1),
+            job_id: 3,
             action: 1,
             object_type: 5,
         };

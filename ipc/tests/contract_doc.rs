@@ -9,8 +9,8 @@ use std::fmt::Write;
 use std::mem::{align_of, offset_of, size_of};
 use std::path::Path;
 
-/// The size and short type name of a field, from an accessor (no value needed).
-fn field<T, F>(_: fn(&T) -> &F) -> (usize, String) {
+/// The size, alignment and short type name of a field, from an accessor (no value needed).
+fn field<T, F>(_: fn(&T) -> &F) -> (usize, usize, String) {
     let full = std::any::type_name::<F>();
     // `[f64; 7]`, `u32`, `herb_ipc::Header` -> `Header`.
     let short = full
@@ -22,14 +22,30 @@ fn field<T, F>(_: fn(&T) -> &F) -> (usize, String) {
     } else {
         short[0].to_string()
     };
-    (size_of::<F>(), name)
+    (size_of::<F>(), align_of::<F>(), name)
 }
 
-/// One table row per field: payload, field, type, byte offset, size, unit or meaning.
+/// `n` rounded up to a multiple of `align`.
+fn round_up(n: usize, align: usize) -> usize {
+    n.div_ceil(align) * align
+}
+
+/// One table row per field: payload, field, type, byte offset, size, unit or meaning. The
+/// fields must be listed completely and in order: each starts where the previous ended (plus
+/// its alignment's padding) and the last ends the struct, so a field missing here fails.
 macro_rules! layout {
     ($out:expr, $t:ident, $( $f:ident : $unit:expr ),+ $(,)?) => {{
+        let mut end = 0usize;
         $(
-            let (size, ty) = field::<$t, _>(|v| &v.$f);
+            let (size, align, ty) = field::<$t, _>(|v| &v.$f);
+            assert_eq!(
+                offset_of!($t, $f),
+                round_up(end, align),
+                "{}.{} is not where the listed fields end: a field is missing from the list",
+                stringify!($t),
+                stringify!($f)
+            );
+            end = offset_of!($t, $f) + size;
             writeln!(
                 $out,
                 "| `{}` | `{}` | `{}` | {} | {} | {} |",
@@ -42,6 +58,12 @@ macro_rules! layout {
             )
             .unwrap();
         )+
+        assert_eq!(
+            round_up(end, align_of::<$t>()),
+            size_of::<$t>(),
+            "{}: fields missing from the list at its end",
+            stringify!($t)
+        );
         writeln!(
             $out,
             "| `{}` | (whole) | align {} | 0 | {} | type name `herb::v1::{}` |",
@@ -74,6 +96,7 @@ fn layouts() -> String {
         acceleration: "rad/s^2, feed-forward");
     layout!(s, GripperCommand,
         header: "",
+        job_id: "the job this command serves (0 outside a job)",
         action: "`GripperAction` code",
         object_type: "catalog type index expected at the pick station, or `NO_OBJECT`");
     layout!(s, GripperState,
@@ -121,6 +144,7 @@ fn layouts() -> String {
         reserved: "zero");
     layout!(s, SimOutcome,
         header: "",
+        job_id: "the job whose gripper command released the object",
         objects: "objects in the box after the release",
         object_type: "released object's catalog type index",
         all_inside: "1 when every object is inside the success volume",

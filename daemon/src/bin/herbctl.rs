@@ -247,7 +247,7 @@ fn pack(
             }
         }
         while let Ok(Some(o)) = outcomes.receive() {
-            if o.payload().validate().is_ok() {
+            if o.payload().validate().is_ok() && o.payload().job_id == job_id {
                 last_outcome = Some(*o.payload());
             }
         }
@@ -263,7 +263,7 @@ fn pack(
             keep_frame(f.payload(), &mut latest_frame);
         }
         while let Ok(Some(o)) = outcomes.receive() {
-            if o.payload().validate().is_ok() {
+            if o.payload().validate().is_ok() && o.payload().job_id == job_id {
                 last_outcome = Some(*o.payload());
             }
         }

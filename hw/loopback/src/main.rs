@@ -70,13 +70,14 @@ struct Released {
     ny: u32,
     cell_m: f32,
     objects: u32,
-    outcome: Option<(herb_sim::PlacementOutcome, u32, [f32; 4])>,
+    /// The outcome, the released type, the release pose and the releasing job.
+    outcome: Option<(herb_sim::PlacementOutcome, u32, [f32; 4], u64)>,
 }
 
 /// The world thread: releases objects and settles, off the publishing loop.
 fn world_thread(
     catalog: Arc<Catalog>,
-    rx: mpsc::Receiver<(TypeIdx, Pose)>,
+    rx: mpsc::Receiver<(TypeIdx, Pose, u64)>,
     tx: mpsc::Sender<Result<Released, String>>,
 ) {
     let mut world = match PackingWorld::new(catalog, WorldConfig::default()) {
@@ -99,7 +100,7 @@ fn world_thread(
         }
     };
     let _ = tx.send(Ok(snapshot(&world, None)));
-    for (ty, pose) in rx {
+    for (ty, pose, job_id) in rx {
         let yaw = {
             let x = pose.rotation * Vector::X;
             x.y.atan2(x.x)
@@ -112,7 +113,10 @@ fn world_thread(
         ];
         match world.place_pose(ty, pose) {
             Ok(o) => {
-                let _ = tx.send(Ok(snapshot(&world, Some((o, ty.0 as u32, release)))));
+                let _ = tx.send(Ok(snapshot(
+                    &world,
+                    Some((o, ty.0 as u32, release, job_id)),
+                )));
             }
             Err(e) => {
                 let _ = tx.send(Err(format!("release of type {}: {e}", ty.0)));
@@ -168,7 +172,7 @@ impl Sim {
         &mut self,
         c: &GripperCommand,
         action: GripperAction,
-        release: &mpsc::Sender<(TypeIdx, Pose)>,
+        release: &mpsc::Sender<(TypeIdx, Pose, u64)>,
     ) {
         match action {
             GripperAction::Close if !self.closed => {
@@ -188,7 +192,7 @@ impl Sim {
                 if let Some((ty, in_tool)) = self.held.take() {
                     let object = self.arm.fk(&self.q) * in_tool;
                     let in_box = self.cell.box_pose().inverse() * object;
-                    let _ = release.send((ty, to_pose(&in_box)));
+                    let _ = release.send((ty, to_pose(&in_box), c.job_id));
                     self.releases += 1;
                     self.settling += 1;
                 }
@@ -332,10 +336,11 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         while let Ok(r) = res_rx.try_recv() {
             match r {
                 Ok(r) => {
-                    if let Some((o, ty, release)) = r.outcome {
+                    if let Some((o, ty, release, job_id)) = r.outcome {
                         sim.settling = sim.settling.saturating_sub(1);
                         let m = SimOutcome {
                             header: Header::now(seq),
+                            job_id,
                             objects: r.objects,
                             object_type: ty,
                             all_inside: o.inside as u32,

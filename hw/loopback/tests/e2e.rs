@@ -809,6 +809,65 @@ fn joint_states_going_backwards_are_rejected_and_counted() {
     assert_eq!(after - before, 2, "two out-of-order states refused");
 }
 
+/// Two jobs one after the other: every simulated outcome carries the job that released the
+/// object, and a subscriber joining afterwards gets the last one from history with the second
+/// job's id, so nobody mistakes an earlier job's outcome for their own (issue 18, item 6).
+#[test]
+fn outcomes_carry_their_job_across_jobs() {
+    use herb_ipc::{Services, SimOutcome, Status, StatusEvent};
+    let (dir, prefix, cfg) = setup("jobids");
+    let cfg_s = cfg.to_str().unwrap();
+    let _lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s],
+        &dir.join("loopback.log"),
+    );
+    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let services = Services::new(&prefix).unwrap();
+    let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
+    let status = bus.subscriber::<Status>(&services.status()).unwrap();
+    let outcomes = bus
+        .subscriber::<SimOutcome>(&services.sim_outcome())
+        .unwrap();
+    let (mut accepted, mut released, mut late_seen) = (Vec::new(), Vec::new(), Vec::new());
+    let mut late = None;
+    for objects in ["003,005", "011"] {
+        let mut ctl = pack_objects(&dir, &prefix, objects, 120, false);
+        assert!(ctl.wait_for(Duration::from_secs(150)).success());
+        std::thread::sleep(Duration::from_millis(1500)); // the last release settles
+        while let Ok(Some(s)) = status.receive() {
+            if s.payload().event == StatusEvent::Accepted as u32 {
+                accepted.push(s.payload().job_id);
+            }
+        }
+        while let Ok(Some(o)) = outcomes.receive() {
+            released.push(o.payload().job_id);
+        }
+        if let Some(l) = &late {
+            while let Ok(Some(o)) = herb_ipc::bus::Sub::<SimOutcome>::receive(l) {
+                late_seen.push(o.payload().job_id);
+            }
+        }
+        // A subscriber joining between the jobs: history hands it the first job's last outcome.
+        late.get_or_insert_with(|| {
+            bus.subscriber::<SimOutcome>(&services.sim_outcome())
+                .unwrap()
+        });
+    }
+    assert_eq!(accepted.len(), 2, "{accepted:?}");
+    assert_ne!(accepted[0], accepted[1]);
+    assert_eq!(
+        released,
+        vec![accepted[0], accepted[0], accepted[1]],
+        "each outcome names its job"
+    );
+    assert_eq!(
+        late_seen,
+        vec![accepted[0], accepted[1]],
+        "the late subscriber tells the earlier job's outcome from the new one"
+    );
+}
+
 #[test]
 fn sigterm_mid_motion_brakes_reports_and_exits_zero() {
     let (dir, prefix, cfg) = setup("sigterm");
