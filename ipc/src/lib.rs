@@ -706,6 +706,25 @@ impl PackJobReply {
     }
 }
 
+/// A request to empty the simulated box (sim-only service, to the loopback; a real cell's box is
+/// emptied by hand). The loopback acts on it only while it holds no object and nothing settles,
+/// and confirms by publishing a heightmap with no object in the box.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::SimReset")]
+pub struct SimReset {
+    /// Header; the stamp is the request's time.
+    pub header: Header,
+}
+payload!(SimReset);
+
+impl SimReset {
+    /// The header.
+    pub fn validate(&self) -> Result<(), Invalid> {
+        self.header.validate()
+    }
+}
+
 /// Simulated outcome of a release (sim-only service, published by the loopback for tests and
 /// evaluation; a real cell has no such service).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
@@ -826,6 +845,10 @@ impl Services {
     /// pub-sub [`SimOutcome`], loopback -> tests (sim only).
     pub fn sim_outcome(&self) -> String {
         self.name("sim/outcome")
+    }
+    /// pub-sub [`SimReset`], clients -> loopback (sim only).
+    pub fn sim_reset(&self) -> String {
+        self.name("sim/reset")
     }
 }
 

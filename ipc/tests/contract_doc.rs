@@ -142,6 +142,7 @@ fn layouts() -> String {
         reason: "`RejectReason` code",
         detail: "e.g. the position of an unknown object",
         reserved: "zero");
+    layout!(s, SimReset, header: "stamp: the request's time");
     layout!(s, SimOutcome,
         header: "",
         job_id: "the job whose gripper command released the object",
@@ -234,6 +235,12 @@ fn services() -> String {
             "SimOutcome",
             "loopback (sim only)",
             "tests, clients",
+        ),
+        (
+            sv.sim_reset(),
+            "SimReset",
+            "clients (`herbctl reset`)",
+            "loopback (sim only)",
         ),
     ] {
         let q = qos(&name);

@@ -4,8 +4,8 @@
 use clap::{Parser, Subcommand};
 use herb_ipc::bus::Bus;
 use herb_ipc::{
-    Fault, HeightmapFrame, JobState, PackJobRequest, RejectReason, Services, SimOutcome, Status,
-    StatusEvent, monotonic_ns,
+    Fault, Header, HeightmapFrame, JobState, PackJobRequest, RejectReason, Services, SimOutcome,
+    SimReset, Status, StatusEvent, monotonic_ns,
 };
 use herb_sim::{Catalog, GridSpec, Heightmap, TypeIdx, boxed, paths};
 use std::path::PathBuf;
@@ -45,6 +45,13 @@ enum Cmd {
         /// Print the summary as one JSON line.
         #[arg(long)]
         json: bool,
+    },
+    /// Empty the simulated box (the loopback; a real cell's box is emptied by hand). Refused
+    /// while herbd runs a job.
+    Reset {
+        /// Give up after this many seconds.
+        #[arg(long, default_value_t = 5.0)]
+        timeout: f64,
     },
     /// Print the daemon's next heartbeat.
     Status {
@@ -357,6 +364,53 @@ fn status(cli: &Cli, timeout: f64) -> Result<bool, String> {
     Err("no heartbeat from herbd".into())
 }
 
+/// `herbctl reset`: asks the loopback to empty its box, unless herbd reports a running job, and
+/// waits for the heightmap of the empty box.
+fn reset(cli: &Cli, timeout: f64) -> Result<bool, String> {
+    let services = Services::new(&cli.prefix).map_err(|e| e.to_string())?;
+    let bus = Bus::open("herbctl", &services).map_err(|e| e.to_string())?;
+    let status = bus
+        .subscriber::<Status>(&services.status())
+        .map_err(|e| e.to_string())?;
+    let frames = bus
+        .subscriber::<HeightmapFrame>(&services.heightmap())
+        .map_err(|e| e.to_string())?;
+    let request = bus
+        .publisher::<SimReset>(&services.sim_reset())
+        .map_err(|e| e.to_string())?;
+    // A heartbeat within two periods says whether a job runs (no herbd: nothing runs).
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_millis(250) {
+        while let Ok(Some(s)) = status.receive() {
+            let s = s.payload();
+            if s.validate().is_ok() && s.event == StatusEvent::Heartbeat as u32 && s.job_id != 0 {
+                return Err(format!("job {} is running: the box is not reset", s.job_id));
+            }
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let asked = monotonic_ns();
+    request
+        .send_copy(SimReset {
+            header: Header::now(1),
+        })
+        .map_err(|e| format!("cannot send the reset: {e:?}"))?;
+    let deadline = Instant::now() + Duration::from_secs_f64(timeout);
+    while Instant::now() < deadline {
+        while let Ok(Some(f)) = frames.receive() {
+            let f = f.payload();
+            if f.validate_meta().is_ok() && f.header.stamp_ns >= asked && f.objects == 0 {
+                println!("box emptied");
+                return Ok(true);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    Err(format!(
+        "no heightmap of an empty box within {timeout} s: is the loopback running, holding nothing?"
+    ))
+}
+
 /// How long without a status message from herbd (it heartbeats at 10 Hz) before a client
 /// following a job says the daemon is lost: five heartbeat periods.
 const DAEMON_LOST_AFTER: Duration = Duration::from_millis(500);
@@ -380,6 +434,7 @@ fn main() -> ExitCode {
             json,
         } => pack(&cli, &catalog, session, objects, picture, *timeout, *json),
         Cmd::Status { timeout } => status(&cli, *timeout),
+        Cmd::Reset { timeout } => reset(&cli, *timeout),
     };
     match r {
         Ok(true) => ExitCode::SUCCESS,

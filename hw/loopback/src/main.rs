@@ -14,7 +14,8 @@
 //!   ended), and re-captures it every 200 ms (stamped then) while no release is settling:
 //!   a frame is never stamped later than a release whose settle it does not show.
 //! - **Sim-only**: publishes a `SimOutcome` after every release (inside, tilt, compactness,
-//!   command counts) for tests.
+//!   command counts, the releasing job) for tests, and empties the box on a `SimReset`
+//!   (`herbctl reset`) while nothing is held or settling.
 //!
 //! SIGINT/SIGTERM: prints a JSON summary on stdout and exits 0.
 
@@ -23,7 +24,7 @@ use herb_adapter::{ArmPorts, CameraPort, Heightmap};
 use herb_ipc::bus::Bus;
 use herb_ipc::{
     GripperAction, GripperCommand, GripperState, Header, JointCommand, JointState, NO_OBJECT,
-    Services, SimOutcome, monotonic_ns,
+    Services, SimOutcome, SimReset, monotonic_ns,
 };
 use herb_loopback::config::{ConfigFile, LoopbackConfig};
 use herb_robot::cell::CellConfig;
@@ -74,10 +75,18 @@ struct Released {
     outcome: Option<(herb_sim::PlacementOutcome, u32, [f32; 4], u64)>,
 }
 
+/// What the publishing loop asks of the world thread.
+enum ToWorld {
+    /// Release an object (type, pose in B, the releasing job) and settle.
+    Release(TypeIdx, Pose, u64),
+    /// Empty the box.
+    Reset,
+}
+
 /// The world thread: releases objects and settles, off the publishing loop.
 fn world_thread(
     catalog: Arc<Catalog>,
-    rx: mpsc::Receiver<(TypeIdx, Pose, u64)>,
+    rx: mpsc::Receiver<ToWorld>,
     tx: mpsc::Sender<Result<Released, String>>,
 ) {
     let mut world = match PackingWorld::new(catalog, WorldConfig::default()) {
@@ -100,7 +109,15 @@ fn world_thread(
         }
     };
     let _ = tx.send(Ok(snapshot(&world, None)));
-    for (ty, pose, job_id) in rx {
+    for msg in rx {
+        let (ty, pose, job_id) = match msg {
+            ToWorld::Release(ty, pose, job_id) => (ty, pose, job_id),
+            ToWorld::Reset => {
+                world.reset();
+                let _ = tx.send(Ok(snapshot(&world, None)));
+                continue;
+            }
+        };
         let yaw = {
             let x = pose.rotation * Vector::X;
             x.y.atan2(x.x)
@@ -172,7 +189,7 @@ impl Sim {
         &mut self,
         c: &GripperCommand,
         action: GripperAction,
-        release: &mpsc::Sender<(TypeIdx, Pose, u64)>,
+        release: &mpsc::Sender<ToWorld>,
     ) {
         match action {
             GripperAction::Close if !self.closed => {
@@ -192,7 +209,7 @@ impl Sim {
                 if let Some((ty, in_tool)) = self.held.take() {
                     let object = self.arm.fk(&self.q) * in_tool;
                     let in_box = self.cell.box_pose().inverse() * object;
-                    let _ = release.send((ty, to_pose(&in_box), c.job_id));
+                    let _ = release.send(ToWorld::Release(ty, to_pose(&in_box), c.job_id));
                     self.releases += 1;
                     self.settling += 1;
                 }
@@ -248,6 +265,10 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
     let out_pub = bus
         .publisher::<SimOutcome>(&services.sim_outcome())
         .map_err(|e| e.to_string())?;
+    let reset_sub = bus
+        .subscriber::<SimReset>(&services.sim_reset())
+        .map_err(|e| e.to_string())?;
+    let (mut resets, mut resets_refused) = (0u64, 0u64);
 
     let (rel_tx, rel_rx) = mpsc::channel();
     let (res_tx, res_rx) = mpsc::channel();
@@ -309,6 +330,22 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         arm.drain_joint_commands(&lower, &upper, |c, valid| sim.command(c, valid));
         let types = sim.catalog.len();
         arm.drain_gripper_commands(types, |c, a| sim.gripper(c, a, &rel_tx));
+        // Empty the box on request, only while nothing is held or settling; the heightmap of
+        // the empty box that follows is the confirmation.
+        while let Ok(Some(r)) = reset_sub.receive() {
+            // A request handed over from history (sent before this loopback started) is old.
+            let r = r.payload();
+            if r.validate().is_err() || now.saturating_sub(r.header.stamp_ns) > 1_000_000_000 {
+                continue;
+            }
+            if sim.held.is_none() && sim.settling == 0 && rel_tx.send(ToWorld::Reset).is_ok() {
+                resets += 1;
+                sim.last_outcome = None;
+            } else {
+                resets_refused += 1;
+                eprintln!("herb-loopback: box reset refused: an object is held or settling");
+            }
+        }
         // Track the target.
         let a = if cli.lag_s > 0.0 {
             (dt / cli.lag_s).min(1.0)
@@ -387,6 +424,8 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         "all_inside": o.is_some_and(|o| o.all_inside == 1),
         "compactness": o.map_or(0.0, |o| o.compactness),
         "world_error": world_error,
+        "resets": resets,
+        "resets_refused": resets_refused,
     }}))
 }
 

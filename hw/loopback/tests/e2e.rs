@@ -868,6 +868,58 @@ fn outcomes_carry_their_job_across_jobs() {
     );
 }
 
+/// `herbctl reset` empties the loopback's box between jobs, so the next job starts in an empty
+/// box, and is refused while a job runs (issue 18, item 7: a second job was packed on top).
+#[test]
+fn the_box_is_reset_between_jobs_and_not_during_one() {
+    use herb_ipc::{Services, SimOutcome};
+    let (dir, prefix, cfg) = setup("reset");
+    let cfg_s = cfg.to_str().unwrap();
+    let _lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s],
+        &dir.join("loopback.log"),
+    );
+    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let services = Services::new(&prefix).unwrap();
+    let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
+    let outcomes = bus
+        .subscriber::<SimOutcome>(&services.sim_outcome())
+        .unwrap();
+    let reset = |log: &str| {
+        spawn(
+            &exe("herbctl"),
+            &["--prefix", &prefix, "reset"],
+            &dir.join(log),
+        )
+        .wait_for(Duration::from_secs(20))
+    };
+    // During a job: refused, the job goes on.
+    let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, false);
+    let mut ctl_out = Follow::new(&mut ctl); // kept: it drains herbctl's output
+    ctl_out.wait_for("object  1/2", Duration::from_secs(60));
+    assert!(!reset("reset-busy.log").success(), "no reset during a job");
+    let err = std::fs::read_to_string(dir.join("reset-busy.log")).unwrap();
+    assert!(err.contains("is running"), "{err}");
+    assert!(ctl.wait_for(Duration::from_secs(150)).success());
+    std::thread::sleep(Duration::from_millis(1500)); // the last release settles
+    let mut last = None;
+    while let Ok(Some(o)) = outcomes.receive() {
+        last = Some(o.payload().objects);
+    }
+    assert_eq!(last, Some(2), "two objects in the box after the first job");
+    // Between jobs: the box is emptied, and the next job's first object is alone in it.
+    assert!(reset("reset.log").success());
+    let mut ctl = pack_objects(&dir, &prefix, "011", 120, false);
+    assert!(ctl.wait_for(Duration::from_secs(150)).success());
+    std::thread::sleep(Duration::from_millis(1500));
+    let mut last = None;
+    while let Ok(Some(o)) = outcomes.receive() {
+        last = Some(o.payload().objects);
+    }
+    assert_eq!(last, Some(1), "the second job packed an empty box");
+}
+
 #[test]
 fn sigterm_mid_motion_brakes_reports_and_exits_zero() {
     let (dir, prefix, cfg) = setup("sigterm");
