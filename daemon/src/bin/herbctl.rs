@@ -2,7 +2,7 @@
 //! summary.
 
 use clap::{Parser, Subcommand};
-use herb_ipc::bus::Bus;
+use herb_ipc::bus::{Bus, Sub};
 use herb_ipc::{
     Fault, Header, HeightmapFrame, JobState, PackJobRequest, RejectReason, Services, SimOutcome,
     SimReset, Status, StatusEvent, monotonic_ns,
@@ -120,14 +120,7 @@ fn pack(
     json: bool,
 ) -> Result<bool, String> {
     let (objects, what) = objects_of(cli, session, ids, catalog)?;
-    let services = Services::new(&cli.prefix).map_err(|e| e.to_string())?;
-    let bus = Bus::open("herbctl", &services).map_err(|e| e.to_string())?;
-    let status = bus
-        .subscriber::<Status>(&services.status())
-        .map_err(|e| e.to_string())?;
-    let frames = bus
-        .subscriber::<HeightmapFrame>(&services.heightmap())
-        .map_err(|e| e.to_string())?;
+    let (bus, services, status, frames) = listen(cli)?;
     let outcomes = bus
         .subscriber::<SimOutcome>(&services.sim_outcome())
         .map_err(|e| e.to_string())?;
@@ -364,9 +357,9 @@ fn status(cli: &Cli, timeout: f64) -> Result<bool, String> {
     Err("no heartbeat from herbd".into())
 }
 
-/// `herbctl reset`: asks the loopback to empty its box, unless herbd reports a running job, and
-/// waits for the heightmap of the empty box.
-fn reset(cli: &Cli, timeout: f64) -> Result<bool, String> {
+/// herbctl's bus under the prefix of `cli`, with subscribers to herbd's status and to the
+/// camera's heightmaps.
+fn listen(cli: &Cli) -> Result<(Bus, Services, Sub<Status>, Sub<HeightmapFrame>), String> {
     let services = Services::new(&cli.prefix).map_err(|e| e.to_string())?;
     let bus = Bus::open("herbctl", &services).map_err(|e| e.to_string())?;
     let status = bus
@@ -375,6 +368,13 @@ fn reset(cli: &Cli, timeout: f64) -> Result<bool, String> {
     let frames = bus
         .subscriber::<HeightmapFrame>(&services.heightmap())
         .map_err(|e| e.to_string())?;
+    Ok((bus, services, status, frames))
+}
+
+/// `herbctl reset`: asks the loopback to empty its box, unless herbd reports a running job, and
+/// waits for the heightmap of the empty box.
+fn reset(cli: &Cli, timeout: f64) -> Result<bool, String> {
+    let (bus, services, status, frames) = listen(cli)?;
     let request = bus
         .publisher::<SimReset>(&services.sim_reset())
         .map_err(|e| e.to_string())?;

@@ -179,6 +179,19 @@ impl Follow {
     }
 }
 
+/// The loopback and herbd on configuration `cfg`, logging into `dir`; they run while the
+/// handles live.
+fn start_cell(dir: &Path, cfg: &Path) -> (Proc, Proc) {
+    let cfg = cfg.to_str().unwrap();
+    let lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg],
+        &dir.join("loopback.log"),
+    );
+    let hd = spawn(&exe("herbd"), &["--config", cfg], &dir.join("herbd.log"));
+    (lb, hd)
+}
+
 /// A temporary folder, a unique prefix and a configuration (BLBF placements) for test `tag`.
 fn setup(tag: &str) -> (PathBuf, String, PathBuf) {
     setup_with(tag, "blbf")
@@ -410,13 +423,7 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
         JointCommand, JointState, PackJobRequest, RejectReason, Services, Status, StatusEvent,
     };
     let (dir, prefix, cfg) = setup("bad");
-    let cfg_s = cfg.to_str().unwrap();
-    let _lb = spawn(
-        &loopback_exe(),
-        &["--config", cfg_s],
-        &dir.join("loopback.log"),
-    );
-    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let (_lb, _hd) = start_cell(&dir, &cfg);
     let services = Services::new(&prefix).unwrap();
     let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
     let client = bus.job_client().unwrap();
@@ -506,13 +513,7 @@ fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
     let (dir, prefix, cfg) = setup("nanframe");
-    let cfg_s = cfg.to_str().unwrap();
-    let _lb = spawn(
-        &loopback_exe(),
-        &["--config", cfg_s],
-        &dir.join("loopback.log"),
-    );
-    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let (_lb, _hd) = start_cell(&dir, &cfg);
     let services = Services::new(&prefix).unwrap();
     let stop = Arc::new(AtomicBool::new(false));
     let injector = {
@@ -584,13 +585,7 @@ fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
 fn a_stalled_loopback_reports_real_speeds_and_nothing_is_rejected() {
     use herb_ipc::{Services, Status, StatusEvent};
     let (dir, prefix, cfg) = setup("stall");
-    let cfg_s = cfg.to_str().unwrap();
-    let lb = spawn(
-        &loopback_exe(),
-        &["--config", cfg_s],
-        &dir.join("loopback.log"),
-    );
-    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let (lb, _hd) = start_cell(&dir, &cfg);
     let services = Services::new(&prefix).unwrap();
     let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
     let status = bus.subscriber::<Status>(&services.status()).unwrap();
@@ -636,13 +631,7 @@ fn a_stalled_loopback_reports_real_speeds_and_nothing_is_rejected() {
 fn a_resume_while_holding_announces_no_second_decision() {
     use herb_ipc::{GripperState, Services, Status, StatusEvent};
     let (dir, prefix, cfg) = setup("holdresume");
-    let cfg_s = cfg.to_str().unwrap();
-    let lb = spawn(
-        &loopback_exe(),
-        &["--config", cfg_s],
-        &dir.join("loopback.log"),
-    );
-    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let (lb, _hd) = start_cell(&dir, &cfg);
     let services = Services::new(&prefix).unwrap();
     let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
     let status = bus.subscriber::<Status>(&services.status()).unwrap();
@@ -692,13 +681,7 @@ fn a_resume_while_holding_announces_no_second_decision() {
 #[test]
 fn a_killed_daemon_is_reported_lost_by_the_client() {
     let (dir, prefix, cfg) = setup("lost");
-    let cfg_s = cfg.to_str().unwrap();
-    let _lb = spawn(
-        &loopback_exe(),
-        &["--config", cfg_s],
-        &dir.join("loopback.log"),
-    );
-    let hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let (_lb, hd) = start_cell(&dir, &cfg);
     let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, false);
     let mut ctl_out = Follow::new(&mut ctl);
     ctl_out.wait_for("object  1/2", Duration::from_secs(60));
@@ -722,12 +705,7 @@ fn a_killed_daemon_is_reported_lost_by_the_client() {
 fn a_second_daemon_on_a_prefix_in_use_refuses_to_start() {
     let (dir, prefix, cfg) = setup("second");
     let cfg_s = cfg.to_str().unwrap();
-    let _lb = spawn(
-        &loopback_exe(),
-        &["--config", cfg_s],
-        &dir.join("loopback.log"),
-    );
-    let first = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let (_lb, first) = start_cell(&dir, &cfg);
     // Up once it has said which policy it runs (its start-up line).
     let t0 = Instant::now();
     while !std::fs::read_to_string(dir.join("herbd.log")).is_ok_and(|l| l.contains("Hz, prefix")) {
@@ -816,13 +794,7 @@ fn joint_states_going_backwards_are_rejected_and_counted() {
 fn outcomes_carry_their_job_across_jobs() {
     use herb_ipc::{Services, SimOutcome, Status, StatusEvent};
     let (dir, prefix, cfg) = setup("jobids");
-    let cfg_s = cfg.to_str().unwrap();
-    let _lb = spawn(
-        &loopback_exe(),
-        &["--config", cfg_s],
-        &dir.join("loopback.log"),
-    );
-    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let (_lb, _hd) = start_cell(&dir, &cfg);
     let services = Services::new(&prefix).unwrap();
     let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
     let status = bus.subscriber::<Status>(&services.status()).unwrap();
@@ -874,13 +846,7 @@ fn outcomes_carry_their_job_across_jobs() {
 fn the_box_is_reset_between_jobs_and_not_during_one() {
     use herb_ipc::{Services, SimOutcome};
     let (dir, prefix, cfg) = setup("reset");
-    let cfg_s = cfg.to_str().unwrap();
-    let _lb = spawn(
-        &loopback_exe(),
-        &["--config", cfg_s],
-        &dir.join("loopback.log"),
-    );
-    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let (_lb, _hd) = start_cell(&dir, &cfg);
     let services = Services::new(&prefix).unwrap();
     let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
     let outcomes = bus
@@ -923,13 +889,7 @@ fn the_box_is_reset_between_jobs_and_not_during_one() {
 #[test]
 fn sigterm_mid_motion_brakes_reports_and_exits_zero() {
     let (dir, prefix, cfg) = setup("sigterm");
-    let cfg_s = cfg.to_str().unwrap();
-    let _lb = spawn(
-        &loopback_exe(),
-        &["--config", cfg_s],
-        &dir.join("loopback.log"),
-    );
-    let mut hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let (_lb, mut hd) = start_cell(&dir, &cfg);
     let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, false);
     let mut ctl_out = Follow::new(&mut ctl);
     ctl_out.wait_for("object  1/2", Duration::from_secs(60));
