@@ -238,6 +238,12 @@ pub struct StatsLink {
     pub tx: rtrb::Producer<Box<LoopStats>>,
 }
 
+/// A stamp is not from the future when it is at most 1 ms past the cycle's start `now`, or, if
+/// the loop was preempted since, not past the clock when read (read only in that case).
+fn not_from_the_future(stamp_ns: u64, now: u64) -> bool {
+    stamp_ns <= now + 1_000_000 || stamp_ns <= monotonic_ns()
+}
+
 impl Controller {
     /// Builds the loop: two trajectory buffers for `max_trajectory_s`, statistics rings.
     pub fn new(
@@ -383,7 +389,7 @@ impl Controller {
             let origin = s.header().publisher_id().value();
             match m.validate() {
                 Ok(())
-                    if m.header.stamp_ns <= now + 1_000_000
+                    if not_from_the_future(m.header.stamp_ns, now)
                         && self.js_order.accept(origin, &m.header) =>
                 {
                     self.js = Some(m);
@@ -397,7 +403,7 @@ impl Controller {
             let origin = s.header().publisher_id().value();
             match m.validate() {
                 Ok(())
-                    if m.header.stamp_ns <= now + 1_000_000
+                    if not_from_the_future(m.header.stamp_ns, now)
                         && self.gs_order.accept(origin, &m.header) =>
                 {
                     self.gs = Some(m);

@@ -318,11 +318,6 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         sleep_until(next, 0);
         next += period;
         let now = monotonic_ns();
-        // The real time since the last cycle (a late or stalled cycle is longer than the
-        // period): tracking and the reported speed use it, so a late cycle reports the arm's
-        // speed, not the distance covered divided by the nominal period.
-        let dt = (now.saturating_sub(last_cycle) as f64 * 1e-9).max(1e-6);
-        last_cycle = now;
         if now > next {
             next = now + period;
         }
@@ -346,6 +341,13 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
                 eprintln!("herb-loopback: box reset refused: an object is held or settling");
             }
         }
+        // The real time since the last measurement, read after the commands were taken (a
+        // cycle preempted before or while draining them sees more motion and more time): a late
+        // or stalled cycle reports the arm's speed, not the distance covered divided by the
+        // nominal period. The joint state is stamped with this measurement time.
+        let measured = monotonic_ns();
+        let dt = (measured.saturating_sub(last_cycle) as f64 * 1e-9).max(1e-6);
+        last_cycle = measured;
         // Track the target.
         let a = if cli.lag_s > 0.0 {
             (dt / cli.lag_s).min(1.0)
@@ -359,7 +361,10 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         }
         seq += 1;
         arm.publish_joint_state(JointState {
-            header: Header::now(seq),
+            header: Header {
+                stamp_ns: measured,
+                ..Header::now(seq)
+            },
             position: sim.q,
             velocity: sim.qd,
         });

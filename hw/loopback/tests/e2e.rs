@@ -179,6 +179,26 @@ impl Follow {
     }
 }
 
+/// herbd's count of rejected inputs from its heartbeats on `status`: the newest one once `done`
+/// holds for it, or after 5 s (panics if no heartbeat came at all).
+fn rejected_inputs(
+    status: &herb_ipc::bus::Sub<herb_ipc::Status>,
+    done: impl Fn(u64) -> bool,
+) -> u64 {
+    let heartbeat = herb_ipc::StatusEvent::Heartbeat as u32;
+    let mut counted = None;
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_secs(5) && !counted.is_some_and(&done) {
+        while let Ok(Some(s)) = status.receive() {
+            if s.payload().event == heartbeat {
+                counted = Some(s.payload().rejected_inputs);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    counted.expect("herbd heartbeats")
+}
+
 /// The loopback and herbd on configuration `cfg`, logging into `dir`; they run while the
 /// handles live.
 fn start_cell(dir: &Path, cfg: &Path) -> (Proc, Proc) {
@@ -419,9 +439,7 @@ fn submit(
 
 #[test]
 fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
-    use herb_ipc::{
-        JointCommand, JointState, PackJobRequest, RejectReason, Services, Status, StatusEvent,
-    };
+    use herb_ipc::{JointCommand, JointState, PackJobRequest, RejectReason, Services, Status};
     let (dir, prefix, cfg) = setup("bad");
     let (_lb, _hd) = start_cell(&dir, &cfg);
     let services = Services::new(&prefix).unwrap();
@@ -451,17 +469,6 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
     nan_count.count = u32::MAX;
     assert_eq!(reason(submit(&client, nan_count)).0, RejectReason::TooMany);
 
-    // No second process may speak for the arm or command it: the robot services take one
-    // publisher each (the adapter's, herbd's), so a rogue one is refused (issue 18, item 2).
-    assert!(
-        bus.publisher::<JointState>(&services.joint_state())
-            .is_err()
-    );
-    assert!(
-        bus.publisher::<JointCommand>(&services.joint_command())
-            .is_err()
-    );
-
     // A valid job is accepted once herbd hears the adapter (NotReady before); a second one
     // while it runs is Busy (not queued).
     let t0 = Instant::now();
@@ -474,6 +481,18 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
         ok = submit(&client, PackJobRequest::new(7, &[1, 3]));
     }
     assert_eq!(reason(ok), (RejectReason::None, 0));
+    // Now that the adapter and herbd publish (herbd heard the adapter), no second process may
+    // speak for the arm or command it: the robot services take one publisher each, so a rogue
+    // one is refused (issue 18, item 2).
+    assert!(
+        bus.publisher::<JointState>(&services.joint_state())
+            .is_err()
+    );
+    assert!(
+        bus.publisher::<JointCommand>(&services.joint_command())
+            .is_err()
+    );
+
     assert_eq!(
         reason(submit(&client, PackJobRequest::new(8, &[1]))).0,
         RejectReason::Busy
@@ -489,16 +508,7 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
 
     // The daemon counts what it rejected: 8 jobs and the NotReady ones.
     let want = 8 + not_ready;
-    let t0 = Instant::now();
-    let mut counted = 0;
-    while t0.elapsed() < Duration::from_secs(5) && counted < want {
-        while let Ok(Some(s)) = status.receive() {
-            if s.payload().event == StatusEvent::Heartbeat as u32 {
-                counted = s.payload().rejected_inputs;
-            }
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    let counted = rejected_inputs(&status, |n| n >= want);
     assert_eq!(counted, want, "rejections counted");
 }
 
@@ -509,7 +519,7 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
 #[test]
 fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
     use herb_adapter::{CameraPort, Heightmap};
-    use herb_ipc::{Services, Status, StatusEvent, monotonic_ns};
+    use herb_ipc::{Services, Status, monotonic_ns};
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
     let (dir, prefix, cfg) = setup("nanframe");
@@ -564,16 +574,7 @@ fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
         "no fault: {summary}"
     );
     assert!(sent > 10, "the injector sent {sent} frames");
-    let mut counted = 0;
-    let t0 = Instant::now();
-    while t0.elapsed() < Duration::from_secs(5) && counted == 0 {
-        while let Ok(Some(s)) = status.receive() {
-            if s.payload().event == StatusEvent::Heartbeat as u32 {
-                counted = s.payload().rejected_inputs;
-            }
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    let counted = rejected_inputs(&status, |n| n > 0);
     assert!(counted > 0, "bad frames counted in rejected_inputs");
 }
 
@@ -583,26 +584,13 @@ fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
 /// a nominal 1 ms, above the 20 rad/s the wire allows).
 #[test]
 fn a_stalled_loopback_reports_real_speeds_and_nothing_is_rejected() {
-    use herb_ipc::{Services, Status, StatusEvent};
+    use herb_ipc::{Services, Status};
     let (dir, prefix, cfg) = setup("stall");
     let (lb, _hd) = start_cell(&dir, &cfg);
     let services = Services::new(&prefix).unwrap();
     let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
     let status = bus.subscriber::<Status>(&services.status()).unwrap();
-    // The newest heartbeat's count of rejected inputs.
-    let rejected_now = || {
-        let mut rejected = None;
-        let t0 = Instant::now();
-        while t0.elapsed() < Duration::from_secs(5) && rejected.is_none() {
-            while let Ok(Some(s)) = status.receive() {
-                if s.payload().event == StatusEvent::Heartbeat as u32 {
-                    rejected = Some(s.payload().rejected_inputs);
-                }
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        rejected.expect("a heartbeat")
-    };
+    let rejected_now = || rejected_inputs(&status, |_| true);
     let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, true);
     let mut ctl_out = Follow::new(&mut ctl);
     ctl_out.wait_for("object  1/2", Duration::from_secs(60));
