@@ -133,6 +133,16 @@ impl Config {
     pub fn period_s(&self) -> f64 {
         1.0 / self.loop_.rate_hz
     }
+
+    /// Loop period (ns).
+    pub fn period_ns(&self) -> u64 {
+        secs_to_ns(self.period_s())
+    }
+}
+
+/// Seconds (from the configuration) to nanoseconds, truncated.
+pub fn secs_to_ns(s: f64) -> u64 {
+    (s * 1e9) as u64
 }
 
 impl ConfigFile for Config {

@@ -6,4 +6,6 @@
 
 pub mod config;
 pub mod controller;
+pub mod job;
+pub mod plan;
 pub mod planner;

@@ -8,6 +8,7 @@
 //! Ruckig trajectories at the loop period; it also computes brakes on request.
 
 use crate::config::Config;
+pub use crate::plan::{MAX_SEGMENTS, MotionPlan, Request, Response, Segment};
 use herb_decide::DecideError;
 use herb_decide::sequence::{SequenceModel, beam3};
 use herb_decide::{Decider, HeightmapView};
@@ -15,7 +16,7 @@ use herb_ipc::bus::{Bus, Sub};
 use herb_ipc::{Fault, GripperAction, HeightmapFrame, MAX_JOB_OBJECTS, Services};
 use herb_robot::cell::{CellConfig, lift_to, plan_waypoints};
 use herb_robot::kinematics::{Arm, DOF, IkOptions};
-use herb_robot::motion::{MotionPlanner, Setpoint, Setpoints};
+use herb_robot::motion::MotionPlanner;
 use herb_sim::{SharedCatalog, TypeIdx};
 use iceoryx2::prelude::ipc;
 use iceoryx2::sample::Sample;
@@ -24,142 +25,16 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-/// Most segments in one object's plan.
-pub const MAX_SEGMENTS: usize = 8;
-
-/// One rest-to-rest move of a plan, and the gripper action at its end.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Segment {
-    /// Index one past its last sample in [`MotionPlan::setpoints`].
-    pub end: usize,
-    /// Gripper action once the arm stands at the segment's end.
-    pub then: Option<GripperAction>,
-}
-
-/// A trajectory buffer and what it is for. Two are allocated at start and reused.
-#[derive(Debug, Clone)]
-pub struct MotionPlan {
-    /// Samples at the loop period.
-    pub setpoints: Setpoints,
-    /// Segments, in order.
-    pub segments: [Segment; MAX_SEGMENTS],
-    /// Segments used.
-    pub n_segments: usize,
-    /// Object index in the packing order.
-    pub index: u32,
-    /// Its catalog type.
-    pub object: u16,
-    /// Placement in B: x, y, z (m), yaw (rad).
-    pub pose: [f32; 4],
-    /// Decision latency (one `herb_decide::Decider::decide` call), ns; 0 when not decided anew.
-    pub decision_ns: u64,
-}
-
-impl MotionPlan {
-    /// An empty plan holding `samples` samples at most.
-    pub fn with_capacity(samples: usize) -> Self {
-        Self {
-            setpoints: Setpoints::with_capacity(samples),
-            segments: [Segment::default(); MAX_SEGMENTS],
-            n_segments: 0,
-            index: 0,
-            object: 0,
-            pose: [0.0; 4],
-            decision_ns: 0,
-        }
-    }
-
-    fn reset(&mut self) {
-        self.setpoints.clear();
-        self.n_segments = 0;
-        self.decision_ns = 0;
-    }
-
-    fn push_segment(&mut self, then: Option<GripperAction>) {
-        if self.n_segments < MAX_SEGMENTS {
-            self.segments[self.n_segments] = Segment {
-                end: self.setpoints.len(),
-                then,
-            };
-            self.n_segments += 1;
-        }
-    }
-
-    /// The segments used.
-    pub fn segments(&self) -> &[Segment] {
-        &self.segments[..self.n_segments]
-    }
-}
-
-/// What the loop asks.
-#[derive(Debug)]
-pub enum Request {
-    /// Order a job's objects (Beam-3).
-    Order {
-        /// Job id.
-        job_id: u64,
-        /// Objects (catalog type indices).
-        objects: [u16; MAX_JOB_OBJECTS],
-        /// Used.
-        count: usize,
-    },
-    /// Decide and plan object `index` from rest at `from`, on a heightmap stamped after
-    /// `after_stamp_ns`. With `place_only`, the object is already held: reuse `pose` and plan
-    /// only the placing moves.
-    Plan {
-        /// Index in the order.
-        index: u32,
-        /// Its type.
-        object: u16,
-        /// Oldest acceptable heightmap stamp (exclusive).
-        after_stamp_ns: u64,
-        /// Current configuration (at rest).
-        from: [f64; DOF],
-        /// Held already: place at `pose`.
-        place_only: bool,
-        /// The placement to reuse with `place_only`.
-        pose: [f32; 4],
-        /// Buffer to fill.
-        buf: Box<MotionPlan>,
-    },
-    /// Brake from `state` to standstill.
-    Brake {
-        /// The last commanded state.
-        state: Setpoint,
-        /// Buffer to fill.
-        buf: Box<MotionPlan>,
-    },
-}
-
-/// What the planner answers.
-#[derive(Debug)]
-pub enum Response {
-    /// The packing order.
-    Ordered {
-        /// Job id.
-        job_id: u64,
-        /// Ordered objects.
-        order: [u16; MAX_JOB_OBJECTS],
-        /// Used.
-        count: usize,
-    },
-    /// The job could not be ordered.
-    OrderFailed {
-        /// Job id.
-        job_id: u64,
-    },
-    /// A plan for an object.
-    Planned(Box<MotionPlan>),
-    /// A brake trajectory.
-    Braked(Box<MotionPlan>),
-    /// Planning failed; the buffer comes back.
-    Failed {
-        /// Why.
-        fault: Fault,
-        /// The buffer.
-        buf: Box<MotionPlan>,
-    },
-}
+/// Requests (and responses) the rings between the loop and the planner hold. The loop has at
+/// most two requests out (an order or a plan, and a brake).
+const RING: usize = 8;
+/// Longest wait for a heightmap stamped after the last release before a plan fails with
+/// `HeightmapTimeout` (the loop then waits and asks again).
+const FRAME_WAIT: Duration = Duration::from_millis(500);
+/// How often a waiting plan looks for a new frame.
+const FRAME_POLL: Duration = Duration::from_millis(1);
+/// Longest sleep with no request (the loop wakes the thread when it sends one).
+const IDLE_PARK: Duration = Duration::from_millis(20);
 
 /// The loop's ends of the rings.
 pub struct PlannerLink {
@@ -229,7 +104,7 @@ impl Worker {
             if fresh || t0.elapsed() > wait {
                 break;
             }
-            std::thread::sleep(Duration::from_millis(1));
+            std::thread::sleep(FRAME_POLL);
         }
         self.latest
             .as_ref()
@@ -261,7 +136,7 @@ impl Worker {
         let pose = match place_only {
             Some(p) => p,
             None => {
-                if !self.refresh_frame(after, Duration::from_millis(500)) {
+                if !self.refresh_frame(after, FRAME_WAIT) {
                     return Err(Fault::HeightmapTimeout);
                 }
                 let frame = self
@@ -280,6 +155,7 @@ impl Worker {
                 let t0 = Instant::now();
                 let p = self.decider.decide(view, ty, index as usize, after);
                 buf.decision_ns = t0.elapsed().as_nanos() as u64;
+                buf.decided = true;
                 p.map_err(|e| match e {
                     DecideError::NoFeasiblePlacement => Fault::NoFeasiblePlacement,
                     _ => Fault::Decision,
@@ -383,8 +259,8 @@ pub fn spawn(
     catalog: SharedCatalog,
     stop: Arc<AtomicBool>,
 ) -> Result<(PlannerLink, JoinHandle<()>), String> {
-    let (tx, req_rx) = rtrb::RingBuffer::<Request>::new(8);
-    let (resp_tx, rx) = rtrb::RingBuffer::<Response>::new(8);
+    let (tx, req_rx) = rtrb::RingBuffer::<Request>::new(RING);
+    let (resp_tx, rx) = rtrb::RingBuffer::<Response>::new(RING);
     let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
     let cfg = cfg.clone();
     let shared_rejects = Arc::new(AtomicU64::new(0));
@@ -440,7 +316,7 @@ pub fn spawn(
                         eprintln!("herbd: planner response ring full (a bug)");
                     }
                 }
-                std::thread::park_timeout(Duration::from_millis(20));
+                std::thread::park_timeout(IDLE_PARK);
             }
         })
         .map_err(|e| format!("cannot start the planner thread: {e}"))?;

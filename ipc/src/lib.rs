@@ -39,6 +39,13 @@ pub const HEIGHT_RANGE_M: (f32, f32) = (-0.05, 1.0);
 pub const MAX_JOINT_ABS_RAD: f64 = 2.0 * std::f64::consts::PI;
 /// Largest plausible joint speed (rad/s).
 pub const MAX_JOINT_SPEED: f64 = 20.0;
+/// `herbd` refuses a joint or gripper state stamped more than this past the start of the cycle
+/// that reads it (ns), unless the clock, read when it was received, is already past the stamp.
+pub const MAX_FUTURE_STAMP_NS: u64 = 1_000_000;
+/// `herbd` repeats its current [`GripperCommand`] this often while a job runs (ns).
+pub const GRIPPER_REPEAT_NS: u64 = 100_000_000;
+/// `herbd` publishes a [`StatusEvent::Heartbeat`] this often (ns).
+pub const HEARTBEAT_PERIOD_NS: u64 = 100_000_000;
 
 /// `CLOCK_MONOTONIC` now, in nanoseconds.
 pub fn monotonic_ns() -> u64 {
@@ -78,14 +85,19 @@ pub struct Header {
 }
 
 impl Header {
-    /// A header for message `seq`, stamped now.
-    pub fn now(seq: u64) -> Self {
+    /// A header for message `seq` stamped `stamp_ns` (`CLOCK_MONOTONIC`).
+    pub fn at(seq: u64, stamp_ns: u64) -> Self {
         Self {
             version: PROTOCOL_VERSION,
             reserved: 0,
             seq,
-            stamp_ns: monotonic_ns(),
+            stamp_ns,
         }
+    }
+
+    /// A header for message `seq`, stamped now.
+    pub fn now(seq: u64) -> Self {
+        Self::at(seq, monotonic_ns())
     }
 
     /// Checks the version and that seq and stamp are set.

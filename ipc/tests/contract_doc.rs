@@ -203,7 +203,7 @@ fn codes() -> String {
 
 fn constants() -> String {
     format!(
-        "| constant | value |\n| --- | --- |\n| `PROTOCOL_VERSION` | {PROTOCOL_VERSION} |\n| `DOF` | {DOF} |\n| `HEIGHTMAP_MAX_CELLS` | {HEIGHTMAP_MAX_CELLS} |\n| `MAX_JOB_OBJECTS` | {MAX_JOB_OBJECTS} |\n| `NO_OBJECT` | {NO_OBJECT} (0x{NO_OBJECT:X}) |\n| `HEIGHT_RANGE_M` | {} .. {} m |\n| `MAX_JOINT_ABS_RAD` | {MAX_JOINT_ABS_RAD} rad |\n| `MAX_JOINT_SPEED` | {MAX_JOINT_SPEED} rad/s |\n",
+        "| constant | value |\n| --- | --- |\n| `PROTOCOL_VERSION` | {PROTOCOL_VERSION} |\n| `DOF` | {DOF} |\n| `HEIGHTMAP_MAX_CELLS` | {HEIGHTMAP_MAX_CELLS} |\n| `MAX_JOB_OBJECTS` | {MAX_JOB_OBJECTS} |\n| `NO_OBJECT` | {NO_OBJECT} (0x{NO_OBJECT:X}) |\n| `HEIGHT_RANGE_M` | {} .. {} m |\n| `MAX_JOINT_ABS_RAD` | {MAX_JOINT_ABS_RAD} rad |\n| `MAX_JOINT_SPEED` | {MAX_JOINT_SPEED} rad/s |\n| `MAX_FUTURE_STAMP_NS` | {MAX_FUTURE_STAMP_NS} ns |\n| `GRIPPER_REPEAT_NS` | {GRIPPER_REPEAT_NS} ns |\n| `HEARTBEAT_PERIOD_NS` | {HEARTBEAT_PERIOD_NS} ns |\n",
         HEIGHT_RANGE_M.0, HEIGHT_RANGE_M.1
     )
 }

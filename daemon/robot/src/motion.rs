@@ -156,7 +156,8 @@ impl Setpoints {
         self.samples.clear();
     }
 
-    fn push(&mut self, s: Setpoint) -> Result<(), MotionError> {
+    /// Appends a sample; an error (`TooLong`) when the buffer is full, never a reallocation.
+    pub fn push(&mut self, s: Setpoint) -> Result<(), MotionError> {
         if self.samples.len() == self.samples.capacity() {
             return Err(MotionError::TooLong {
                 capacity: self.samples.capacity(),

@@ -14,6 +14,9 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
+/// How often the reporter thread prints statistics and statuses and pings the watchdog.
+const REPORT_POLL: Duration = Duration::from_millis(20);
+
 /// HERB's real-time packing controller.
 #[derive(Debug, Parser)]
 #[command(name = "herbd", version)]
@@ -214,7 +217,7 @@ fn run(cli: Cli) -> Result<(), String> {
                     if run_for.is_some_and(|t| t0.elapsed().as_secs_f64() >= t) {
                         shared.stop.store(true, Ordering::Relaxed);
                     }
-                    std::thread::sleep(Duration::from_millis(20));
+                    std::thread::sleep(REPORT_POLL);
                 }
                 total
             })

@@ -1,8 +1,8 @@
 //! `herb-loopback`: a stand-in for the Baxter arm, its gripper and the depth camera, so the
 //! whole controller runs on any machine.
 //!
-//! - **Arm**: follows `JointCommand`s (ideal tracking, or a first-order lag with `--lag-s`)
-//!   and publishes `JointState` every cycle. Commands are validated against the configured
+//! - **Arm**: follows `JointCommand`s (ideal tracking, or a first-order lag with `--lag-s`),
+//!   never faster than the configured joint speed limits, and publishes `JointState` every cycle. Commands are validated against the configured
 //!   joint limits (the same configuration file as `herbd`): an invalid one is counted and not
 //!   followed; the largest excess seen is reported.
 //! - **Gripper**: closing within 2 cm of the pick station's grasp point takes the object the
@@ -157,6 +157,9 @@ struct Sim {
     catalog: Arc<Catalog>,
     lower: [f64; DOF],
     upper: [f64; DOF],
+    /// Joint speed limits: the simulated arm never moves faster, whatever the commands did
+    /// while this process was stalled or before it started.
+    vmax: [f64; DOF],
     q: [f64; DOF],
     qd: [f64; DOF],
     target: [f64; DOF],
@@ -285,6 +288,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         catalog: catalog.clone(),
         lower: cfg.limits.lower,
         upper: cfg.limits.upper,
+        vmax: cfg.limits.velocity,
         q: LEFT_TOP_DOWN_NOMINAL,
         qd: [0.0; DOF],
         target: LEFT_TOP_DOWN_NOMINAL,
@@ -355,7 +359,10 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             1.0
         };
         for i in 0..DOF {
-            let nq = sim.q[i] + a * (sim.target[i] - sim.q[i]);
+            // A stall between taking the commands and measuring the time leaves a whole stall's
+            // worth of commanded motion to one short cycle: the arm's speed limit bounds it.
+            let reach = sim.vmax[i] * dt;
+            let nq = sim.q[i] + (a * (sim.target[i] - sim.q[i])).clamp(-reach, reach);
             sim.qd[i] = (nq - sim.q[i]) / dt;
             sim.q[i] = nq;
         }

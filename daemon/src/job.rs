@@ -1,0 +1,834 @@
+//! The job state machine: what `herbd` does with a pack job, as a pure function of its inputs.
+//!
+//! [`Job`] owns no port, reads no clock and allocates nothing after [`Job::new`]. The loop
+//! ([`crate::controller`]) is a thin shell around it: each cycle it reads the clock once (`now`,
+//! the cycle's start) and feeds the machine, in this order,
+//!
+//! 1. every joint state ([`Job::joint_state`]), gripper state ([`Job::gripper_state`]) and
+//!    heightmap frame ([`Job::heightmap`]) that arrived,
+//! 2. every planner response ([`Job::planner_response`]),
+//! 3. every pack-job request ([`Job::job_request`]),
+//! 4. one [`Job::tick`] (stop request, health, one step of the current phase, commands),
+//!
+//! and the machine answers through [`Effects`]: replies, status events, joint and gripper
+//! commands and planner requests, in the order the shell must publish them. Unit tests
+//! (`job/tests.rs`) drive it with scripted inputs and a fake clock.
+//!
+//! # Per object
+//!
+//! wait for a heightmap stamped after the last release -> the planner decides and plans
+//! (Beam-3 order at job start; policy; z; waypoints; IK; Ruckig) -> stream the samples, one per
+//! tick -> at the grasp, close the gripper and wait until it holds -> stream -> at the
+//! placement, open and wait -> report -> retreat -> next object.
+//!
+//! # Faults
+//!
+//! Joint states, gripper states or heightmaps older than their timeouts are a fault: a moving
+//! arm brakes (a Ruckig brake from the last commanded state), a status reports the fault, and
+//! the job holds. When every input has been fresh for `resume_after_s`, the job resumes from
+//! the measured configuration: an object still held is placed, an object lost from the
+//! gripper (the adapter restarted) is picked again, otherwise the current object starts over.
+//! A second job while one runs is rejected (`Busy`), not queued: a client resubmits.
+//! No joint command leaves the configured limits: every sample is checked before it is
+//! published, and one outside is replaced by holding the last command (counted).
+
+use crate::config::{Timeouts, secs_to_ns};
+use crate::plan::{MotionPlan, Request, Response};
+use herb_ipc::{
+    Fault, GRIPPER_REPEAT_NS, GripperAction, GripperState, HEARTBEAT_PERIOD_NS, Header,
+    HeightmapFrame, InOrder, JobState, JointState, MAX_FUTURE_STAMP_NS, MAX_JOB_OBJECTS, NO_OBJECT,
+    PackJobRequest, RejectReason, Status, StatusEvent,
+};
+use herb_robot::kinematics::DOF;
+use herb_robot::motion::Setpoint;
+
+/// The job's timeouts (ns), from the `[timeouts]` section of the configuration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct JobTimeouts {
+    /// A joint state older than this while a job runs is a fault (`joint_state_s`).
+    pub joint_state_ns: u64,
+    /// A gripper state older than this is a fault (`gripper_state_s`).
+    pub gripper_state_ns: u64,
+    /// No heightmap received for this long is a fault (`heightmap_s`).
+    pub heightmap_ns: u64,
+    /// The gripper must reach a commanded state within this (`gripper_action_s`).
+    pub gripper_action_ns: u64,
+    /// Inputs must be fresh this long before a faulted job resumes (`resume_after_s`).
+    pub resume_after_ns: u64,
+    /// Longest wait for a heightmap stamped after the last release (`fresh_heightmap_s`).
+    pub fresh_heightmap_ns: u64,
+}
+
+impl From<&Timeouts> for JobTimeouts {
+    fn from(t: &Timeouts) -> Self {
+        Self {
+            joint_state_ns: secs_to_ns(t.joint_state_s),
+            gripper_state_ns: secs_to_ns(t.gripper_state_s),
+            heightmap_ns: secs_to_ns(t.heightmap_s),
+            gripper_action_ns: secs_to_ns(t.gripper_action_s),
+            resume_after_ns: secs_to_ns(t.resume_after_s),
+            fresh_heightmap_ns: secs_to_ns(t.fresh_heightmap_s),
+        }
+    }
+}
+
+/// What the machine is built with (constant while it runs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JobParams {
+    /// Timeouts.
+    pub timeouts: JobTimeouts,
+    /// Lowest joint command (rad).
+    pub lower: [f64; DOF],
+    /// Highest joint command (rad).
+    pub upper: [f64; DOF],
+    /// Object types in the catalog (a request naming another is rejected).
+    pub catalog_len: usize,
+}
+
+/// Where the machine's outputs go, in the order they must be published. The shell numbers
+/// every message from one sequence counter in call order and stamps it with the cycle's start.
+pub trait Effects {
+    /// Answers the pack-job request being handled ([`Job::job_request`]).
+    fn reply(&mut self, job_id: u64, reason: RejectReason, detail: u32);
+    /// Publishes a status. Its header, `cycles`, `deadline_misses` and `max_cycle_ns` are the
+    /// shell's to fill; `rejected_inputs` counts the machine's rejections only.
+    fn status(&mut self, status: &Status);
+    /// Publishes a joint command (already checked against the limits).
+    fn joint(&mut self, command: &Setpoint);
+    /// Publishes a gripper command.
+    fn gripper(&mut self, job_id: u64, action: GripperAction, object_type: u32);
+    /// Hands a request to the planner; gives it back when the planner's ring is full.
+    #[allow(clippy::result_large_err)] // moved, not copied around: the machine takes it back
+    fn plan(&mut self, request: Request) -> Result<(), Request>;
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Phase {
+    Idle,
+    Ordering,
+    WaitHeightmap {
+        since: u64,
+    },
+    Planning,
+    Streaming {
+        seg: usize,
+        cursor: usize,
+    },
+    Gripper {
+        action: GripperAction,
+        seg: usize,
+        since: u64,
+    },
+    /// Braking: `cursor` into the brake buffer once it arrived (`None` while it is computed).
+    Braking {
+        cursor: Option<usize>,
+        seg: usize,
+        active_cursor: usize,
+    },
+    Faulted {
+        healthy_since: Option<u64>,
+    },
+}
+
+/// The job state machine. Built once; no method allocates.
+pub struct Job {
+    t: JobTimeouts,
+    lower: [f64; DOF],
+    upper: [f64; DOF],
+    catalog_len: usize,
+    // latched inputs
+    js: Option<JointState>,
+    js_at: u64,
+    /// Order of the joint states (per publisher: sequence and stamp grow).
+    js_order: InOrder,
+    gs: Option<GripperState>,
+    gs_at: u64,
+    /// Order of the gripper states.
+    gs_order: InOrder,
+    /// When the newest valid heightmap was received (the cycle's start).
+    hm_rx_at: u64,
+    /// The newest valid heightmap's capture stamp.
+    hm_stamp: u64,
+    rejected: u64,
+    // the job
+    phase: Phase,
+    job_id: u64,
+    order: [u16; MAX_JOB_OBJECTS],
+    count: usize,
+    index: usize,
+    done: usize,
+    release_stamp: u64,
+    holding: bool,
+    fault: Fault,
+    // trajectory buffers: two, moved between the machine and the planner, never allocated
+    active: Option<Box<MotionPlan>>,
+    spare: Option<Box<MotionPlan>>,
+    brake: Option<Box<MotionPlan>>,
+    // commands
+    cmd: Setpoint,
+    commanding: bool,
+    grip_cmd: GripperAction,
+    grip_object: u32,
+    /// The gripper command changed: publish it at this tick.
+    grip_due: bool,
+    grip_sent_at: u64,
+    last_heartbeat: u64,
+    limit_holds: u64,
+    stopping: bool,
+}
+
+/// A state is not from the future when stamped at most [`MAX_FUTURE_STAMP_NS`] past the
+/// cycle's start, or not past the clock when it was received (the loop may have been preempted
+/// since the cycle began).
+fn not_from_the_future(stamp_ns: u64, now: u64, received_ns: u64) -> bool {
+    stamp_ns <= now + MAX_FUTURE_STAMP_NS || stamp_ns <= received_ns
+}
+
+impl Job {
+    /// A machine without a job, with its two trajectory buffers.
+    pub fn new(p: JobParams, a: Box<MotionPlan>, b: Box<MotionPlan>) -> Self {
+        Self {
+            t: p.timeouts,
+            lower: p.lower,
+            upper: p.upper,
+            catalog_len: p.catalog_len,
+            js: None,
+            js_at: 0,
+            js_order: InOrder::default(),
+            gs: None,
+            gs_at: 0,
+            gs_order: InOrder::default(),
+            hm_rx_at: 0,
+            hm_stamp: 0,
+            rejected: 0,
+            phase: Phase::Idle,
+            job_id: 0,
+            order: [0; MAX_JOB_OBJECTS],
+            count: 0,
+            index: 0,
+            done: 0,
+            release_stamp: 0,
+            holding: false,
+            fault: Fault::None,
+            active: Some(a),
+            spare: Some(b),
+            brake: None,
+            cmd: Setpoint::default(),
+            commanding: false,
+            grip_cmd: GripperAction::Open,
+            grip_object: NO_OBJECT,
+            grip_due: false,
+            grip_sent_at: 0,
+            last_heartbeat: 0,
+            limit_holds: 0,
+            stopping: false,
+        }
+    }
+
+    /// A joint state from `publisher` (iceoryx2's id), received at `received_ns`: latched when
+    /// valid, not from the future and in order; else counted as rejected.
+    pub fn joint_state(&mut self, publisher: u128, m: &JointState, now: u64, received_ns: u64) {
+        match m.validate() {
+            Ok(())
+                if not_from_the_future(m.header.stamp_ns, now, received_ns)
+                    && self.js_order.accept(publisher, &m.header) =>
+            {
+                self.js = Some(*m);
+                self.js_at = m.header.stamp_ns;
+            }
+            _ => self.rejected += 1,
+        }
+    }
+
+    /// A gripper state, as [`Job::joint_state`].
+    pub fn gripper_state(&mut self, publisher: u128, m: &GripperState, now: u64, received_ns: u64) {
+        match m.validate() {
+            Ok(())
+                if not_from_the_future(m.header.stamp_ns, now, received_ns)
+                    && self.gs_order.accept(publisher, &m.header) =>
+            {
+                self.gs = Some(*m);
+                self.gs_at = m.header.stamp_ns;
+            }
+            _ => self.rejected += 1,
+        }
+    }
+
+    /// A heightmap frame, read in place: only its header and grid are checked here (the
+    /// planner checks every cell of the frame it decides on).
+    pub fn heightmap(&mut self, f: &HeightmapFrame, now: u64) {
+        match f.validate_meta() {
+            Ok(()) => {
+                self.hm_rx_at = now;
+                self.hm_stamp = self.hm_stamp.max(f.header.stamp_ns);
+            }
+            Err(_) => self.rejected += 1,
+        }
+    }
+
+    /// A pack-job request: answered through [`Effects::reply`] (a malformed request gets what
+    /// is wrong with it whatever the state; then `ShuttingDown`, `Busy`, `NotReady`), and
+    /// started when accepted.
+    pub fn job_request(&mut self, r: &PackJobRequest, now: u64, fx: &mut impl Effects) {
+        let verdict = r.validate(self.catalog_len).and_then(|()| {
+            if self.stopping {
+                Err((RejectReason::ShuttingDown, 0))
+            } else if self.phase != Phase::Idle {
+                Err((RejectReason::Busy, 0))
+            } else if !self.inputs_fresh(now) {
+                Err((RejectReason::NotReady, 0))
+            } else {
+                Ok(())
+            }
+        });
+        let (reason, detail) = verdict.err().unwrap_or((RejectReason::None, 0));
+        if reason != RejectReason::None {
+            self.rejected += 1;
+        }
+        fx.reply(r.job_id, reason, detail);
+        if reason == RejectReason::None {
+            self.start_job(r, fx);
+        }
+    }
+
+    fn start_job(&mut self, r: &PackJobRequest, fx: &mut impl Effects) {
+        let n = r.objects().len();
+        let mut objects = [0u16; MAX_JOB_OBJECTS];
+        objects[..n].copy_from_slice(r.objects());
+        self.job_id = r.job_id;
+        self.count = n;
+        self.index = 0;
+        self.done = 0;
+        self.fault = Fault::None;
+        self.holding = self.gs.is_some_and(|g| g.holding == 1);
+        self.release_stamp = 0;
+        let q = self.js.map(|j| j.position).unwrap_or_default();
+        self.cmd = Setpoint::at_rest(q);
+        self.commanding = true;
+        let _ = fx.plan(Request::Order {
+            job_id: r.job_id,
+            objects,
+            count: n,
+        });
+        self.phase = Phase::Ordering;
+        self.emit(fx, StatusEvent::Accepted, NO_OBJECT, [0.0; 4], 0);
+    }
+
+    /// One planner response.
+    pub fn planner_response(&mut self, resp: Response, now: u64, fx: &mut impl Effects) {
+        match resp {
+            Response::Ordered {
+                job_id,
+                order,
+                count,
+            } if job_id == self.job_id => {
+                self.order = order;
+                self.count = count;
+                if self.phase == Phase::Ordering {
+                    self.phase = Phase::WaitHeightmap { since: now };
+                }
+            }
+            Response::Ordered { .. } => {}
+            Response::OrderFailed { .. } => {
+                self.fault = Fault::Decision;
+                self.finish(fx, false);
+            }
+            Response::Planned(plan) => {
+                if self.phase == Phase::Planning && !self.stopping {
+                    if let Some(old) = self.active.take() {
+                        self.recycle(old);
+                    }
+                    let (ty, pose, dns) = (plan.object as u32, plan.pose, plan.decision_ns);
+                    let decided = plan.decided;
+                    self.active = Some(plan);
+                    self.phase = Phase::Streaming { seg: 0, cursor: 0 };
+                    // A replan of a decided placement (after a resume while holding the
+                    // object) carries no new decision and is not announced again.
+                    if decided {
+                        self.emit(fx, StatusEvent::Decided, ty, pose, dns);
+                    }
+                } else {
+                    self.recycle(plan);
+                }
+            }
+            Response::Braked(buf) => {
+                if let Phase::Braking {
+                    seg, active_cursor, ..
+                } = self.phase
+                {
+                    self.brake = Some(buf);
+                    self.phase = Phase::Braking {
+                        cursor: Some(0),
+                        seg,
+                        active_cursor,
+                    };
+                } else {
+                    self.recycle(buf);
+                }
+            }
+            Response::Failed { fault, buf } => {
+                self.recycle(buf);
+                match self.phase {
+                    Phase::Planning => {
+                        self.fault = fault;
+                        if fault == Fault::HeightmapTimeout {
+                            self.phase = Phase::WaitHeightmap { since: now };
+                        } else {
+                            self.finish(fx, false);
+                        }
+                    }
+                    Phase::Braking { .. } => self.enter_faulted(fx),
+                    _ => {}
+                }
+            }
+        }
+    }
+
+    /// The rest of a cycle: the stop request (`stop`, seen once), input health, one step of
+    /// the current phase, then the commands and the heartbeat. True when the daemon may exit
+    /// (stopping, and the arm no longer braking).
+    pub fn tick(&mut self, now: u64, stop: bool, fx: &mut impl Effects) -> bool {
+        if stop && !self.stopping {
+            self.stopping = true;
+            self.begin_stop(fx);
+        }
+        self.check_health(now, fx);
+        self.step(now, fx);
+        self.publish(now, fx);
+        self.stopping && !matches!(self.phase, Phase::Braking { .. })
+    }
+
+    /// A status with `event` about no particular object, as the machine stands (the shell's
+    /// `Shutdown`).
+    pub fn status(&self, event: StatusEvent) -> Status {
+        self.status_of(event, NO_OBJECT, [0.0; 4], 0)
+    }
+
+    /// The state reported in statuses.
+    pub fn state(&self) -> JobState {
+        match self.phase {
+            Phase::Idle => JobState::Idle,
+            Phase::Braking { .. } => JobState::Braking,
+            Phase::Faulted { .. } => JobState::Faulted,
+            _ => JobState::Running,
+        }
+    }
+
+    /// Inputs rejected so far (invalid, from the future, out of order; bad job requests).
+    pub fn rejected_inputs(&self) -> u64 {
+        self.rejected
+    }
+
+    /// Commands outside the joint limits replaced by holding the last one.
+    pub fn limit_holds(&self) -> u64 {
+        self.limit_holds
+    }
+
+    fn inputs_fresh(&self, now: u64) -> bool {
+        self.js.is_some() && self.gs.is_some() && self.stale_input(now).is_none()
+    }
+
+    fn stale_input(&self, now: u64) -> Option<Fault> {
+        if now.saturating_sub(self.js_at) >= self.t.joint_state_ns {
+            Some(Fault::JointStateTimeout)
+        } else if now.saturating_sub(self.gs_at) >= self.t.gripper_state_ns {
+            Some(Fault::GripperStateTimeout)
+        } else if now.saturating_sub(self.hm_rx_at) >= self.t.heightmap_ns {
+            Some(Fault::HeightmapTimeout)
+        } else {
+            None
+        }
+    }
+
+    fn check_health(&mut self, now: u64, fx: &mut impl Effects) {
+        match self.phase {
+            Phase::Idle | Phase::Braking { .. } | Phase::Faulted { .. } => {}
+            _ => {
+                if let Some(f) = self.stale_input(now) {
+                    self.raise(fx, f);
+                }
+            }
+        }
+    }
+
+    /// A fault: report, brake if moving, hold.
+    fn raise(&mut self, fx: &mut impl Effects, fault: Fault) {
+        self.fault = fault;
+        self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+        self.begin_brake(fx);
+    }
+
+    fn begin_brake(&mut self, fx: &mut impl Effects) {
+        let moving = self.cmd.velocity.iter().any(|v| *v != 0.0)
+            || self.cmd.acceleration.iter().any(|a| *a != 0.0);
+        let (seg, cursor) = match self.phase {
+            Phase::Streaming { seg, cursor } => (seg, cursor),
+            _ => (0, 0),
+        };
+        if moving && let Some(buf) = self.spare.take() {
+            match fx.plan(Request::Brake {
+                state: self.cmd,
+                buf,
+            }) {
+                Ok(()) => {
+                    self.phase = Phase::Braking {
+                        cursor: None,
+                        seg,
+                        active_cursor: cursor,
+                    };
+                    return;
+                }
+                Err(Request::Brake { buf, .. }) => self.spare = Some(buf),
+                Err(_) => {}
+            }
+        }
+        self.enter_faulted(fx);
+    }
+
+    fn enter_faulted(&mut self, fx: &mut impl Effects) {
+        self.cmd.velocity = [0.0; DOF];
+        self.cmd.acceleration = [0.0; DOF];
+        self.phase = Phase::Faulted {
+            healthy_since: None,
+        };
+        self.emit(fx, StatusEvent::Braked, self.current_type(), [0.0; 4], 0);
+    }
+
+    fn begin_stop(&mut self, fx: &mut impl Effects) {
+        match self.phase {
+            Phase::Streaming { .. } => {
+                self.fault = Fault::Stop;
+                self.begin_brake(fx);
+            }
+            Phase::Braking { .. } => {}
+            _ => self.enter_faulted(fx),
+        }
+    }
+
+    fn current_type(&self) -> u32 {
+        if self.index < self.count {
+            self.order[self.index] as u32
+        } else {
+            NO_OBJECT
+        }
+    }
+
+    fn recycle(&mut self, buf: Box<MotionPlan>) {
+        if self.spare.is_none() {
+            self.spare = Some(buf);
+        } else if self.active.is_none() {
+            self.active = Some(buf);
+        } else {
+            self.brake = Some(buf);
+        }
+    }
+
+    fn finish(&mut self, fx: &mut impl Effects, ok: bool) {
+        let ev = if ok {
+            StatusEvent::JobDone
+        } else {
+            StatusEvent::JobFailed
+        };
+        self.phase = Phase::Idle;
+        self.commanding = false;
+        self.emit(fx, ev, NO_OBJECT, [0.0; 4], 0);
+        self.job_id = 0;
+    }
+
+    fn request_plan(&mut self, fx: &mut impl Effects, place_only: bool) {
+        let Some(buf) = self.spare.take() else {
+            return;
+        };
+        let pose = self.active.as_ref().map(|p| p.pose).unwrap_or_default();
+        let req = Request::Plan {
+            index: self.index as u32,
+            object: self.order[self.index],
+            after_stamp_ns: self.release_stamp,
+            from: self.cmd.position,
+            place_only,
+            pose,
+            buf,
+        };
+        match fx.plan(req) {
+            Ok(()) => self.phase = Phase::Planning,
+            Err(Request::Plan { buf, .. }) => self.spare = Some(buf),
+            Err(_) => {}
+        }
+    }
+
+    fn step(&mut self, now: u64, fx: &mut impl Effects) {
+        match self.phase {
+            Phase::Idle | Phase::Ordering | Phase::Planning => {}
+            Phase::WaitHeightmap { since } => {
+                if self.stopping {
+                    return;
+                }
+                if self.hm_stamp > self.release_stamp {
+                    self.request_plan(fx, false);
+                } else if now.saturating_sub(since) > self.t.fresh_heightmap_ns {
+                    self.raise(fx, Fault::HeightmapTimeout);
+                }
+            }
+            Phase::Streaming { seg, cursor } => self.stream(fx, now, seg, cursor),
+            Phase::Gripper { action, seg, since } => self.grip(fx, now, action, seg, since),
+            Phase::Braking {
+                cursor,
+                seg,
+                active_cursor,
+            } => self.brake_step(fx, cursor, seg, active_cursor),
+            Phase::Faulted { healthy_since } => {
+                if self.stopping || self.job_id == 0 {
+                    return;
+                }
+                if !self.inputs_fresh(now) {
+                    self.phase = Phase::Faulted {
+                        healthy_since: None,
+                    };
+                    return;
+                }
+                let since = healthy_since.unwrap_or(now);
+                self.phase = Phase::Faulted {
+                    healthy_since: Some(since),
+                };
+                // Resume once both trajectory buffers are home (a plan may still be in flight).
+                if now - since >= self.t.resume_after_ns && self.spare.is_some() {
+                    self.resume(fx, now);
+                }
+            }
+        }
+    }
+
+    fn grip(
+        &mut self,
+        fx: &mut impl Effects,
+        now: u64,
+        action: GripperAction,
+        seg: usize,
+        since: u64,
+    ) {
+        let Some(g) = self.gs else { return };
+        let reached = match action {
+            GripperAction::Close => g.closed == 1 && g.holding == 1,
+            GripperAction::Open => g.closed == 0,
+        };
+        if reached && g.header.stamp_ns >= since {
+            match action {
+                GripperAction::Close => self.holding = true,
+                GripperAction::Open => {
+                    self.holding = false;
+                    self.release_stamp = g.header.stamp_ns;
+                    let (ty, pose, dns) = self
+                        .active
+                        .as_ref()
+                        .map(|p| (p.object as u32, p.pose, p.decision_ns))
+                        .unwrap_or((NO_OBJECT, [0.0; 4], 0));
+                    self.done += 1;
+                    self.emit(fx, StatusEvent::Placed, ty, pose, dns);
+                    self.index += 1;
+                }
+            }
+            self.next_segment(fx, now, seg + 1);
+        } else if now.saturating_sub(since) > self.t.gripper_action_ns {
+            self.fault = Fault::Gripper;
+            self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+            self.finish(fx, false);
+        }
+    }
+
+    fn brake_step(
+        &mut self,
+        fx: &mut impl Effects,
+        cursor: Option<usize>,
+        seg: usize,
+        active_cursor: usize,
+    ) {
+        match cursor {
+            None => {
+                // Until the brake is computed (a cycle or two), go on along the plan, which is
+                // within every limit, and hold at its segment end.
+                if let Some(p) = &self.active
+                    && let Some(sg) = p.segments().get(seg)
+                    && active_cursor < sg.end
+                    && let Some(s) = p.setpoints.get(active_cursor)
+                {
+                    self.cmd = *s;
+                    self.phase = Phase::Braking {
+                        cursor: None,
+                        seg,
+                        active_cursor: active_cursor + 1,
+                    };
+                } else {
+                    self.cmd.velocity = [0.0; DOF];
+                    self.cmd.acceleration = [0.0; DOF];
+                }
+            }
+            Some(k) => {
+                let next = self
+                    .brake
+                    .as_ref()
+                    .and_then(|b| b.setpoints.get(k).copied());
+                match next {
+                    Some(s) => {
+                        self.cmd = s;
+                        self.phase = Phase::Braking {
+                            cursor: Some(k + 1),
+                            seg,
+                            active_cursor,
+                        };
+                    }
+                    None => {
+                        if let Some(b) = self.brake.take() {
+                            self.recycle(b);
+                        }
+                        self.enter_faulted(fx);
+                    }
+                }
+            }
+        }
+    }
+
+    fn resume(&mut self, fx: &mut impl Effects, now: u64) {
+        // Re-synchronise to where the arm is.
+        if let Some(j) = self.js {
+            self.cmd = Setpoint::at_rest(j.position);
+        }
+        let held = self.gs.is_some_and(|g| g.holding == 1);
+        self.emit(fx, StatusEvent::Resumed, self.current_type(), [0.0; 4], 0);
+        if self.index >= self.count {
+            self.finish(fx, true);
+            return;
+        }
+        if self.holding && !held {
+            self.fault = Fault::ObjectLost;
+            self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+            self.holding = false;
+        }
+        self.grip_cmd = if self.holding {
+            GripperAction::Close
+        } else {
+            GripperAction::Open
+        };
+        if self.holding {
+            self.request_plan(fx, true);
+        } else {
+            // Start the object over on a heightmap taken after the resume.
+            self.release_stamp = self.release_stamp.max(now);
+            self.phase = Phase::WaitHeightmap { since: now };
+        }
+    }
+
+    fn next_segment(&mut self, fx: &mut impl Effects, now: u64, seg: usize) {
+        let n = self.active.as_ref().map_or(0, |p| p.n_segments);
+        if seg < n {
+            let start = self
+                .active
+                .as_ref()
+                .map_or(0, |p| if seg == 0 { 0 } else { p.segments[seg - 1].end });
+            self.phase = Phase::Streaming { seg, cursor: start };
+        } else if self.index >= self.count {
+            self.finish(fx, true);
+        } else {
+            self.phase = Phase::WaitHeightmap { since: now };
+        }
+    }
+
+    fn stream(&mut self, fx: &mut impl Effects, now: u64, seg: usize, cursor: usize) {
+        let Some(p) = &self.active else { return };
+        let Some(sg) = p.segments().get(seg).copied() else {
+            self.next_segment(fx, now, seg);
+            return;
+        };
+        if cursor < sg.end {
+            if let Some(s) = p.setpoints.get(cursor) {
+                self.cmd = *s;
+            }
+            self.phase = Phase::Streaming {
+                seg,
+                cursor: cursor + 1,
+            };
+            return;
+        }
+        // At the segment's end, at rest.
+        self.cmd.velocity = [0.0; DOF];
+        self.cmd.acceleration = [0.0; DOF];
+        match sg.then {
+            Some(action) => {
+                self.grip_cmd = action;
+                self.grip_object = if action == GripperAction::Close {
+                    p.object as u32
+                } else {
+                    NO_OBJECT
+                };
+                self.grip_due = true;
+                self.phase = Phase::Gripper {
+                    action,
+                    seg,
+                    since: now,
+                };
+            }
+            None => self.next_segment(fx, now, seg + 1),
+        }
+    }
+
+    fn publish(&mut self, now: u64, fx: &mut impl Effects) {
+        if self.commanding {
+            let q = self.cmd.position;
+            let inside = (0..DOF).all(|i| q[i] >= self.lower[i] && q[i] <= self.upper[i]);
+            if inside {
+                fx.joint(&self.cmd);
+            } else {
+                // Never reached by planned samples (checked by the planner); a guard.
+                self.limit_holds += 1;
+            }
+            if self.grip_due || now.saturating_sub(self.grip_sent_at) >= GRIPPER_REPEAT_NS {
+                self.grip_due = false;
+                self.grip_sent_at = now;
+                fx.gripper(self.job_id, self.grip_cmd, self.grip_object);
+            }
+        }
+        if now.saturating_sub(self.last_heartbeat) >= HEARTBEAT_PERIOD_NS {
+            self.last_heartbeat = now;
+            self.emit(fx, StatusEvent::Heartbeat, self.current_type(), [0.0; 4], 0);
+        }
+    }
+
+    fn status_of(&self, event: StatusEvent, object_type: u32, pose: [f32; 4], dns: u64) -> Status {
+        let state = match event {
+            StatusEvent::JobDone => JobState::Done,
+            StatusEvent::JobFailed => JobState::Failed,
+            _ => self.state(),
+        };
+        Status {
+            header: Header::at(0, 0),
+            job_id: self.job_id,
+            event: event as u32,
+            state: state as u32,
+            fault: self.fault as u32,
+            objects_total: self.count as u32,
+            objects_done: self.done.min(self.count) as u32,
+            object_index: self.index as u32,
+            object_type,
+            reserved: 0,
+            pose,
+            decision_ns: dns,
+            cycles: 0,
+            deadline_misses: 0,
+            rejected_inputs: self.rejected,
+            max_cycle_ns: 0,
+        }
+    }
+
+    fn emit(
+        &self,
+        fx: &mut impl Effects,
+        event: StatusEvent,
+        object_type: u32,
+        pose: [f32; 4],
+        decision_ns: u64,
+    ) {
+        fx.status(&self.status_of(event, object_type, pose, decision_ns));
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,1623 @@
+//! Unit tests of the job state machine: scripted adapter, camera and planner, a fake clock.
+//!
+//! [`Rig`] plays the loop's shell at 1 kHz: each tick it advances the clock, feeds the states
+//! of a perfect arm (it is where it was last commanded) and gripper, and a camera frame every
+//! 100 ms, answers the planner's requests when `auto` is on, and ticks the machine. Tests turn
+//! each source off, answer the planner by hand, or inject inputs directly.
+
+use super::*;
+use crate::config::Config;
+use herb_ipc::PROTOCOL_VERSION;
+use std::collections::VecDeque;
+
+const MS: u64 = 1_000_000;
+const PERIOD: u64 = MS;
+const CATALOG: usize = 24;
+/// Samples per scripted plan segment.
+const SEG: usize = 200;
+/// The scripted decision latency.
+const DECISION_NS: u64 = 400_000;
+const FRAME_EVERY: u64 = 100 * MS;
+
+/// One output of the machine, as the shell would publish it.
+#[derive(Debug, Clone, PartialEq)]
+enum Out {
+    Reply {
+        job_id: u64,
+        reason: RejectReason,
+        detail: u32,
+    },
+    Status(Status),
+    Joint(Setpoint),
+    Gripper {
+        job_id: u64,
+        action: GripperAction,
+        object_type: u32,
+    },
+    /// A planner request was handed over (its kind).
+    Plan(&'static str),
+}
+
+fn kind(r: &Request) -> &'static str {
+    match r {
+        Request::Order { .. } => "order",
+        Request::Plan { .. } => "plan",
+        Request::Brake { .. } => "brake",
+    }
+}
+
+/// Records the outputs; the planner's ring refuses requests while `refuse` is set.
+#[derive(Default)]
+struct Fx {
+    out: Vec<Out>,
+    sent: VecDeque<Request>,
+    refuse: bool,
+}
+
+impl Effects for Fx {
+    fn reply(&mut self, job_id: u64, reason: RejectReason, detail: u32) {
+        self.out.push(Out::Reply {
+            job_id,
+            reason,
+            detail,
+        });
+    }
+    fn status(&mut self, status: &Status) {
+        self.out.push(Out::Status(*status));
+    }
+    fn joint(&mut self, command: &Setpoint) {
+        self.out.push(Out::Joint(*command));
+    }
+    fn gripper(&mut self, job_id: u64, action: GripperAction, object_type: u32) {
+        self.out.push(Out::Gripper {
+            job_id,
+            action,
+            object_type,
+        });
+    }
+    fn plan(&mut self, request: Request) -> Result<(), Request> {
+        if self.refuse {
+            return Err(request);
+        }
+        self.out.push(Out::Plan(kind(&request)));
+        self.sent.push_back(request);
+        Ok(())
+    }
+}
+
+fn event(s: &Status) -> StatusEvent {
+    StatusEvent::from_code(s.event).expect("a defined event")
+}
+
+fn params() -> JobParams {
+    let cfg = Config::default();
+    JobParams {
+        timeouts: JobTimeouts::from(&cfg.timeouts),
+        lower: cfg.limits.lower,
+        upper: cfg.limits.upper,
+        catalog_len: CATALOG,
+    }
+}
+
+fn buffer() -> Box<MotionPlan> {
+    Box::new(MotionPlan::with_capacity(1000))
+}
+
+/// A scripted plan from `from`: per segment, `SEG` samples moving joint 0 by 1 mrad each at
+/// 1 rad/s (forth, back, forth...), then the segment's action. Pick and place: lift, grasp (close), carry, place
+/// (open), retreat; place only: carry, place (open), retreat.
+fn fill(buf: &mut MotionPlan, from: [f64; DOF], place_only: bool) {
+    buf.reset();
+    let segs: &[Option<GripperAction>] = if place_only {
+        &[None, Some(GripperAction::Open), None]
+    } else {
+        &[
+            None,
+            Some(GripperAction::Close),
+            None,
+            Some(GripperAction::Open),
+            None,
+        ]
+    };
+    let mut q = from;
+    for (k, then) in segs.iter().enumerate() {
+        // back and forth, so that long jobs stay inside the limits
+        let step = if k % 2 == 0 { 0.001 } else { -0.001 };
+        for _ in 0..SEG {
+            q[0] += step;
+            let mut s = Setpoint::at_rest(q);
+            s.velocity[0] = 1.0;
+            s.acceleration[0] = 0.5;
+            buf.setpoints.push(s).expect("room");
+        }
+        buf.push_segment(*then);
+    }
+}
+
+/// The scripted planner's answer to `r`; `order` reverses the objects (Beam-3 reorders).
+fn answer(r: Request) -> Response {
+    match r {
+        Request::Order {
+            job_id,
+            objects,
+            count,
+        } => {
+            let mut order = objects;
+            order[..count].reverse();
+            Response::Ordered {
+                job_id,
+                order,
+                count,
+            }
+        }
+        Request::Plan {
+            index,
+            object,
+            from,
+            place_only,
+            pose,
+            mut buf,
+            ..
+        } => {
+            fill(&mut buf, from, place_only);
+            buf.index = index;
+            buf.object = object;
+            if place_only {
+                buf.pose = pose;
+            } else {
+                buf.pose = [0.1 * (index + 1) as f32, 0.2, 0.05, 0.3];
+                buf.decided = true;
+                buf.decision_ns = DECISION_NS;
+            }
+            Response::Planned(buf)
+        }
+        Request::Brake { state, mut buf } => {
+            buf.reset();
+            let mut s = state;
+            for k in (0..3).rev() {
+                s.velocity[0] = k as f64 * 0.3;
+                s.acceleration[0] = -1.0;
+                if k == 0 {
+                    s.acceleration[0] = 0.0;
+                }
+                buf.setpoints.push(s).expect("room");
+            }
+            buf.push_segment(None);
+            Response::Braked(buf)
+        }
+    }
+}
+
+struct Rig {
+    job: Job,
+    fx: Fx,
+    now: u64,
+    /// The arm's configuration (it follows the commands exactly).
+    q: [f64; DOF],
+    closed: bool,
+    holding: bool,
+    /// A commanded close grasps the object.
+    grasps: bool,
+    /// Gripper states are stamped this long before they are fed.
+    gs_lag: u64,
+    js_up: bool,
+    gs_up: bool,
+    camera_up: bool,
+    /// Frames carry this stamp instead of the time of capture.
+    frame_stamp: Option<u64>,
+    last_frame: u64,
+    js_seq: u64,
+    gs_seq: u64,
+    frame: Box<HeightmapFrame>,
+    stop: bool,
+    /// Answer planner requests at the start of the next tick.
+    auto: bool,
+    finished: bool,
+}
+
+impl Rig {
+    fn new() -> Self {
+        let cfg = Config::default();
+        let q = std::array::from_fn(|i| 0.5 * (cfg.limits.lower[i] + cfg.limits.upper[i]));
+        let mut frame: Box<HeightmapFrame> = Box::new(HeightmapFrame {
+            header: Header::at(0, 0),
+            nx: 10,
+            ny: 10,
+            cell_m: 0.01,
+            objects: 0,
+            data: [0.0; herb_ipc::HEIGHTMAP_MAX_CELLS],
+        });
+        frame.header.version = PROTOCOL_VERSION;
+        let mut r = Self {
+            job: Job::new(params(), buffer(), buffer()),
+            fx: Fx::default(),
+            now: 10_000 * MS,
+            q,
+            closed: false,
+            holding: false,
+            grasps: true,
+            gs_lag: 0,
+            js_up: true,
+            gs_up: true,
+            camera_up: true,
+            frame_stamp: None,
+            last_frame: 0,
+            js_seq: 0,
+            gs_seq: 0,
+            frame,
+            stop: false,
+            auto: true,
+            finished: false,
+        };
+        r.ticks(3);
+        r
+    }
+
+    fn js(&mut self, stamp: u64) -> JointState {
+        self.js_seq += 1;
+        JointState {
+            header: Header::at(self.js_seq, stamp),
+            position: self.q,
+            velocity: [0.0; DOF],
+        }
+    }
+
+    fn gs(&mut self, stamp: u64) -> GripperState {
+        self.gs_seq += 1;
+        GripperState {
+            header: Header::at(self.gs_seq, stamp),
+            closed: self.closed as u32,
+            holding: self.holding as u32,
+            object_type: NO_OBJECT,
+            reserved: 0,
+        }
+    }
+
+    fn feed(&mut self) {
+        let now = self.now;
+        if self.js_up {
+            let m = self.js(now);
+            self.job.joint_state(1, &m, now, now);
+        }
+        if self.gs_up {
+            let m = self.gs(now - self.gs_lag);
+            self.job.gripper_state(2, &m, now, now);
+        }
+        if self.camera_up && now - self.last_frame >= FRAME_EVERY {
+            self.last_frame = now;
+            self.frame.header.seq += 1;
+            self.frame.header.stamp_ns = self.frame_stamp.unwrap_or(now);
+            self.job.heightmap(&self.frame, now);
+        }
+    }
+
+    /// One cycle: clock, inputs, planner answers (when `auto`), tick; the arm and gripper
+    /// then follow the commands.
+    fn tick(&mut self) {
+        self.now += PERIOD;
+        self.feed();
+        if self.auto {
+            self.respond();
+        }
+        let mark = self.fx.out.len();
+        self.finished = self.job.tick(self.now, self.stop, &mut self.fx);
+        for o in &self.fx.out[mark..] {
+            match o {
+                Out::Joint(c) => self.q = c.position,
+                Out::Gripper { action, .. } => {
+                    self.closed = *action == GripperAction::Close;
+                    self.holding = self.closed && self.grasps;
+                }
+                _ => {}
+            }
+        }
+    }
+
+    fn ticks(&mut self, n: usize) {
+        for _ in 0..n {
+            self.tick();
+        }
+    }
+
+    /// Ticks until `pred` holds for an output of a tick (at most `max` ticks); panics else.
+    fn until(&mut self, max: usize, what: &str, pred: impl Fn(&Out) -> bool) {
+        for _ in 0..max {
+            let mark = self.fx.out.len();
+            self.tick();
+            if self.fx.out[mark..].iter().any(&pred) {
+                return;
+            }
+        }
+        panic!("no {what} within {max} ticks; events: {:?}", self.events());
+    }
+
+    fn until_event(&mut self, max: usize, ev: StatusEvent) {
+        self.until(
+            max,
+            &format!("{ev:?}"),
+            |o| matches!(o, Out::Status(s) if event(s) == ev),
+        );
+    }
+
+    /// Answers every pending planner request (the scripted planner).
+    fn respond(&mut self) {
+        while let Some(r) = self.fx.sent.pop_front() {
+            let resp = answer(r);
+            self.job.planner_response(resp, self.now, &mut self.fx);
+        }
+    }
+
+    /// Hands `resp` to the machine now.
+    fn deliver(&mut self, resp: Response) {
+        self.job.planner_response(resp, self.now, &mut self.fx);
+    }
+
+    /// The oldest pending request (manual planner).
+    fn take(&mut self) -> Request {
+        self.fx.sent.pop_front().expect("a pending planner request")
+    }
+
+    fn request(&mut self, r: &PackJobRequest) -> (RejectReason, u32) {
+        let mark = self.fx.out.len();
+        self.job.job_request(r, self.now, &mut self.fx);
+        let replies: Vec<_> = self.fx.out[mark..]
+            .iter()
+            .filter_map(|o| match o {
+                Out::Reply { reason, detail, .. } => Some((*reason, *detail)),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(replies.len(), 1, "one reply per request");
+        replies[0]
+    }
+
+    fn submit(&mut self, job_id: u64, objects: &[u16]) -> (RejectReason, u32) {
+        let mut r = PackJobRequest::new(job_id, objects);
+        r.header = Header::at(1, self.now);
+        self.request(&r)
+    }
+
+    /// A job started and ordered (the scripted planner answers).
+    fn started(objects: &[u16]) -> Self {
+        let mut r = Self::new();
+        assert_eq!(r.submit(7, objects), (RejectReason::None, 0));
+        r
+    }
+
+    /// Statuses so far, heartbeats left out.
+    fn statuses(&self) -> Vec<Status> {
+        self.fx
+            .out
+            .iter()
+            .filter_map(|o| match o {
+                Out::Status(s) if event(s) != StatusEvent::Heartbeat => Some(*s),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn events(&self) -> Vec<StatusEvent> {
+        self.statuses().iter().map(event).collect()
+    }
+
+    fn last(&self, ev: StatusEvent) -> Status {
+        *self
+            .statuses()
+            .iter()
+            .rev()
+            .find(|s| event(s) == ev)
+            .unwrap_or_else(|| panic!("no {ev:?} in {:?}", self.events()))
+    }
+
+    fn joints_since(&self, mark: usize) -> Vec<Setpoint> {
+        self.fx.out[mark..]
+            .iter()
+            .filter_map(|o| match o {
+                Out::Joint(c) => Some(*c),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn count(&self, what: impl Fn(&Out) -> bool) -> usize {
+        self.fx.out.iter().filter(|o| what(o)).count()
+    }
+
+    fn phase(&self) -> Phase {
+        self.job.phase
+    }
+}
+
+fn is_plan(o: &Out) -> bool {
+    *o == Out::Plan("plan")
+}
+
+fn is_brake(o: &Out) -> bool {
+    *o == Out::Plan("brake")
+}
+
+fn is_close(o: &Out) -> bool {
+    matches!(
+        o,
+        Out::Gripper {
+            action: GripperAction::Close,
+            ..
+        }
+    )
+}
+
+// ---------------------------------------------------------------------------------------
+// Job requests
+// ---------------------------------------------------------------------------------------
+
+#[test]
+fn bad_requests_are_answered_with_reason_and_detail_and_counted() {
+    let mut r = Rig::new();
+    let ok = |r: &Rig| {
+        let mut q = PackJobRequest::new(5, &[1, 2, 3]);
+        q.header = Header::at(1, r.now);
+        q
+    };
+    let mut v0 = ok(&r);
+    v0.header.version = 0;
+    let mut id0 = ok(&r);
+    id0.job_id = 0;
+    let mut empty = ok(&r);
+    empty.count = 0;
+    let mut too_many = ok(&r);
+    too_many.count = 65;
+    let mut huge = ok(&r);
+    huge.count = u32::MAX;
+    let mut unknown = ok(&r);
+    unknown.objects[2] = CATALOG as u16;
+    let cases = [
+        (v0, (RejectReason::Malformed, 0)),
+        (id0, (RejectReason::Malformed, 0)),
+        (empty, (RejectReason::Empty, 0)),
+        (too_many, (RejectReason::TooMany, 65)),
+        (huge, (RejectReason::TooMany, u32::MAX)),
+        (unknown, (RejectReason::UnknownObject, 2)),
+    ];
+    for (req, want) in &cases {
+        assert_eq!(r.request(req), *want, "{req:?}");
+    }
+    assert_eq!(r.job.rejected_inputs(), cases.len() as u64);
+    assert_eq!(r.phase(), Phase::Idle);
+    assert_eq!(r.count(|o| matches!(o, Out::Plan(_))), 0, "nothing ordered");
+    assert!(r.events().is_empty(), "no status but heartbeats");
+}
+
+#[test]
+fn a_malformed_request_while_busy_gets_its_reason_not_busy() {
+    let mut r = Rig::started(&[1]);
+    assert_eq!(r.submit(8, &[]), (RejectReason::Empty, 0));
+    assert_eq!(r.submit(8, &[1, 99]), (RejectReason::UnknownObject, 1));
+    assert_eq!(r.submit(8, &[1]), (RejectReason::Busy, 0));
+}
+
+#[test]
+fn not_ready_without_joint_state_gripper_state_or_a_recent_heightmap() {
+    // Never heard from the arm.
+    let mut r = Rig::new();
+    r.job = Job::new(params(), buffer(), buffer());
+    assert_eq!(r.submit(1, &[1]), (RejectReason::NotReady, 0));
+    // Joint states stale (100 ms), then fresh again.
+    let mut r = Rig::new();
+    r.js_up = false;
+    r.ticks(100);
+    assert_eq!(r.submit(1, &[1]), (RejectReason::NotReady, 0));
+    r.js_up = true;
+    r.tick();
+    assert_eq!(r.submit(2, &[1]), (RejectReason::None, 0));
+    // Gripper states stale (200 ms).
+    let mut r = Rig::new();
+    r.gs_up = false;
+    r.ticks(199);
+    assert_eq!(
+        r.submit(1, &[1]),
+        (RejectReason::None, 0),
+        "199 ms is fresh"
+    );
+    let mut r = Rig::new();
+    r.gs_up = false;
+    r.ticks(200);
+    assert_eq!(r.submit(1, &[1]), (RejectReason::NotReady, 0));
+    // No heightmap for 2 s: the camera counts too.
+    let mut r = Rig::new();
+    r.camera_up = false;
+    r.ticks(2000);
+    assert_eq!(r.submit(1, &[1]), (RejectReason::NotReady, 0));
+    assert_eq!(r.job.rejected_inputs(), 1);
+}
+
+#[test]
+fn a_second_job_while_one_runs_is_busy_and_not_queued() {
+    let mut r = Rig::started(&[1]);
+    r.ticks(2);
+    assert_eq!(r.submit(8, &[2]), (RejectReason::Busy, 0));
+    r.until_event(5000, StatusEvent::JobDone);
+    r.ticks(200);
+    assert_eq!(
+        r.count(|o| *o == Out::Plan("order")),
+        1,
+        "job 8 never started"
+    );
+    assert!(r.statuses().iter().all(|s| s.job_id != 8));
+}
+
+#[test]
+fn a_job_while_braking_or_faulted_is_busy() {
+    let mut r = Rig::started(&[1]);
+    r.auto = false;
+    r.tick();
+    r.respond();
+    r.until(200, "plan", is_plan);
+    r.respond();
+    r.ticks(2); // streaming
+    r.js_up = false;
+    r.until(200, "brake", is_brake);
+    assert!(matches!(r.phase(), Phase::Braking { .. }));
+    assert_eq!(r.submit(8, &[2]), (RejectReason::Busy, 0));
+    r.respond();
+    r.until_event(50, StatusEvent::Braked);
+    assert!(matches!(r.phase(), Phase::Faulted { .. }));
+    assert_eq!(r.submit(8, &[2]), (RejectReason::Busy, 0));
+}
+
+#[test]
+fn a_job_after_a_stop_is_shutting_down() {
+    let mut r = Rig::new();
+    r.stop = true;
+    r.tick();
+    assert!(r.finished);
+    assert_eq!(r.submit(1, &[1]), (RejectReason::ShuttingDown, 0));
+    // A malformed one still hears what is wrong with it.
+    assert_eq!(r.submit(0, &[1]), (RejectReason::Malformed, 0));
+}
+
+#[test]
+fn an_accepted_job_replies_orders_reports_and_holds_the_measured_position() {
+    let mut r = Rig::new();
+    r.q[3] += 0.25; // the arm is somewhere
+    r.tick();
+    let mark = r.fx.out.len();
+    assert_eq!(r.submit(7, &[4, 5, 6]), (RejectReason::None, 0));
+    let out = &r.fx.out[mark..];
+    assert_eq!(
+        out[0],
+        Out::Reply {
+            job_id: 7,
+            reason: RejectReason::None,
+            detail: 0
+        }
+    );
+    assert_eq!(out[1], Out::Plan("order"));
+    let Out::Status(s) = out[2] else {
+        panic!("{out:?}")
+    };
+    assert_eq!(
+        (event(&s), s.job_id, s.objects_total, s.state, s.fault),
+        (
+            StatusEvent::Accepted,
+            7,
+            3,
+            JobState::Running as u32,
+            Fault::None as u32
+        )
+    );
+    let Request::Order {
+        job_id,
+        objects,
+        count,
+    } = r.take()
+    else {
+        panic!("an order")
+    };
+    assert_eq!((job_id, &objects[..count]), (7, &[4u16, 5, 6][..]));
+    let mark = r.fx.out.len();
+    r.tick();
+    assert_eq!(r.joints_since(mark), vec![Setpoint::at_rest(r.q)]);
+}
+
+// ---------------------------------------------------------------------------------------
+// Ordering
+// ---------------------------------------------------------------------------------------
+
+#[test]
+fn ordered_waits_for_a_heightmap_then_plans_the_first_object_of_the_order() {
+    let mut r = Rig::new();
+    r.auto = false;
+    r.submit(7, &[4, 5, 6]);
+    r.ticks(5);
+    assert_eq!(r.phase(), Phase::Ordering);
+    let resp = answer(r.take());
+    r.deliver(resp);
+    assert_eq!(r.phase(), Phase::WaitHeightmap { since: r.now });
+    r.tick();
+    let Request::Plan {
+        index,
+        object,
+        after_stamp_ns,
+        from,
+        place_only,
+        ..
+    } = r.take()
+    else {
+        panic!("a plan")
+    };
+    // The planner's order (reversed by the script), from rest where the arm stands.
+    assert_eq!((index, object, after_stamp_ns), (0, 6, 0));
+    assert_eq!((from, place_only), (r.q, false));
+    assert_eq!(r.phase(), Phase::Planning);
+}
+
+#[test]
+fn ordered_for_another_job_is_ignored() {
+    let mut r = Rig::new();
+    r.auto = false;
+    r.submit(7, &[4]);
+    r.deliver(Response::Ordered {
+        job_id: 6,
+        order: [9; MAX_JOB_OBJECTS],
+        count: 1,
+    });
+    r.ticks(3);
+    assert_eq!(r.phase(), Phase::Ordering);
+    assert_eq!(r.job.order[0], 0);
+}
+
+#[test]
+fn order_failed_fails_the_job_with_decision() {
+    let mut r = Rig::new();
+    r.auto = false;
+    r.submit(7, &[4]);
+    r.take();
+    r.deliver(Response::OrderFailed { job_id: 7 });
+    let s = r.last(StatusEvent::JobFailed);
+    assert_eq!(
+        (s.job_id, s.state, s.fault),
+        (7, JobState::Failed as u32, Fault::Decision as u32)
+    );
+    assert_eq!(r.phase(), Phase::Idle);
+    let mark = r.fx.out.len();
+    r.ticks(3);
+    assert!(r.joints_since(mark).is_empty(), "no command without a job");
+}
+
+// ---------------------------------------------------------------------------------------
+// Waiting for a heightmap, planning
+// ---------------------------------------------------------------------------------------
+
+#[test]
+fn the_next_object_is_planned_only_on_a_frame_newer_than_the_release() {
+    let mut r = Rig::started(&[1, 2]);
+    r.until_event(5000, StatusEvent::Placed);
+    // Released; the camera stalls.
+    r.camera_up = false;
+    let plans = r.count(is_plan);
+    r.ticks(300);
+    assert_eq!(
+        r.count(is_plan),
+        plans,
+        "no plan on the frame from before the release"
+    );
+    assert!(matches!(r.phase(), Phase::WaitHeightmap { .. }));
+    r.camera_up = true;
+    r.auto = false;
+    r.until(200, "plan", is_plan);
+    let Request::Plan {
+        index,
+        after_stamp_ns,
+        ..
+    } = r.take()
+    else {
+        panic!()
+    };
+    assert_eq!(index, 1);
+    assert_eq!(after_stamp_ns, r.job.release_stamp);
+    assert!(r.job.hm_stamp > after_stamp_ns);
+}
+
+#[test]
+fn no_newer_frame_within_fresh_heightmap_timeout_faults() {
+    let mut r = Rig::started(&[1, 2]);
+    r.until_event(5000, StatusEvent::Placed);
+    // Frames keep coming, but none is newer than the release.
+    r.frame_stamp = Some(r.job.release_stamp);
+    while !matches!(r.phase(), Phase::WaitHeightmap { .. }) {
+        r.tick();
+    }
+    let Phase::WaitHeightmap { since } = r.phase() else {
+        unreachable!()
+    };
+    let t = params().timeouts.fresh_heightmap_ns;
+    while r.now < since + t {
+        r.tick();
+    }
+    assert!(
+        matches!(r.phase(), Phase::WaitHeightmap { .. }),
+        "not at the timeout"
+    );
+    r.tick();
+    let s = r.last(StatusEvent::Fault);
+    assert_eq!(s.fault, Fault::HeightmapTimeout as u32);
+    // At rest: faulted at once, no brake.
+    assert_eq!(r.events().last(), Some(&StatusEvent::Braked));
+    assert_eq!(r.count(is_brake), 0);
+}
+
+#[test]
+fn a_full_planner_ring_keeps_waiting_and_retries() {
+    let mut r = Rig::started(&[1]);
+    r.fx.refuse = true;
+    r.ticks(20);
+    assert!(matches!(r.phase(), Phase::WaitHeightmap { .. }));
+    assert!(r.job.spare.is_some(), "the buffer stays home");
+    r.fx.refuse = false;
+    r.auto = false;
+    r.tick();
+    assert_eq!(r.phase(), Phase::Planning);
+}
+
+#[test]
+fn planned_streams_and_reports_decided_with_pose_and_latency() {
+    let mut r = Rig::started(&[4, 5]);
+    r.until_event(5000, StatusEvent::Decided);
+    let s = r.last(StatusEvent::Decided);
+    assert_eq!(
+        (s.job_id, s.object_type, s.object_index, s.decision_ns),
+        (7, 5, 0, DECISION_NS)
+    );
+    assert_eq!(s.pose, [0.1, 0.2, 0.05, 0.3]);
+    assert_eq!(r.phase(), Phase::Streaming { seg: 0, cursor: 1 });
+}
+
+#[test]
+fn the_planners_heightmap_timeout_returns_to_waiting_silently() {
+    let mut r = Rig::started(&[1]);
+    r.auto = false;
+    r.tick();
+    r.respond(); // ordered
+    r.until(50, "plan", is_plan);
+    let Request::Plan { buf, .. } = r.take() else {
+        panic!()
+    };
+    r.deliver(Response::Failed {
+        fault: Fault::HeightmapTimeout,
+        buf,
+    });
+    assert_eq!(r.phase(), Phase::WaitHeightmap { since: r.now });
+    assert!(!r.events().contains(&StatusEvent::Fault), "no fault event");
+    // and plans again
+    r.tick();
+    assert_eq!(r.phase(), Phase::Planning);
+}
+
+#[test]
+fn planner_failures_fail_the_job_with_their_fault() {
+    for fault in [
+        Fault::Unreachable,
+        Fault::Decision,
+        Fault::Motion,
+        Fault::NoFeasiblePlacement,
+    ] {
+        let mut r = Rig::started(&[1]);
+        r.auto = false;
+        r.tick();
+        r.respond();
+        r.until(50, "plan", is_plan);
+        let Request::Plan { buf, .. } = r.take() else {
+            panic!()
+        };
+        r.deliver(Response::Failed { fault, buf });
+        let s = r.last(StatusEvent::JobFailed);
+        assert_eq!(
+            (s.job_id, s.state, s.fault),
+            (7, JobState::Failed as u32, fault as u32)
+        );
+        assert_eq!(r.phase(), Phase::Idle);
+        assert!(
+            r.job.spare.is_some() && r.job.active.is_some(),
+            "buffers home"
+        );
+        // Both buffers home: the next job plans.
+        r.auto = true;
+        assert_eq!(r.submit(8, &[1]), (RejectReason::None, 0));
+        r.until_event(5000, StatusEvent::JobDone);
+    }
+}
+
+#[test]
+fn a_plan_arriving_after_a_fault_is_recycled_and_the_resume_waits_for_it() {
+    let mut r = Rig::started(&[1]);
+    r.auto = false;
+    r.tick();
+    r.respond();
+    r.until(50, "plan", is_plan);
+    assert_eq!(r.phase(), Phase::Planning);
+    // The adapter goes away while the planner works.
+    r.js_up = false;
+    r.until_event(200, StatusEvent::Braked);
+    r.js_up = true;
+    let resume = params().timeouts.resume_after_ns / PERIOD;
+    r.ticks(resume as usize + 10);
+    assert!(
+        matches!(r.phase(), Phase::Faulted { .. }),
+        "no resume while the plan is out"
+    );
+    let late = r.take();
+    let resp = answer(late);
+    r.deliver(resp);
+    assert!(
+        !r.events().contains(&StatusEvent::Decided),
+        "a late plan is not used"
+    );
+    r.tick();
+    assert_eq!(r.events().last(), Some(&StatusEvent::Resumed));
+    // Starts the object over on a new frame, with a new decision.
+    r.auto = true;
+    r.until_event(5000, StatusEvent::JobDone);
+    assert_eq!(
+        r.events(),
+        vec![
+            StatusEvent::Accepted,
+            StatusEvent::Fault,
+            StatusEvent::Braked,
+            StatusEvent::Resumed,
+            StatusEvent::Decided,
+            StatusEvent::Placed,
+            StatusEvent::JobDone
+        ]
+    );
+}
+
+// ---------------------------------------------------------------------------------------
+// Streaming and the gripper
+// ---------------------------------------------------------------------------------------
+
+/// A job of one object whose plan arrived; returns the rig and the plan's samples.
+fn streaming() -> (Rig, Vec<Setpoint>) {
+    let mut r = Rig::started(&[3]);
+    r.auto = false;
+    r.tick();
+    r.respond();
+    r.until(50, "plan", is_plan);
+    let resp = answer(r.take());
+    let Response::Planned(p) = &resp else {
+        panic!()
+    };
+    let samples = p.setpoints.as_slice().to_vec();
+    r.deliver(resp);
+    r.auto = true;
+    (r, samples)
+}
+
+#[test]
+fn samples_are_streamed_one_per_tick_bit_for_bit_and_segment_ends_are_at_rest() {
+    let (mut r, samples) = streaming();
+    let mark = r.fx.out.len();
+    r.ticks(SEG + 1);
+    let sent = r.joints_since(mark);
+    assert_eq!(&sent[..SEG], &samples[..SEG]);
+    // The segment's end: same position, at rest.
+    assert_eq!(sent[SEG], Setpoint::at_rest(samples[SEG - 1].position));
+    // Then the next segment (no action at the first one's end).
+    let mark = r.fx.out.len();
+    r.tick();
+    assert_eq!(r.joints_since(mark), vec![samples[SEG]]);
+}
+
+#[test]
+fn close_is_sent_at_once_with_the_object_type_and_the_arm_waits_at_rest() {
+    let (mut r, _) = streaming();
+    r.grasps = false; // the gripper closes on nothing
+    r.until(3000, "close", is_close);
+    let Some(Out::Gripper {
+        job_id,
+        object_type,
+        ..
+    }) =
+        r.fx.out
+            .iter()
+            .rev()
+            .find(|o| matches!(o, Out::Gripper { .. }))
+    else {
+        panic!()
+    };
+    assert_eq!((*job_id, *object_type), (7, 3));
+    let Phase::Gripper { action, .. } = r.phase() else {
+        panic!("{:?}", r.phase())
+    };
+    assert_eq!(action, GripperAction::Close);
+    let mark = r.fx.out.len();
+    r.ticks(50);
+    let held = r.joints_since(mark);
+    assert!(held.iter().all(|c| *c == Setpoint::at_rest(r.q)), "at rest");
+}
+
+#[test]
+fn close_waits_for_a_state_stamped_after_the_command() {
+    let (mut r, _) = streaming();
+    r.gs_lag = 3 * MS; // the adapter's states describe the gripper 3 ms ago
+    r.until(3000, "close", is_close);
+    let Phase::Gripper { since, .. } = r.phase() else {
+        panic!()
+    };
+    // The gripper is closed and holding from the next state on, but those states are stamped
+    // before the command until the lag has passed.
+    let mut left = 0;
+    while matches!(r.phase(), Phase::Gripper { .. }) {
+        r.tick();
+        left += 1;
+        assert!(left < 100);
+    }
+    assert_eq!(
+        r.now - since,
+        3 * MS,
+        "left the wait at the first state stamped at `since`"
+    );
+    assert!(r.job.holding);
+}
+
+#[test]
+fn open_reports_placed_and_the_release_stamp_gates_the_next_plan() {
+    let mut r = Rig::started(&[1, 2]);
+    r.gs_lag = 2 * MS;
+    r.until_event(5000, StatusEvent::Placed);
+    let s = r.last(StatusEvent::Placed);
+    assert_eq!(
+        (s.objects_done, s.object_index, s.object_type, s.decision_ns),
+        (1, 0, 2, DECISION_NS)
+    );
+    assert_eq!(s.pose, [0.1, 0.2, 0.05, 0.3]);
+    // The release is when the open gripper was observed, not when it was reported.
+    assert_eq!(r.job.release_stamp, r.now - 2 * MS);
+    assert!(!r.job.holding);
+    assert_eq!(r.job.index, 1);
+}
+
+#[test]
+fn a_gripper_that_never_holds_fails_the_job_after_the_timeout() {
+    let (mut r, _) = streaming();
+    r.grasps = false;
+    r.until(3000, "close", is_close);
+    let Phase::Gripper { since, .. } = r.phase() else {
+        panic!()
+    };
+    let t = params().timeouts.gripper_action_ns;
+    while r.now < since + t {
+        r.tick();
+    }
+    assert!(
+        matches!(r.phase(), Phase::Gripper { .. }),
+        "not at the timeout"
+    );
+    r.tick();
+    let ev = r.events();
+    assert_eq!(
+        &ev[ev.len() - 2..],
+        &[StatusEvent::Fault, StatusEvent::JobFailed]
+    );
+    let s = r.last(StatusEvent::JobFailed);
+    assert_eq!((s.fault, s.job_id), (Fault::Gripper as u32, 7));
+    assert_eq!(r.count(is_brake), 0, "the arm was at rest");
+}
+
+#[test]
+fn the_gripper_command_repeats_every_100_ms_while_a_job_runs() {
+    let (mut r, _) = streaming();
+    r.grasps = false;
+    r.until(3000, "close", is_close);
+    let first = r.now;
+    let mut at = vec![];
+    while r.now < first + 350 * MS {
+        let mark = r.fx.out.len();
+        r.tick();
+        if r.fx.out[mark..]
+            .iter()
+            .any(|o| matches!(o, Out::Gripper { .. }))
+        {
+            at.push(r.now - first);
+        }
+    }
+    assert_eq!(at, vec![100 * MS, 200 * MS, 300 * MS]);
+}
+
+#[test]
+fn the_last_placement_reports_job_done_then_the_job_id_is_cleared() {
+    let mut r = Rig::started(&[1, 2, 3]);
+    r.until_event(10000, StatusEvent::JobDone);
+    let s = r.last(StatusEvent::JobDone);
+    assert_eq!(
+        (s.job_id, s.state, s.objects_done, s.objects_total),
+        (7, JobState::Done as u32, 3, 3)
+    );
+    assert_eq!(r.phase(), Phase::Idle);
+    let mark = r.fx.out.len();
+    r.ticks(150);
+    assert!(r.joints_since(mark).is_empty(), "no command after the job");
+    let hb = r.fx.out[mark..]
+        .iter()
+        .find_map(|o| match o {
+            Out::Status(s) => Some(*s),
+            _ => None,
+        })
+        .expect("a heartbeat");
+    assert_eq!((hb.job_id, hb.state), (0, JobState::Idle as u32));
+}
+
+#[test]
+fn a_three_object_job_reports_the_golden_event_sequence() {
+    let mut r = Rig::started(&[10, 11, 12]);
+    r.until_event(10000, StatusEvent::JobDone);
+    use StatusEvent::*;
+    assert_eq!(
+        r.events(),
+        vec![
+            Accepted, Decided, Placed, Decided, Placed, Decided, Placed, JobDone
+        ]
+    );
+    let types: Vec<u32> = r
+        .statuses()
+        .iter()
+        .filter(|s| event(s) == Placed)
+        .map(|s| s.object_type)
+        .collect();
+    assert_eq!(types, vec![12, 11, 10], "in the planner's order");
+    let closes = r.count(|o| {
+        matches!(
+            o,
+            Out::Gripper {
+                action: GripperAction::Close,
+                ..
+            }
+        )
+    });
+    assert!(closes >= 3);
+    assert_eq!(r.job.limit_holds(), 0);
+}
+
+// ---------------------------------------------------------------------------------------
+// Faults, and the adapter coming back
+// ---------------------------------------------------------------------------------------
+
+#[test]
+fn a_stale_joint_state_while_streaming_brakes_along_the_plan_then_along_the_brake() {
+    let (mut r, samples) = streaming();
+    r.auto = false;
+    r.ticks(2);
+    r.js_up = false;
+    r.until(200, "brake", is_brake);
+    let s = r.last(StatusEvent::Fault);
+    assert_eq!(s.fault, Fault::JointStateTimeout as u32);
+    let Request::Brake { state, buf } = r.take() else {
+        panic!()
+    };
+    let asked = r.fx.out.iter().rposition(is_brake).unwrap();
+    let last_sent = r.joints_since(0).len() - r.joints_since(asked).len();
+    assert_eq!(
+        state,
+        r.joints_since(0)[last_sent - 1],
+        "from the last command"
+    );
+    // Until the brake arrives: along the plan to its segment end (the fault came late in
+    // the first segments; hold where it ends).
+    let mark = r.fx.out.len();
+    r.ticks(2);
+    for c in r.joints_since(mark) {
+        assert!(samples.contains(&c) || c.velocity == [0.0; DOF], "{c:?}");
+    }
+    let resp = answer(Request::Brake { state, buf });
+    let Response::Braked(b) = &resp else { panic!() };
+    let brake = b.setpoints.as_slice().to_vec();
+    r.deliver(resp);
+    let mark = r.fx.out.len();
+    r.ticks(brake.len() + 1);
+    assert_eq!(r.joints_since(mark)[..brake.len()], brake[..]);
+    assert_eq!(r.events().last(), Some(&StatusEvent::Braked));
+    assert!(matches!(r.phase(), Phase::Faulted { .. }));
+    let last = *r.joints_since(mark).last().unwrap();
+    assert_eq!(last.velocity, [0.0; DOF]);
+}
+
+#[test]
+fn stale_gripper_state_and_stale_heightmap_are_faults_and_joint_state_comes_first() {
+    let (mut r, _) = streaming();
+    r.gs_up = false;
+    r.until_event(300, StatusEvent::Fault);
+    assert_eq!(
+        r.last(StatusEvent::Fault).fault,
+        Fault::GripperStateTimeout as u32
+    );
+
+    // (waiting for the next object's frame: longer than a scripted plan)
+    let mut r = Rig::started(&[1, 2]);
+    r.until_event(5000, StatusEvent::Decided);
+    r.camera_up = false;
+    r.until_event(2500, StatusEvent::Fault);
+    assert_eq!(
+        r.last(StatusEvent::Fault).fault,
+        Fault::HeightmapTimeout as u32
+    );
+
+    // All three stale at once: the joint state is named.
+    let (mut r, _) = streaming();
+    r.js_up = false;
+    r.gs_up = false;
+    r.camera_up = false;
+    r.until_event(2500, StatusEvent::Fault);
+    assert_eq!(
+        r.last(StatusEvent::Fault).fault,
+        Fault::JointStateTimeout as u32
+    );
+}
+
+#[test]
+fn a_fault_at_rest_is_braked_at_once_without_a_brake() {
+    // Ordering.
+    let mut r = Rig::new();
+    r.auto = false;
+    r.submit(7, &[1]);
+    r.js_up = false;
+    r.until_event(200, StatusEvent::Braked);
+    // Waiting for a heightmap.
+    let mut r = Rig::started(&[1]);
+    r.auto = false;
+    r.tick();
+    r.respond();
+    r.camera_up = false;
+    r.frame_stamp = Some(0);
+    r.gs_up = false;
+    r.until_event(300, StatusEvent::Braked);
+    // At the gripper.
+    let (mut r, _) = streaming();
+    r.grasps = false;
+    r.until(3000, "close", is_close);
+    r.js_up = false;
+    r.until_event(200, StatusEvent::Braked);
+    assert_eq!(r.count(is_brake), 0);
+}
+
+#[test]
+fn a_failed_brake_or_a_full_ring_enters_faulted_where_it_stands() {
+    let (mut r, _) = streaming();
+    r.auto = false;
+    r.ticks(2);
+    r.js_up = false;
+    r.until(200, "brake", is_brake);
+    let Request::Brake { buf, .. } = r.take() else {
+        panic!()
+    };
+    r.deliver(Response::Failed {
+        fault: Fault::Motion,
+        buf,
+    });
+    assert_eq!(r.events().last(), Some(&StatusEvent::Braked));
+    assert!(matches!(r.phase(), Phase::Faulted { .. }));
+
+    let (mut r, _) = streaming();
+    r.ticks(2);
+    r.fx.refuse = true;
+    r.js_up = false;
+    r.until_event(200, StatusEvent::Braked);
+    assert_eq!(r.count(is_brake), 0);
+    assert!(r.job.spare.is_some(), "the brake buffer stays home");
+}
+
+#[test]
+fn invalid_future_and_out_of_order_states_and_bad_frames_are_rejected_not_latched() {
+    let mut r = Rig::new();
+    r.js_up = false;
+    r.gs_up = false;
+    let now = r.now;
+    let before = r.job.js;
+    let mut bad = r.js(now);
+    bad.position[2] = f64::NAN;
+    r.job.joint_state(1, &bad, now, now);
+    let future = r.js(now + MAX_FUTURE_STAMP_NS + 1);
+    r.job.joint_state(1, &future, now, now);
+    let old = JointState {
+        header: Header::at(1, now),
+        ..r.js(now)
+    };
+    r.job.joint_state(1, &old, now, now); // seq goes back
+    assert_eq!(r.job.js, before);
+    assert_eq!(r.job.rejected_inputs(), 3);
+    // 1 ms ahead is allowed; later is allowed only if the clock at receipt is past it.
+    let ahead = r.js(now + MAX_FUTURE_STAMP_NS);
+    r.job.joint_state(1, &ahead, now, now);
+    let late = r.js(now + 5 * MS);
+    r.job.joint_state(1, &late, now, now + 5 * MS);
+    assert_eq!(r.job.js, Some(late));
+    assert_eq!(r.job.rejected_inputs(), 3);
+    // Gripper states likewise.
+    let mut g = r.gs(now);
+    g.holding = 2;
+    r.job.gripper_state(2, &g, now, now);
+    assert_eq!(r.job.rejected_inputs(), 4);
+    // A frame with a bad grid or header.
+    let stamp = r.job.hm_stamp;
+    r.frame.nx = 0;
+    r.frame.header.stamp_ns = now + 1;
+    let f = r.frame.clone();
+    r.job.heightmap(&f, now);
+    assert_eq!((r.job.rejected_inputs(), r.job.hm_stamp), (5, stamp));
+}
+
+#[test]
+fn the_adapter_back_resumes_after_the_window_from_the_measured_position() {
+    let (mut r, _) = streaming();
+    r.ticks(2);
+    r.js_up = false;
+    r.until_event(200, StatusEvent::Braked);
+    r.q[1] += 0.1; // moved while away
+    r.js_up = true;
+    r.tick();
+    let back = r.now;
+    r.until_event(5000, StatusEvent::Resumed);
+    assert_eq!(r.now - back, params().timeouts.resume_after_ns);
+    assert_eq!(r.job.cmd, Setpoint::at_rest(r.q));
+    r.until_event(5000, StatusEvent::JobDone);
+}
+
+#[test]
+fn a_flapping_adapter_restarts_the_resume_window() {
+    let (mut r, _) = streaming();
+    r.ticks(2);
+    r.js_up = false;
+    r.until_event(200, StatusEvent::Braked);
+    r.js_up = true;
+    r.ticks(400);
+    r.js_up = false;
+    r.ticks(150); // stale again
+    r.js_up = true;
+    r.tick();
+    let back = r.now;
+    r.until_event(5000, StatusEvent::Resumed);
+    assert_eq!(r.now - back, params().timeouts.resume_after_ns);
+}
+
+#[test]
+fn a_resume_while_holding_replans_only_the_placement_at_the_same_pose() {
+    let mut r = Rig::started(&[1]);
+    r.until(3000, "close", is_close);
+    r.ticks(3); // holding, carrying
+    assert!(r.job.holding);
+    r.auto = false;
+    r.js_up = false;
+    r.until_event(200, StatusEvent::Fault);
+    r.respond(); // the brake
+    r.until_event(50, StatusEvent::Braked);
+    r.js_up = true;
+    r.until(1000, "plan", is_plan);
+    assert_eq!(r.events().last(), Some(&StatusEvent::Resumed));
+    let Request::Plan {
+        place_only, pose, ..
+    } = r.take()
+    else {
+        panic!()
+    };
+    assert!(place_only);
+    assert_eq!(pose, [0.1, 0.2, 0.05, 0.3]);
+    let resp = answer(Request::Plan {
+        index: 0,
+        object: 1,
+        after_stamp_ns: 0,
+        from: r.q,
+        place_only,
+        pose,
+        buf: buffer(),
+    });
+    // (the buffer in flight is the rig's; a fresh one stands in for it)
+    r.deliver(resp);
+    r.auto = true;
+    r.until_event(5000, StatusEvent::JobDone);
+    use StatusEvent::*;
+    assert_eq!(
+        r.events(),
+        vec![Accepted, Decided, Fault, Braked, Resumed, Placed, JobDone],
+        "no second Decided"
+    );
+    assert_eq!(r.last(Placed).pose, [0.1, 0.2, 0.05, 0.3]);
+}
+
+#[test]
+fn an_object_lost_while_away_is_reported_and_picked_again() {
+    let mut r = Rig::started(&[1]);
+    r.until(3000, "close", is_close);
+    r.ticks(3);
+    r.js_up = false;
+    r.gs_up = false;
+    r.until_event(300, StatusEvent::Braked);
+    // The adapter restarts: the gripper is open, the object fell; closing grasps nothing.
+    r.closed = false;
+    r.holding = false;
+    r.grasps = false;
+    r.js_up = true;
+    r.gs_up = true;
+    r.tick();
+    let back = r.now;
+    r.until_event(5000, StatusEvent::Resumed);
+    let ev = r.events();
+    assert_eq!(
+        &ev[ev.len() - 2..],
+        &[StatusEvent::Resumed, StatusEvent::Fault]
+    );
+    assert_eq!(r.last(StatusEvent::Fault).fault, Fault::ObjectLost as u32);
+    assert!(r.job.release_stamp >= back);
+    r.grasps = true; // the object, picked up again, is there to grasp
+    r.until_event(5000, StatusEvent::JobDone);
+    assert_eq!(
+        r.statuses()
+            .iter()
+            .filter(|s| event(s) == StatusEvent::Decided)
+            .count(),
+        2,
+        "decided again on a new frame"
+    );
+}
+
+#[test]
+fn a_resume_after_the_last_placement_finishes_the_job() {
+    let mut r = Rig::started(&[1]);
+    r.until_event(5000, StatusEvent::Placed);
+    r.ticks(2); // retreating
+    r.js_up = false;
+    r.until_event(200, StatusEvent::Braked);
+    r.js_up = true;
+    r.until_event(5000, StatusEvent::JobDone);
+    let ev = r.events();
+    assert_eq!(
+        &ev[ev.len() - 2..],
+        &[StatusEvent::Resumed, StatusEvent::JobDone]
+    );
+}
+
+// ---------------------------------------------------------------------------------------
+// Stop
+// ---------------------------------------------------------------------------------------
+
+#[test]
+fn a_stop_while_streaming_brakes_then_finishes_without_a_fault_event() {
+    let (mut r, _) = streaming();
+    r.ticks(2);
+    r.auto = false;
+    r.stop = true;
+    r.tick();
+    assert!(!r.finished, "braking");
+    assert_eq!(r.fx.out.iter().filter(|o| is_brake(o)).count(), 1);
+    assert!(!r.events().contains(&StatusEvent::Fault));
+    r.respond();
+    let mut n = 0;
+    while !r.finished {
+        r.tick();
+        n += 1;
+        assert!(n < 20);
+    }
+    assert_eq!(r.events().last(), Some(&StatusEvent::Braked));
+    assert_eq!(r.last(StatusEvent::Braked).fault, Fault::Stop as u32);
+}
+
+#[test]
+fn a_stop_while_idle_reports_braked_and_finishes() {
+    let mut r = Rig::new();
+    r.stop = true;
+    r.tick();
+    assert!(r.finished);
+    assert_eq!(r.events(), vec![StatusEvent::Braked]);
+    let s = r.job.status(StatusEvent::Shutdown);
+    assert_eq!((s.job_id, s.object_type), (0, NO_OBJECT));
+}
+
+#[test]
+fn a_stop_while_planning_drops_the_late_plan_and_blocks_resume() {
+    let mut r = Rig::started(&[1]);
+    r.auto = false;
+    r.tick();
+    r.respond();
+    r.until(50, "plan", is_plan);
+    r.stop = true;
+    r.tick();
+    assert!(r.finished);
+    r.respond();
+    assert!(!r.events().contains(&StatusEvent::Decided));
+    let mark = r.fx.out.len();
+    r.ticks(1000);
+    assert!(!r.events().contains(&StatusEvent::Resumed));
+    assert_eq!(r.count(is_plan), 1);
+    assert!(
+        r.joints_since(mark)
+            .iter()
+            .all(|c| c.velocity == [0.0; DOF])
+    );
+}
+
+// ---------------------------------------------------------------------------------------
+// Outputs
+// ---------------------------------------------------------------------------------------
+
+#[test]
+fn a_command_outside_the_limits_is_held_and_counted() {
+    let mut r = Rig::started(&[1]);
+    r.auto = false;
+    r.tick();
+    r.respond();
+    r.until(50, "plan", is_plan);
+    let Response::Planned(mut p) = answer(r.take()) else {
+        panic!()
+    };
+    // Sample 2 past the upper limit of joint 0.
+    let mut s = p.setpoints.as_slice().to_vec();
+    s[2].position[0] = params().upper[0] + 0.01;
+    p.setpoints.clear();
+    for x in s {
+        p.setpoints.push(x).unwrap();
+    }
+    r.deliver(Response::Planned(p));
+    let mark = r.fx.out.len();
+    r.ticks(3);
+    assert_eq!(
+        r.joints_since(mark).len(),
+        2,
+        "the third sample is not sent"
+    );
+    assert_eq!(r.job.limit_holds(), 1);
+}
+
+#[test]
+fn heartbeats_every_100_ms_carry_the_state() {
+    let mut r = Rig::new();
+    let mut beats = vec![];
+    for _ in 0..1000 {
+        let mark = r.fx.out.len();
+        r.tick();
+        for o in &r.fx.out[mark..] {
+            if let Out::Status(s) = o
+                && event(s) == StatusEvent::Heartbeat
+            {
+                beats.push((r.now, s.state));
+            }
+        }
+    }
+    assert_eq!(beats.len(), 10);
+    assert!(
+        beats
+            .windows(2)
+            .all(|w| w[1].0 - w[0].0 == HEARTBEAT_PERIOD_NS)
+    );
+    assert!(beats.iter().all(|b| b.1 == JobState::Idle as u32));
+}
+
+#[test]
+fn outputs_of_a_tick_come_status_then_joint_then_gripper_then_heartbeat() {
+    let (mut r, _) = streaming();
+    r.grasps = false;
+    // Find the tick that reaches the grasp.
+    loop {
+        let mark = r.fx.out.len();
+        r.tick();
+        let out = r.fx.out[mark..].to_vec();
+        if out.iter().any(is_close) {
+            let j = out.iter().position(|o| matches!(o, Out::Joint(_))).unwrap();
+            let g = out
+                .iter()
+                .position(|o| matches!(o, Out::Gripper { .. }))
+                .unwrap();
+            assert!(j < g, "{out:?}");
+            if let Some(h) = out.iter().position(|o| matches!(o, Out::Status(_))) {
+                assert!(g < h, "the heartbeat comes last: {out:?}");
+            }
+            break;
+        }
+    }
+    // A Placed status comes before the tick's joint command.
+    let mut r = Rig::started(&[1, 2]);
+    loop {
+        let mark = r.fx.out.len();
+        r.tick();
+        let out = r.fx.out[mark..].to_vec();
+        if let Some(p) = out
+            .iter()
+            .position(|o| matches!(o, Out::Status(s) if event(s) == StatusEvent::Placed))
+        {
+            let j = out.iter().position(|o| matches!(o, Out::Joint(_))).unwrap();
+            assert!(p < j, "{out:?}");
+            break;
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// No allocation
+// ---------------------------------------------------------------------------------------
+
+/// Counts the allocations made on a thread while it has counting on (this test binary's
+/// allocator; other threads and other times are not counted).
+mod counting {
+    use std::alloc::{GlobalAlloc, Layout, System};
+    use std::cell::Cell;
+    use std::sync::atomic::{AtomicU64, Ordering};
+
+    struct Counting;
+
+    static ALLOCS: AtomicU64 = AtomicU64::new(0);
+
+    thread_local! {
+        static ON: Cell<bool> = const { Cell::new(false) };
+    }
+
+    fn note() {
+        if ON.try_with(|c| c.get()).unwrap_or(false) {
+            ALLOCS.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    // SAFETY: forwards to the system allocator unchanged; only counts.
+    unsafe impl GlobalAlloc for Counting {
+        unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+            note();
+            unsafe { System.alloc(layout) }
+        }
+        unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+            unsafe { System.dealloc(ptr, layout) }
+        }
+        unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+            note();
+            unsafe { System.realloc(ptr, layout, new_size) }
+        }
+    }
+
+    #[global_allocator]
+    static A: Counting = Counting;
+
+    /// Runs `f` with counting on; the allocations it made on this thread.
+    pub fn allocations(f: impl FnOnce()) -> u64 {
+        let before = ALLOCS.load(Ordering::Relaxed);
+        ON.with(|c| c.set(true));
+        f();
+        ON.with(|c| c.set(false));
+        ALLOCS.load(Ordering::Relaxed) - before
+    }
+}
+
+#[test]
+fn a_whole_job_with_a_fault_and_a_resume_allocates_nothing() {
+    // The counter counts.
+    let probe = counting::allocations(|| {
+        std::hint::black_box(vec![0u8; 16]);
+    });
+    assert_eq!(probe, 1);
+    let mut r = Rig::started(&[1, 2, 3]);
+    // The rig's own records are preallocated, so that every allocation counted is the job's.
+    r.fx.out.reserve(100_000);
+    r.fx.sent.reserve(16);
+    let n = counting::allocations(|| {
+        // Into the second object's carry, then the adapter goes away and comes back.
+        let mut placed = 0;
+        for _ in 0..10_000 {
+            let mark = r.fx.out.len();
+            r.tick();
+            placed += r.fx.out[mark..]
+                .iter()
+                .filter(|o| matches!(o, Out::Status(s) if s.event == StatusEvent::Placed as u32))
+                .count();
+            if placed == 1 && matches!(r.phase(), Phase::Streaming { seg: 2, .. }) {
+                break;
+            }
+        }
+        r.js_up = false;
+        r.ticks(300);
+        r.js_up = true;
+        for _ in 0..20_000 {
+            r.tick();
+            if r.phase() == Phase::Idle {
+                break;
+            }
+        }
+    });
+    use StatusEvent::*;
+    let ev = r.events();
+    assert!(ev.contains(&Braked) && ev.contains(&Resumed), "{ev:?}");
+    assert_eq!(ev.last(), Some(&JobDone), "{ev:?}");
+    assert_eq!(n, 0, "allocations during the job");
+}

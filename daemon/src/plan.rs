@@ -1,0 +1,151 @@
+//! What the control loop and the planner thread exchange: trajectory buffers ([`MotionPlan`])
+//! that move between them, [`Request`]s and [`Response`]s. Plain data (no I/O), shared by the
+//! planner ([`crate::planner`]), the job state machine ([`crate::job`]) and its tests.
+
+use herb_ipc::{Fault, GripperAction, MAX_JOB_OBJECTS};
+use herb_robot::kinematics::DOF;
+use herb_robot::motion::{Setpoint, Setpoints};
+
+/// Most segments in one object's plan.
+pub const MAX_SEGMENTS: usize = 8;
+
+/// One rest-to-rest move of a plan, and the gripper action at its end.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Segment {
+    /// Index one past its last sample in [`MotionPlan::setpoints`].
+    pub end: usize,
+    /// Gripper action once the arm stands at the segment's end.
+    pub then: Option<GripperAction>,
+}
+
+/// A trajectory buffer and what it is for. Two are allocated at start and reused.
+#[derive(Debug, Clone)]
+pub struct MotionPlan {
+    /// Samples at the loop period.
+    pub setpoints: Setpoints,
+    /// Segments, in order.
+    pub segments: [Segment; MAX_SEGMENTS],
+    /// Segments used.
+    pub n_segments: usize,
+    /// Object index in the packing order.
+    pub index: u32,
+    /// Its catalog type.
+    pub object: u16,
+    /// Placement in B: x, y, z (m), yaw (rad).
+    pub pose: [f32; 4],
+    /// Whether the placement was decided for this plan (false for a replan of a held
+    /// object's placement after a resume).
+    pub decided: bool,
+    /// Decision latency (one `herb_decide::Decider::decide` call), ns; 0 when not decided.
+    pub decision_ns: u64,
+}
+
+impl MotionPlan {
+    /// An empty plan holding `samples` samples at most.
+    pub fn with_capacity(samples: usize) -> Self {
+        Self {
+            setpoints: Setpoints::with_capacity(samples),
+            segments: [Segment::default(); MAX_SEGMENTS],
+            n_segments: 0,
+            index: 0,
+            object: 0,
+            pose: [0.0; 4],
+            decided: false,
+            decision_ns: 0,
+        }
+    }
+
+    /// Empties the plan for reuse (capacity kept).
+    pub fn reset(&mut self) {
+        self.setpoints.clear();
+        self.n_segments = 0;
+        self.decided = false;
+        self.decision_ns = 0;
+    }
+
+    /// Ends a segment at the last sample, with `then` to do there.
+    pub fn push_segment(&mut self, then: Option<GripperAction>) {
+        if self.n_segments < MAX_SEGMENTS {
+            self.segments[self.n_segments] = Segment {
+                end: self.setpoints.len(),
+                then,
+            };
+            self.n_segments += 1;
+        }
+    }
+
+    /// The segments used.
+    pub fn segments(&self) -> &[Segment] {
+        &self.segments[..self.n_segments]
+    }
+}
+
+/// What the loop asks.
+#[derive(Debug)]
+pub enum Request {
+    /// Order a job's objects (Beam-3).
+    Order {
+        /// Job id.
+        job_id: u64,
+        /// Objects (catalog type indices).
+        objects: [u16; MAX_JOB_OBJECTS],
+        /// Used.
+        count: usize,
+    },
+    /// Decide and plan object `index` from rest at `from`, on a heightmap stamped after
+    /// `after_stamp_ns`. With `place_only`, the object is already held: reuse `pose` and plan
+    /// only the placing moves.
+    Plan {
+        /// Index in the order.
+        index: u32,
+        /// Its type.
+        object: u16,
+        /// Oldest acceptable heightmap stamp (exclusive).
+        after_stamp_ns: u64,
+        /// Current configuration (at rest).
+        from: [f64; DOF],
+        /// Held already: place at `pose`.
+        place_only: bool,
+        /// The placement to reuse with `place_only`.
+        pose: [f32; 4],
+        /// Buffer to fill.
+        buf: Box<MotionPlan>,
+    },
+    /// Brake from `state` to standstill.
+    Brake {
+        /// The last commanded state.
+        state: Setpoint,
+        /// Buffer to fill.
+        buf: Box<MotionPlan>,
+    },
+}
+
+/// What the planner answers.
+#[derive(Debug)]
+pub enum Response {
+    /// The packing order.
+    Ordered {
+        /// Job id.
+        job_id: u64,
+        /// Ordered objects.
+        order: [u16; MAX_JOB_OBJECTS],
+        /// Used.
+        count: usize,
+    },
+    /// The job could not be ordered.
+    OrderFailed {
+        /// Job id.
+        job_id: u64,
+    },
+    /// A plan for an object.
+    Planned(Box<MotionPlan>),
+    /// A brake trajectory.
+    Braked(Box<MotionPlan>),
+    /// Planning failed; the buffer comes back.
+    Failed {
+        /// Why.
+        fault: Fault,
+        /// The buffer.
+        buf: Box<MotionPlan>,
+    },
+}
