@@ -329,10 +329,14 @@ impl Job {
                 }
             }
             Response::Ordered { .. } => {}
-            Response::OrderFailed { .. } => {
+            Response::OrderFailed { job_id }
+                if job_id == self.job_id && self.phase == Phase::Ordering =>
+            {
                 self.fault = Fault::Decision;
                 self.finish(fx, false);
             }
+            // A stale reply (an earlier job's) changes nothing.
+            Response::OrderFailed { .. } => {}
             Response::Planned(plan) => {
                 if self.phase == Phase::Planning && !self.stopping {
                     if let Some(old) = self.active.take() {

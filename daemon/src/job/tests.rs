@@ -684,6 +684,23 @@ fn order_failed_fails_the_job_with_decision() {
     assert!(r.joints_since(mark).is_empty(), "no command without a job");
 }
 
+#[test]
+fn order_failed_for_another_job_or_after_ordering_is_ignored() {
+    // A stale reply for an earlier job.
+    let mut r = Rig::new();
+    r.auto = false;
+    r.submit(7, &[4]);
+    r.deliver(Response::OrderFailed { job_id: 6 });
+    assert_eq!(r.phase(), Phase::Ordering);
+    // One for this job, once it is ordered (the planner answers each order once; a repeat
+    // is a bug elsewhere, and must not fail a job mid-motion).
+    let resp = answer(r.take());
+    r.deliver(resp);
+    r.deliver(Response::OrderFailed { job_id: 7 });
+    assert!(matches!(r.phase(), Phase::WaitHeightmap { .. }));
+    assert!(!r.events().contains(&StatusEvent::JobFailed));
+}
+
 // ---------------------------------------------------------------------------------------
 // Waiting for a heightmap, planning
 // ---------------------------------------------------------------------------------------
