@@ -109,7 +109,11 @@ enum Phase {
     WaitHeightmap {
         since: u64,
     },
-    Planning,
+    /// A plan is being made; `since`: when this object began waiting for a frame newer than
+    /// the last release (the planner's own waits for one do not restart that clock).
+    Planning {
+        since: u64,
+    },
     Streaming {
         seg: usize,
         cursor: usize,
@@ -338,7 +342,7 @@ impl Job {
             // A stale reply (an earlier job's) changes nothing.
             Response::OrderFailed { .. } => {}
             Response::Planned(plan) => {
-                if self.phase == Phase::Planning && !self.stopping {
+                if matches!(self.phase, Phase::Planning { .. }) && !self.stopping {
                     if let Some(old) = self.active.take() {
                         self.recycle(old);
                     }
@@ -373,13 +377,15 @@ impl Job {
             Response::Failed { fault, buf } => {
                 self.recycle(buf);
                 match self.phase {
-                    Phase::Planning => {
+                    // The planner saw no valid frame newer than the release within its wait: not
+                    // a fault yet; wait on (the fresh-heightmap timeout, from when the object
+                    // began waiting, reports one).
+                    Phase::Planning { since } if fault == Fault::HeightmapTimeout => {
+                        self.phase = Phase::WaitHeightmap { since };
+                    }
+                    Phase::Planning { .. } => {
                         self.fault = fault;
-                        if fault == Fault::HeightmapTimeout {
-                            self.phase = Phase::WaitHeightmap { since: now };
-                        } else {
-                            self.finish(fx, false);
-                        }
+                        self.finish(fx, false);
                     }
                     Phase::Braking { .. } => self.enter_faulted(fx),
                     _ => {}
@@ -539,7 +545,8 @@ impl Job {
         self.job_id = 0;
     }
 
-    fn request_plan(&mut self, fx: &mut impl Effects, place_only: bool) {
+    /// Asks for object `index`'s plan; `since`: when it began waiting for a frame.
+    fn request_plan(&mut self, fx: &mut impl Effects, place_only: bool, since: u64) {
         let Some(buf) = self.spare.take() else {
             return;
         };
@@ -554,7 +561,7 @@ impl Job {
             buf,
         };
         match fx.plan(req) {
-            Ok(()) => self.phase = Phase::Planning,
+            Ok(()) => self.phase = Phase::Planning { since },
             Err(Request::Plan { buf, .. }) => self.spare = Some(buf),
             Err(_) => {}
         }
@@ -562,15 +569,15 @@ impl Job {
 
     fn step(&mut self, now: u64, fx: &mut impl Effects) {
         match self.phase {
-            Phase::Idle | Phase::Ordering | Phase::Planning => {}
+            Phase::Idle | Phase::Ordering | Phase::Planning { .. } => {}
             Phase::WaitHeightmap { since } => {
                 if self.stopping {
                     return;
                 }
-                if self.hm_stamp > self.release_stamp {
-                    self.request_plan(fx, false);
-                } else if now.saturating_sub(since) > self.t.fresh_heightmap_ns {
+                if now.saturating_sub(since) > self.t.fresh_heightmap_ns {
                     self.raise(fx, Fault::HeightmapTimeout);
+                } else if self.hm_stamp > self.release_stamp {
+                    self.request_plan(fx, false, since);
                 }
             }
             Phase::Streaming { seg, cursor } => self.stream(fx, now, seg, cursor),
@@ -713,7 +720,7 @@ impl Job {
             GripperAction::Open
         };
         if self.holding {
-            self.request_plan(fx, true);
+            self.request_plan(fx, true, now);
         } else {
             // Start the object over on a heightmap taken after the resume.
             self.release_stamp = self.release_stamp.max(now);

@@ -648,7 +648,7 @@ fn ordered_waits_for_a_heightmap_then_plans_the_first_object_of_the_order() {
     // The planner's order (reversed by the script), from rest where the arm stands.
     assert_eq!((index, object, after_stamp_ns), (0, 6, 0));
     assert_eq!((from, place_only), (r.q, false));
-    assert_eq!(r.phase(), Phase::Planning);
+    assert!(matches!(r.phase(), Phase::Planning { .. }));
 }
 
 #[test]
@@ -773,7 +773,7 @@ fn a_full_planner_ring_keeps_waiting_and_retries() {
     r.fx.refuse = false;
     r.auto = false;
     r.tick();
-    assert_eq!(r.phase(), Phase::Planning);
+    assert!(matches!(r.phase(), Phase::Planning { .. }));
 }
 
 #[test]
@@ -803,11 +803,48 @@ fn the_planners_heightmap_timeout_returns_to_waiting_silently() {
         fault: Fault::HeightmapTimeout,
         buf,
     });
-    assert_eq!(r.phase(), Phase::WaitHeightmap { since: r.now });
+    assert!(matches!(r.phase(), Phase::WaitHeightmap { .. }));
     assert!(!r.events().contains(&StatusEvent::Fault), "no fault event");
+    assert_eq!(
+        r.job.status(StatusEvent::Heartbeat).fault,
+        Fault::None as u32,
+        "nor fault"
+    );
     // and plans again
     r.tick();
-    assert_eq!(r.phase(), Phase::Planning);
+    assert!(matches!(r.phase(), Phase::Planning { .. }));
+}
+
+#[test]
+fn a_planner_that_never_finds_a_frame_faults_at_the_fresh_heightmap_timeout() {
+    // The loop sees frames (their headers are fine) but the planner rejects every one (a bad
+    // cell): its 500 ms waits must not restart the loop's fresh-heightmap clock.
+    let mut r = Rig::started(&[1]);
+    r.auto = false;
+    r.tick();
+    r.respond(); // ordered
+    let start = r.now;
+    let t = params().timeouts.fresh_heightmap_ns;
+    while !r.events().contains(&StatusEvent::Fault) {
+        assert!(
+            r.now < start + t + 1000 * MS,
+            "no fault after {} ms",
+            (r.now - start) / MS
+        );
+        if let Some(Request::Plan { buf, .. }) = r.fx.sent.pop_front() {
+            r.ticks(500); // the planner's wait
+            r.deliver(Response::Failed {
+                fault: Fault::HeightmapTimeout,
+                buf,
+            });
+        }
+        r.tick();
+    }
+    assert_eq!(
+        r.last(StatusEvent::Fault).fault,
+        Fault::HeightmapTimeout as u32
+    );
+    assert!(r.now > start + t);
 }
 
 #[test]
@@ -851,7 +888,7 @@ fn a_plan_arriving_after_a_fault_is_recycled_and_the_resume_waits_for_it() {
     r.tick();
     r.respond();
     r.until(50, "plan", is_plan);
-    assert_eq!(r.phase(), Phase::Planning);
+    assert!(matches!(r.phase(), Phase::Planning { .. }));
     // The adapter goes away while the planner works.
     r.js_up = false;
     r.until_event(200, StatusEvent::Braked);
