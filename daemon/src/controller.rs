@@ -16,10 +16,11 @@ use crate::job::{Effects, Job, JobParams, JobTimeouts};
 use crate::plan::{MotionPlan, Request};
 use crate::planner::PlannerLink;
 use hdrhistogram::Histogram;
-use herb_ipc::bus::{Bus, JobServer, Pub, Sub};
+use herb_ipc::bus::{Bus, CancelServer, JobServer, Pub, Sub};
 use herb_ipc::{
-    GripperAction, GripperCommand, GripperState, Header, HeightmapFrame, JointCommand, JointState,
-    PackJobReply, PackJobRequest, RejectReason, Status, StatusEvent, monotonic_ns,
+    CancelJobReply, CancelJobRequest, GripperAction, GripperCommand, GripperState, Header,
+    HeightmapFrame, JointCommand, JointState, PackJobReply, PackJobRequest, RejectReason, Status,
+    StatusEvent, monotonic_ns,
 };
 use herb_robot::motion::Setpoint;
 use herb_robot::rt::{set_timer_slack, sleep_until};
@@ -105,6 +106,7 @@ pub struct Ports {
     gs: Sub<GripperState>,
     hm: Sub<HeightmapFrame>,
     jobs: JobServer,
+    cancel: CancelServer,
     out: OutPorts,
     _bus: Bus,
 }
@@ -125,6 +127,7 @@ impl Ports {
             gs: bus.subscriber(&s.gripper_state())?,
             hm: bus.subscriber(&s.heightmap())?,
             jobs: bus.job_server()?,
+            cancel: bus.cancel_server()?,
             out: OutPorts {
                 cmd: bus.publisher(&s.joint_command())?,
                 grip: bus.publisher(&s.gripper_command())?,
@@ -137,6 +140,8 @@ impl Ports {
 
 /// A pack-job request being answered.
 type JobRequest = ActiveRequest<ipc::Service, PackJobRequest, (), PackJobReply, ()>;
+/// A cancel request being answered.
+type CancelRequest = ActiveRequest<ipc::Service, CancelJobRequest, (), CancelJobReply, ()>;
 
 /// The loop's counters reported in every status.
 #[derive(Debug, Clone, Copy, Default)]
@@ -156,6 +161,7 @@ struct Outbox<'a> {
     decision_ns: &'a mut Histogram<u64>,
     counters: LoopCounters,
     request: Option<JobRequest>,
+    cancel: Option<CancelRequest>,
 }
 
 impl<'a> Outbox<'a> {
@@ -175,6 +181,7 @@ impl<'a> Outbox<'a> {
             decision_ns: &mut stats.decision_ns,
             counters,
             request: None,
+            cancel: None,
         }
     }
 
@@ -195,6 +202,18 @@ impl Effects for Outbox<'_> {
                 reason: reason as u32,
                 detail,
                 reserved: 0,
+            });
+        }
+    }
+
+    fn cancel_reply(&mut self, job_id: u64, reason: RejectReason) {
+        let header = self.header();
+        if let Some(req) = &self.cancel {
+            let _ = req.send_copy(CancelJobReply {
+                header,
+                job_id,
+                accepted: (reason == RejectReason::None) as u32,
+                reason: reason as u32,
             });
         }
     }
@@ -394,6 +413,12 @@ impl Controller {
             fx.request = Some(req);
             job.job_request(&r, now, &mut fx);
             fx.request = None;
+        }
+        while let Ok(Some(req)) = p.cancel.receive() {
+            let r = *req.payload();
+            fx.cancel = Some(req);
+            job.cancel_request(&r, &mut fx);
+            fx.cancel = None;
         }
         let stop = self.shared.stop.load(Ordering::Relaxed);
         job.tick(now, stop, &mut fx)

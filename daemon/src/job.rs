@@ -7,7 +7,8 @@
 //! 1. every joint state ([`Job::joint_state`]), gripper state ([`Job::gripper_state`]) and
 //!    heightmap frame ([`Job::heightmap`]) that arrived,
 //! 2. every planner response ([`Job::planner_response`]),
-//! 3. every pack-job request ([`Job::job_request`]),
+//! 3. every pack-job request ([`Job::job_request`]), then every cancel request
+//!    ([`Job::cancel_request`]),
 //! 4. one [`Job::tick`] (stop request, health, one step of the current phase, commands),
 //!
 //! and the machine answers through [`Effects`]: replies, status events, joint and gripper
@@ -35,9 +36,9 @@
 use crate::config::{Timeouts, secs_to_ns};
 use crate::plan::{MotionPlan, Request, Response};
 use herb_ipc::{
-    Fault, GRIPPER_REPEAT_NS, GripperAction, GripperState, HEARTBEAT_PERIOD_NS, Header,
-    HeightmapFrame, InOrder, JobState, JointState, MAX_FUTURE_STAMP_NS, MAX_JOB_OBJECTS, NO_OBJECT,
-    PackJobRequest, RejectReason, Status, StatusEvent,
+    CancelJobRequest, Fault, GRIPPER_REPEAT_NS, GripperAction, GripperState, HEARTBEAT_PERIOD_NS,
+    Header, HeightmapFrame, InOrder, JobState, JointState, MAX_FUTURE_STAMP_NS, MAX_JOB_OBJECTS,
+    NO_OBJECT, PackJobRequest, RejectReason, Status, StatusEvent,
 };
 use herb_robot::kinematics::DOF;
 use herb_robot::motion::Setpoint;
@@ -90,6 +91,8 @@ pub struct JobParams {
 pub trait Effects {
     /// Answers the pack-job request being handled ([`Job::job_request`]).
     fn reply(&mut self, job_id: u64, reason: RejectReason, detail: u32);
+    /// Answers the cancel request being handled ([`Job::cancel_request`]).
+    fn cancel_reply(&mut self, job_id: u64, reason: RejectReason);
     /// Publishes a status. Its header, `cycles`, `deadline_misses` and `max_cycle_ns` are the
     /// shell's to fill; `rejected_inputs` counts the machine's rejections only.
     fn status(&mut self, status: &Status);
@@ -132,6 +135,10 @@ enum Phase {
     Faulted {
         healthy_since: Option<u64>,
     },
+    /// A cancelled job's retreat: `asked` once the planner has the request.
+    Retreating {
+        asked: bool,
+    },
 }
 
 /// The job state machine. Built once; no method allocates.
@@ -164,6 +171,8 @@ pub struct Job {
     release_stamp: u64,
     holding: bool,
     fault: Fault,
+    /// A client cancelled the job: brake, retreat, report `JobCancelled`.
+    cancelling: bool,
     // trajectory buffers: two, moved between the machine and the planner, never allocated
     active: Option<Box<MotionPlan>>,
     spare: Option<Box<MotionPlan>>,
@@ -214,6 +223,7 @@ impl Job {
             release_stamp: 0,
             holding: false,
             fault: Fault::None,
+            cancelling: false,
             active: Some(a),
             spare: Some(b),
             brake: None,
@@ -295,6 +305,58 @@ impl Job {
         }
     }
 
+    /// A cancel request: answered through [`Effects::cancel_reply`] (`Malformed`, then
+    /// `ShuttingDown`, then `NoSuchJob` unless it names the running job; a repeat is accepted
+    /// again). The arm brakes if it moves, then retreats straight up; a job waiting on a fault
+    /// is cancelled where it stands. Either way `JobCancelled` ends the job.
+    pub fn cancel_request(&mut self, r: &CancelJobRequest, fx: &mut impl Effects) {
+        let reason = match r.validate() {
+            Err(e) => e,
+            Ok(()) if self.stopping => RejectReason::ShuttingDown,
+            Ok(()) if self.job_id == 0 || r.job_id != self.job_id => RejectReason::NoSuchJob,
+            Ok(()) => RejectReason::None,
+        };
+        if reason != RejectReason::None {
+            self.rejected += 1;
+        }
+        fx.cancel_reply(r.job_id, reason);
+        if reason != RejectReason::None || self.cancelling {
+            return;
+        }
+        self.cancelling = true;
+        match self.phase {
+            Phase::Streaming { .. } if self.moving() => self.begin_brake(fx),
+            // At rest: retreat now.
+            Phase::Ordering
+            | Phase::WaitHeightmap { .. }
+            | Phase::Streaming { .. }
+            | Phase::Gripper { .. } => self.retreat(fx),
+            // Planning: when the plan comes back. Braking: when it ends. Faulted: next tick.
+            _ => {}
+        }
+    }
+
+    /// Asks for the retreat of a cancelled job (when a buffer is home; else on a later tick).
+    fn retreat(&mut self, fx: &mut impl Effects) {
+        self.cmd.velocity = [0.0; DOF];
+        self.cmd.acceleration = [0.0; DOF];
+        self.phase = Phase::Retreating { asked: false };
+        let Some(buf) = self.spare.take() else {
+            return;
+        };
+        let held = self.holding || self.gs.is_some_and(|g| g.holding == 1);
+        let req = Request::Retreat {
+            from: self.cmd.position,
+            held: held.then(|| self.order.get(self.index).copied()).flatten(),
+            buf,
+        };
+        match fx.plan(req) {
+            Ok(()) => self.phase = Phase::Retreating { asked: true },
+            Err(Request::Retreat { buf, .. }) => self.spare = Some(buf),
+            Err(_) => {}
+        }
+    }
+
     fn start_job(&mut self, r: &PackJobRequest, fx: &mut impl Effects) {
         let n = r.objects().len();
         let mut objects = [0u16; MAX_JOB_OBJECTS];
@@ -304,6 +366,7 @@ impl Job {
         self.index = 0;
         self.done = 0;
         self.fault = Fault::None;
+        self.cancelling = false;
         self.holding = self.gs.is_some_and(|g| g.holding == 1);
         self.release_stamp = 0;
         let q = self.js.map(|j| j.position).unwrap_or_default();
@@ -337,12 +400,20 @@ impl Job {
                 if job_id == self.job_id && self.phase == Phase::Ordering =>
             {
                 self.fault = Fault::Decision;
-                self.finish(fx, false);
+                self.finish(fx, StatusEvent::JobFailed);
             }
             // A stale reply (an earlier job's) changes nothing.
             Response::OrderFailed { .. } => {}
+            Response::Planned(plan) if matches!(self.phase, Phase::Retreating { .. }) => {
+                if let Some(old) = self.active.take() {
+                    self.recycle(old);
+                }
+                self.active = Some(plan);
+                self.phase = Phase::Streaming { seg: 0, cursor: 0 };
+            }
             Response::Planned(plan) => {
-                if matches!(self.phase, Phase::Planning { .. }) && !self.stopping {
+                let planning = matches!(self.phase, Phase::Planning { .. });
+                if planning && !self.stopping && !self.cancelling {
                     if let Some(old) = self.active.take() {
                         self.recycle(old);
                     }
@@ -357,6 +428,9 @@ impl Job {
                     }
                 } else {
                     self.recycle(plan);
+                    if planning && self.cancelling && !self.stopping {
+                        self.retreat(fx);
+                    }
                 }
             }
             Response::Braked(buf) => {
@@ -383,11 +457,17 @@ impl Job {
                     Phase::Planning { since } if fault == Fault::HeightmapTimeout => {
                         self.phase = Phase::WaitHeightmap { since };
                     }
+                    Phase::Planning { .. } if self.cancelling => self.retreat(fx),
                     Phase::Planning { .. } => {
                         self.fault = fault;
-                        self.finish(fx, false);
+                        self.finish(fx, StatusEvent::JobFailed);
                     }
                     Phase::Braking { .. } => self.enter_faulted(fx),
+                    // No way up: the arm stays where it stopped.
+                    Phase::Retreating { .. } => {
+                        self.fault = fault;
+                        self.finish(fx, StatusEvent::JobCancelled);
+                    }
                     _ => {}
                 }
             }
@@ -468,9 +548,14 @@ impl Job {
         self.begin_brake(fx);
     }
 
+    /// The last command moves the arm.
+    fn moving(&self) -> bool {
+        self.cmd.velocity.iter().any(|v| *v != 0.0)
+            || self.cmd.acceleration.iter().any(|a| *a != 0.0)
+    }
+
     fn begin_brake(&mut self, fx: &mut impl Effects) {
-        let moving = self.cmd.velocity.iter().any(|v| *v != 0.0)
-            || self.cmd.acceleration.iter().any(|a| *a != 0.0);
+        let moving = self.moving();
         let (seg, cursor) = match self.phase {
             Phase::Streaming { seg, cursor } => (seg, cursor),
             _ => (0, 0),
@@ -533,15 +618,12 @@ impl Job {
         }
     }
 
-    fn finish(&mut self, fx: &mut impl Effects, ok: bool) {
-        let ev = if ok {
-            StatusEvent::JobDone
-        } else {
-            StatusEvent::JobFailed
-        };
+    /// Ends the job with `end` (`JobDone`, `JobFailed` or `JobCancelled`).
+    fn finish(&mut self, fx: &mut impl Effects, end: StatusEvent) {
         self.phase = Phase::Idle;
         self.commanding = false;
-        self.emit(fx, ev, NO_OBJECT, [0.0; 4], 0);
+        self.cancelling = false;
+        self.emit(fx, end, NO_OBJECT, [0.0; 4], 0);
         self.job_id = 0;
     }
 
@@ -587,7 +669,14 @@ impl Job {
                 seg,
                 active_cursor,
             } => self.brake_step(fx, cursor, seg, active_cursor),
+            Phase::Retreating { asked: false } => self.retreat(fx),
+            Phase::Retreating { asked: true } => {}
             Phase::Faulted { healthy_since } => {
+                if self.cancelling {
+                    // Cancelled where it stopped (its inputs may be gone: no retreat).
+                    self.finish(fx, StatusEvent::JobCancelled);
+                    return;
+                }
                 if self.stopping || self.job_id == 0 {
                     return;
                 }
@@ -642,7 +731,7 @@ impl Job {
         } else if now.saturating_sub(since) > self.t.gripper_action_ns {
             self.fault = Fault::Gripper;
             self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
-            self.finish(fx, false);
+            self.finish(fx, StatusEvent::JobFailed);
         }
     }
 
@@ -691,7 +780,14 @@ impl Job {
                         if let Some(b) = self.brake.take() {
                             self.recycle(b);
                         }
-                        self.enter_faulted(fx);
+                        if self.cancelling && !self.stopping {
+                            self.cmd.velocity = [0.0; DOF];
+                            self.cmd.acceleration = [0.0; DOF];
+                            self.emit(fx, StatusEvent::Braked, self.current_type(), [0.0; 4], 0);
+                            self.retreat(fx);
+                        } else {
+                            self.enter_faulted(fx);
+                        }
                     }
                 }
             }
@@ -706,7 +802,7 @@ impl Job {
         let held = self.gs.is_some_and(|g| g.holding == 1);
         self.emit(fx, StatusEvent::Resumed, self.current_type(), [0.0; 4], 0);
         if self.index >= self.count {
-            self.finish(fx, true);
+            self.finish(fx, StatusEvent::JobDone);
             return;
         }
         if self.holding && !held {
@@ -736,8 +832,10 @@ impl Job {
                 .as_ref()
                 .map_or(0, |p| if seg == 0 { 0 } else { p.segments[seg - 1].end });
             self.phase = Phase::Streaming { seg, cursor: start };
+        } else if self.cancelling {
+            self.finish(fx, StatusEvent::JobCancelled);
         } else if self.index >= self.count {
-            self.finish(fx, true);
+            self.finish(fx, StatusEvent::JobDone);
         } else {
             self.phase = Phase::WaitHeightmap { since: now };
         }
@@ -807,6 +905,7 @@ impl Job {
         let state = match event {
             StatusEvent::JobDone => JobState::Done,
             StatusEvent::JobFailed => JobState::Failed,
+            StatusEvent::JobCancelled => JobState::Cancelled,
             _ => self.state(),
         };
         Status {

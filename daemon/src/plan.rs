@@ -111,6 +111,17 @@ pub enum Request {
         /// Buffer to fill.
         buf: Box<MotionPlan>,
     },
+    /// Retreat straight up from rest at `from` to the transit height (for `held`, the type of
+    /// the object in the gripper, if any): the move of a cancelled job. No segment when the
+    /// gripper is already that high or the lift is out of reach.
+    Retreat {
+        /// Current configuration (at rest).
+        from: [f64; DOF],
+        /// The held object's type, if one is held.
+        held: Option<u16>,
+        /// Buffer to fill.
+        buf: Box<MotionPlan>,
+    },
     /// Brake from `state` to standstill.
     Brake {
         /// The last commanded state.
@@ -137,7 +148,7 @@ pub enum Response {
         /// Job id.
         job_id: u64,
     },
-    /// A plan for an object.
+    /// A plan for an object, or a retreat.
     Planned(Box<MotionPlan>),
     /// A brake trajectory.
     Braked(Box<MotionPlan>),

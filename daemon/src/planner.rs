@@ -196,6 +196,28 @@ impl Worker {
         Ok(())
     }
 
+    /// Straight up from `from` to the transit height for the object `held` (none: an empty
+    /// gripper); no segment when already there or out of reach.
+    fn retreat(
+        &mut self,
+        from: [f64; DOF],
+        held: Option<u16>,
+        buf: &mut MotionPlan,
+    ) -> Result<(), Fault> {
+        buf.reset();
+        let h = held.map_or(0.0, |t| self.catalog.shape(TypeIdx(t)).extents().z as f64);
+        let transit = self
+            .cell
+            .transit_z(h, herb_sim::frames::SUCCESS_TOP_Z as f64);
+        if let Some(up) = lift_to(&self.arm, &self.ik, &from, transit) {
+            self.motion
+                .point_to_point(&from, &up, &mut buf.setpoints)
+                .map_err(|_| Fault::Motion)?;
+            buf.push_segment(None);
+        }
+        Ok(())
+    }
+
     fn handle(&mut self, r: Request) -> Response {
         match r {
             Request::Order {
@@ -231,6 +253,14 @@ impl Worker {
                     Err(fault) => Response::Failed { fault, buf },
                 }
             }
+            Request::Retreat {
+                from,
+                held,
+                mut buf,
+            } => match self.retreat(from, held, &mut buf) {
+                Ok(()) => Response::Planned(buf),
+                Err(fault) => Response::Failed { fault, buf },
+            },
             Request::Brake { state, mut buf } => {
                 buf.reset();
                 match self.motion.brake(&state, &mut buf.setpoints) {

@@ -7,7 +7,7 @@
 //! its last sample for late subscribers (history 1), so a restarted daemon sees the current
 //! heightmap at once. Room is left for peers that were killed and not yet cleaned up.
 
-use crate::{PackJobReply, PackJobRequest, Payload, Services};
+use crate::{CancelJobReply, CancelJobRequest, PackJobReply, PackJobRequest, Payload, Services};
 use iceoryx2::node::NodeView;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -22,6 +22,10 @@ pub type Sub<T> = Subscriber<ipc::Service, T, ()>;
 pub type JobServer = Server<ipc::Service, PackJobRequest, (), PackJobReply, ()>;
 /// A pack-job client.
 pub type JobClient = Client<ipc::Service, PackJobRequest, (), PackJobReply, ()>;
+/// The cancel-job server (herbd).
+pub type CancelServer = Server<ipc::Service, CancelJobRequest, (), CancelJobReply, ()>;
+/// A cancel-job client.
+pub type CancelClient = Client<ipc::Service, CancelJobRequest, (), CancelJobReply, ()>;
 
 /// A failure to open a node, service or port, with what was being opened.
 #[derive(Debug, thiserror::Error)]
@@ -90,8 +94,9 @@ pub fn qos(leaf: &str) -> Qos {
     }
 }
 
-/// Clients the pack-job service takes at most; it takes one server (one daemon per prefix).
-pub const PACK_JOB_MAX_CLIENTS: usize = 8;
+/// Clients each request-response service (pack job, cancel job) takes at most; each takes one
+/// server (one daemon per prefix).
+pub const REQUEST_MAX_CLIENTS: usize = 8;
 
 /// The iceoryx2 node name of the daemon serving `prefix`: how a second daemon finds it.
 pub fn daemon_node_name(prefix: &str) -> String {
@@ -198,42 +203,57 @@ impl Bus {
             .map_err(|e| err(name, e))
     }
 
-    fn jobs(
+    /// A request-response service of HERB (herbd is its one server).
+    fn request_response<Q: Payload, R: Payload>(
         &self,
+        name: &str,
     ) -> Result<
-        iceoryx2::service::port_factory::request_response::PortFactory<
-            ipc::Service,
-            PackJobRequest,
-            (),
-            PackJobReply,
-            (),
-        >,
+        iceoryx2::service::port_factory::request_response::PortFactory<ipc::Service, Q, (), R, ()>,
         BusError,
     > {
-        let name = self.services.pack_job();
-        let sn: ServiceName = name.as_str().try_into().map_err(|e| err(&name, e))?;
+        let sn: ServiceName = name.try_into().map_err(|e| err(name, e))?;
         self.node
             .service_builder(&sn)
-            .request_response::<PackJobRequest, PackJobReply>()
-            .max_clients(PACK_JOB_MAX_CLIENTS)
+            .request_response::<Q, R>()
+            .max_clients(REQUEST_MAX_CLIENTS)
             .max_servers(1) // one daemon per prefix
             .open_or_create()
-            .map_err(|e| err(&name, e))
+            .map_err(|e| err(name, e))
     }
 
     /// The pack-job server.
     pub fn job_server(&self) -> Result<JobServer, BusError> {
-        self.jobs()?
+        let name = self.services.pack_job();
+        self.request_response(&name)?
             .server_builder()
             .create()
-            .map_err(|e| err("pack_job server", e))
+            .map_err(|e| err(&name, e))
     }
 
     /// A pack-job client.
     pub fn job_client(&self) -> Result<JobClient, BusError> {
-        self.jobs()?
+        let name = self.services.pack_job();
+        self.request_response(&name)?
             .client_builder()
             .create()
-            .map_err(|e| err("pack_job client", e))
+            .map_err(|e| err(&name, e))
+    }
+
+    /// The cancel-job server.
+    pub fn cancel_server(&self) -> Result<CancelServer, BusError> {
+        let name = self.services.cancel_job();
+        self.request_response(&name)?
+            .server_builder()
+            .create()
+            .map_err(|e| err(&name, e))
+    }
+
+    /// A cancel-job client.
+    pub fn cancel_client(&self) -> Result<CancelClient, BusError> {
+        let name = self.services.cancel_job();
+        self.request_response(&name)?
+            .client_builder()
+            .create()
+            .map_err(|e| err(&name, e))
     }
 }

@@ -416,6 +416,8 @@ pub enum JobState {
     Done = 4,
     /// Ended early (an object could not be placed).
     Failed = 5,
+    /// Ended on a client's request ([`CancelJobRequest`]).
+    Cancelled = 6,
 }
 
 /// What a [`Status`] message reports.
@@ -442,6 +444,9 @@ pub enum StatusEvent {
     JobFailed = 8,
     /// `herbd` is stopping (signal); the last message it sends.
     Shutdown = 9,
+    /// The job was cancelled ([`CancelJobRequest`]): the arm braked and retreated (or, if it
+    /// was faulted, stands where it stopped); objects not yet placed stay unpacked.
+    JobCancelled = 10,
 }
 
 /// Why the daemon stopped or failed.
@@ -499,7 +504,7 @@ impl JobState {
     /// The state for a wire code, if defined.
     pub fn from_code(c: u32) -> Option<Self> {
         use JobState::*;
-        [Idle, Running, Braking, Faulted, Done, Failed]
+        [Idle, Running, Braking, Faulted, Done, Failed, Cancelled]
             .get(c as usize)
             .copied()
     }
@@ -510,8 +515,17 @@ impl StatusEvent {
     pub fn from_code(c: u32) -> Option<Self> {
         use StatusEvent::*;
         [
-            Heartbeat, Accepted, Decided, Placed, Fault, Braked, Resumed, JobDone, JobFailed,
+            Heartbeat,
+            Accepted,
+            Decided,
+            Placed,
+            Fault,
+            Braked,
+            Resumed,
+            JobDone,
+            JobFailed,
             Shutdown,
+            JobCancelled,
         ]
         .get(c as usize)
         .copied()
@@ -619,6 +633,8 @@ pub enum RejectReason {
     ShuttingDown = 6,
     /// The robot adapter is not connected (no fresh joint and gripper states).
     NotReady = 7,
+    /// A cancel named a job that is not running (finished, never started, or another one).
+    NoSuchJob = 8,
 }
 
 impl RejectReason {
@@ -634,6 +650,7 @@ impl RejectReason {
             Malformed,
             ShuttingDown,
             NotReady,
+            NoSuchJob,
         ]
         .get(c as usize)
         .copied()
@@ -734,6 +751,68 @@ impl SimReset {
     /// The header.
     pub fn validate(&self) -> Result<(), Invalid> {
         self.header.validate()
+    }
+}
+
+/// A request to cancel a running job (`herbctl cancel`): `herbd` brakes the arm, retreats it
+/// straight up to the transit height (an object held stays in the gripper), and reports
+/// [`StatusEvent::JobCancelled`]. Answered by a [`CancelJobReply`].
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::CancelJobRequest")]
+pub struct CancelJobRequest {
+    /// Header.
+    pub header: Header,
+    /// The job to cancel (as in its [`PackJobRequest`]).
+    pub job_id: u64,
+}
+payload!(CancelJobRequest);
+
+impl CancelJobRequest {
+    /// A request to cancel job `job_id`, stamped now.
+    pub fn new(job_id: u64) -> Self {
+        Self {
+            header: Header::now(1),
+            job_id,
+        }
+    }
+
+    /// Header and a non-zero job id; the error is `Malformed`.
+    pub fn validate(&self) -> Result<(), RejectReason> {
+        if self.header.validate().is_err() || self.job_id == 0 {
+            return Err(RejectReason::Malformed);
+        }
+        Ok(())
+    }
+}
+
+/// The reply to a [`CancelJobRequest`].
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::CancelJobReply")]
+pub struct CancelJobReply {
+    /// Header.
+    pub header: Header,
+    /// The request's job id.
+    pub job_id: u64,
+    /// 1 when the cancel was accepted (the job is being cancelled).
+    pub accepted: u32,
+    /// [`RejectReason`] code: `None`, `Malformed`, `ShuttingDown` or `NoSuchJob`.
+    pub reason: u32,
+}
+payload!(CancelJobReply);
+
+impl CancelJobReply {
+    /// Header, flag and reason code.
+    pub fn validate(&self) -> Result<RejectReason, Invalid> {
+        self.header.validate()?;
+        flag("accepted", self.accepted)?;
+        let r = RejectReason::from_code(self.reason)
+            .ok_or(Invalid::new("reason", Reason::UnknownCode))?;
+        if (self.accepted == 1) != (r == RejectReason::None) {
+            return Err(Invalid::new("reason", Reason::OutOfRange));
+        }
+        Ok(r)
     }
 }
 
@@ -853,6 +932,10 @@ impl Services {
     /// request-response [`PackJobRequest`] / [`PackJobReply`], clients -> herbd.
     pub fn pack_job(&self) -> String {
         self.name("pack_job")
+    }
+    /// request-response [`CancelJobRequest`] / [`CancelJobReply`], clients -> herbd.
+    pub fn cancel_job(&self) -> String {
+        self.name("cancel_job")
     }
     /// pub-sub [`SimOutcome`], loopback -> tests (sim only).
     pub fn sim_outcome(&self) -> String {

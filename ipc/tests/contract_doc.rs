@@ -3,7 +3,7 @@
 //! match the file. `HERB_UPDATE_CONTRACT=1 cargo test -p herb-ipc --test contract_doc` rewrites
 //! the blocks after a deliberate change of the wire.
 
-use herb_ipc::bus::{PACK_JOB_MAX_CLIENTS, qos};
+use herb_ipc::bus::{REQUEST_MAX_CLIENTS, qos};
 use herb_ipc::*;
 use std::fmt::Write;
 use std::mem::{align_of, offset_of, size_of};
@@ -112,6 +112,14 @@ fn layouts() -> String {
         cell_m: "m, cell side",
         objects: "objects in the box if the source knows, else 0",
         data: "m above the inner floor; row-major, row 0 at +y, column 0 at -x; first nx*ny used");
+    layout!(s, CancelJobRequest,
+        header: "",
+        job_id: "the running job to cancel");
+    layout!(s, CancelJobReply,
+        header: "",
+        job_id: "the request's job id",
+        accepted: "1 when the job is being cancelled",
+        reason: "`RejectReason` code: `None`, `Malformed`, `ShuttingDown`, `NoSuchJob`");
     layout!(s, Status,
         header: "",
         job_id: "the job (0 when idle)",
@@ -263,7 +271,13 @@ fn services() -> String {
     .unwrap();
     writeln!(
         s,
-        "\nThe pack-job service takes at most {PACK_JOB_MAX_CLIENTS} clients and 1 server."
+        "| `{}` | request-response | `CancelJobRequest` -> `CancelJobReply` | clients | herbd (the one server) | - | - | - | - | - |",
+        sv.cancel_job()
+    )
+    .unwrap();
+    writeln!(
+        s,
+        "\nEach request-response service takes at most {REQUEST_MAX_CLIENTS} clients and 1 server."
     )
     .unwrap();
     s

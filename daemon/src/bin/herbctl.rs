@@ -1,11 +1,11 @@
 //! `herbctl`: submit a pack job to `herbd`, follow it live, print per-object results and a
-//! summary.
+//! summary; cancel a running job; empty the simulated box; print the daemon's state.
 
 use clap::{Parser, Subcommand};
 use herb_ipc::bus::{Bus, Sub};
 use herb_ipc::{
-    Fault, Header, HeightmapFrame, JobState, PackJobRequest, RejectReason, Services, SimOutcome,
-    SimReset, Status, StatusEvent, monotonic_ns,
+    CancelJobRequest, Fault, Header, HeightmapFrame, JobState, PackJobRequest, RejectReason,
+    Services, SimOutcome, SimReset, Status, StatusEvent, monotonic_ns,
 };
 use herb_sim::{Catalog, GridSpec, Heightmap, TypeIdx, boxed, paths};
 use std::path::PathBuf;
@@ -51,6 +51,16 @@ enum Cmd {
     Reset {
         /// Give up after this many seconds.
         #[arg(long, default_value_t = 5.0)]
+        timeout: f64,
+    },
+    /// Cancel the running job: the arm brakes, retreats straight up and the job ends
+    /// `JobCancelled` (a job stopped on a fault ends where it stands). Waits for that end.
+    Cancel {
+        /// The job to cancel (default: the running one, from herbd's heartbeat).
+        #[arg(long)]
+        job: Option<u64>,
+        /// Give up after this many seconds.
+        #[arg(long, default_value_t = 30.0)]
         timeout: f64,
     },
     /// Print the daemon's next heartbeat.
@@ -239,6 +249,10 @@ fn pack(
                     println!("job failed: {fault:?}");
                     ok = Some(false)
                 }
+                Some(StatusEvent::JobCancelled) => {
+                    println!("job cancelled");
+                    ok = Some(false)
+                }
                 Some(StatusEvent::Shutdown) => {
                     println!("herbd shut down");
                     ok = Some(false)
@@ -411,6 +425,94 @@ fn reset(cli: &Cli, timeout: f64) -> Result<bool, String> {
     ))
 }
 
+/// `herbctl cancel`: cancels job `job` (or the running one) and follows it to its end.
+fn cancel(cli: &Cli, job: Option<u64>, timeout: f64) -> Result<bool, String> {
+    let (bus, _, status, _) = listen(cli)?;
+    let deadline = Instant::now() + Duration::from_secs_f64(timeout);
+    let job_id = match job {
+        Some(j) => j,
+        None => {
+            // The running job, from the next heartbeat (10 Hz).
+            let mut found = None;
+            let t0 = Instant::now();
+            while found.is_none() && t0.elapsed() < Duration::from_secs(1) {
+                while let Ok(Some(s)) = status.receive() {
+                    let s = s.payload();
+                    if s.validate().is_ok() && s.event == StatusEvent::Heartbeat as u32 {
+                        found = Some(s.job_id);
+                    }
+                }
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            match found {
+                None => return Err("no heartbeat from herbd (is it running?)".into()),
+                Some(0) => return Err("no job is running".into()),
+                Some(j) => j,
+            }
+        }
+    };
+    let client = bus.cancel_client().map_err(|e| e.to_string())?;
+    let pending = client
+        .send_copy(CancelJobRequest::new(job_id))
+        .map_err(|e| format!("send: {e:?}"))?;
+    if pending.number_of_server_connections() == 0 {
+        return Err("no herbd serves this prefix".into());
+    }
+    let t0 = Instant::now();
+    let reply = loop {
+        if let Ok(Some(r)) = pending.receive() {
+            break *r.payload();
+        }
+        if t0.elapsed() > Duration::from_secs(2) {
+            return Err("no reply from herbd".into());
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    };
+    match reply.validate() {
+        Ok(RejectReason::None) => println!("cancelling job {job_id}"),
+        Ok(RejectReason::NoSuchJob) => return Err(format!("job {job_id} is not running")),
+        Ok(r) => return Err(format!("cancel refused: {r:?}")),
+        Err(e) => return Err(format!("malformed reply: {e}")),
+    }
+    let mut heard = Instant::now();
+    while Instant::now() < deadline {
+        if heard.elapsed() > DAEMON_LOST_AFTER {
+            return Err("daemon lost: no status from herbd".into());
+        }
+        while let Ok(Some(s)) = status.receive() {
+            let s = *s.payload();
+            if s.validate().is_err() || s.job_id != job_id {
+                continue;
+            }
+            heard = Instant::now();
+            let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
+            match StatusEvent::from_code(s.event) {
+                Some(StatusEvent::Braked) => println!("braked: standing still"),
+                Some(StatusEvent::JobCancelled) => {
+                    let how = if fault == Fault::None {
+                        String::new()
+                    } else {
+                        format!(" (last fault {fault:?})")
+                    };
+                    println!(
+                        "job {job_id} cancelled{how}: {}/{} placed",
+                        s.objects_done, s.objects_total
+                    );
+                    return Ok(true);
+                }
+                Some(e @ (StatusEvent::JobDone | StatusEvent::JobFailed)) => {
+                    println!("job {job_id} ended before the cancel took effect: {e:?}");
+                    return Ok(false);
+                }
+                Some(StatusEvent::Shutdown) => return Err("herbd shut down".into()),
+                _ => {}
+            }
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    Err(format!("job {job_id} not cancelled within {timeout} s"))
+}
+
 /// How long without a status message from herbd (it heartbeats at 10 Hz) before a client
 /// following a job says the daemon is lost: five heartbeat periods.
 const DAEMON_LOST_AFTER: Duration = Duration::from_millis(500);
@@ -435,6 +537,7 @@ fn main() -> ExitCode {
         } => pack(&cli, &catalog, session, objects, picture, *timeout, *json),
         Cmd::Status { timeout } => status(&cli, *timeout),
         Cmd::Reset { timeout } => reset(&cli, *timeout),
+        Cmd::Cancel { job, timeout } => cancel(&cli, *job, *timeout),
     };
     match r {
         Ok(true) => ExitCode::SUCCESS,

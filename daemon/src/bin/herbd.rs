@@ -140,6 +140,10 @@ fn describe(s: &Status) -> Option<String> {
             "job {}: FAILED ({fault:?}), {}/{} placed",
             s.job_id, s.objects_done, s.objects_total
         ),
+        StatusEvent::JobCancelled => format!(
+            "job {}: cancelled, {}/{} placed",
+            s.job_id, s.objects_done, s.objects_total
+        ),
         StatusEvent::Shutdown => "shutdown".into(),
     })
 }

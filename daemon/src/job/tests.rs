@@ -27,6 +27,10 @@ enum Out {
         reason: RejectReason,
         detail: u32,
     },
+    CancelReply {
+        job_id: u64,
+        reason: RejectReason,
+    },
     Status(Status),
     Joint(Setpoint),
     Gripper {
@@ -43,6 +47,7 @@ fn kind(r: &Request) -> &'static str {
         Request::Order { .. } => "order",
         Request::Plan { .. } => "plan",
         Request::Brake { .. } => "brake",
+        Request::Retreat { .. } => "retreat",
     }
 }
 
@@ -61,6 +66,9 @@ impl Effects for Fx {
             reason,
             detail,
         });
+    }
+    fn cancel_reply(&mut self, job_id: u64, reason: RejectReason) {
+        self.out.push(Out::CancelReply { job_id, reason });
     }
     fn status(&mut self, status: &Status) {
         self.out.push(Out::Status(*status));
@@ -169,6 +177,18 @@ fn answer(r: Request) -> Response {
                 buf.decided = true;
                 buf.decision_ns = DECISION_NS;
             }
+            Response::Planned(buf)
+        }
+        Request::Retreat { from, mut buf, .. } => {
+            buf.reset();
+            let mut q = from;
+            for _ in 0..SEG {
+                q[1] -= 0.001;
+                let mut s = Setpoint::at_rest(q);
+                s.velocity[1] = -1.0;
+                buf.setpoints.push(s).expect("room");
+            }
+            buf.push_segment(None);
             Response::Planned(buf)
         }
         Request::Brake { state, mut buf } => {
@@ -1484,6 +1504,214 @@ fn a_stop_while_planning_drops_the_late_plan_and_blocks_resume() {
             .iter()
             .all(|c| c.velocity == [0.0; DOF])
     );
+}
+
+// ---------------------------------------------------------------------------------------
+// Cancel
+// ---------------------------------------------------------------------------------------
+
+impl Rig {
+    fn cancel(&mut self, job_id: u64) -> RejectReason {
+        let mut r = CancelJobRequest::new(job_id);
+        r.header = Header::at(1, self.now);
+        let mark = self.fx.out.len();
+        self.job.cancel_request(&r, &mut self.fx);
+        let replies: Vec<_> = self.fx.out[mark..]
+            .iter()
+            .filter_map(|o| match o {
+                Out::CancelReply { job_id: j, reason } if *j == job_id => Some(*reason),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(replies.len(), 1, "one reply per cancel");
+        replies[0]
+    }
+}
+
+fn is_retreat(o: &Out) -> bool {
+    *o == Out::Plan("retreat")
+}
+
+#[test]
+fn cancel_requests_are_answered_with_their_reason() {
+    let mut r = Rig::new();
+    assert_eq!(r.cancel(0), RejectReason::Malformed);
+    assert_eq!(r.cancel(7), RejectReason::NoSuchJob, "no job runs");
+    r.submit(7, &[1]);
+    assert_eq!(r.cancel(8), RejectReason::NoSuchJob, "another job runs");
+    assert_eq!(r.job.rejected_inputs(), 3);
+    assert_eq!(r.cancel(7), RejectReason::None);
+    assert_eq!(
+        r.cancel(7),
+        RejectReason::None,
+        "a repeat is accepted again"
+    );
+    r.until_event(3000, StatusEvent::JobCancelled);
+    assert_eq!(r.count(is_retreat), 1, "and changes nothing");
+    assert_eq!(r.cancel(7), RejectReason::NoSuchJob, "over");
+    let mut r = Rig::started(&[1]);
+    r.stop = true;
+    r.tick();
+    assert_eq!(r.cancel(7), RejectReason::ShuttingDown);
+}
+
+#[test]
+fn a_cancel_while_moving_brakes_retreats_and_reports_cancelled() {
+    let (mut r, _) = streaming();
+    r.ticks(3);
+    assert_eq!(r.cancel(7), RejectReason::None);
+    assert_eq!(r.count(is_brake), 1, "brakes at once");
+    r.auto = false;
+    r.tick();
+    r.respond(); // the brake
+    r.until(50, "retreat", is_retreat);
+    let Request::Retreat { from, held, buf } = r.take() else {
+        panic!()
+    };
+    assert_eq!(
+        (from, held),
+        (r.q, None),
+        "from where it stopped, holding nothing"
+    );
+    let resp = answer(Request::Retreat { from, held, buf });
+    let Response::Planned(p) = &resp else {
+        panic!()
+    };
+    let up = p.setpoints.as_slice().to_vec();
+    r.deliver(resp);
+    let mark = r.fx.out.len();
+    r.until_event(SEG + 5, StatusEvent::JobCancelled);
+    assert_eq!(
+        r.joints_since(mark)[..SEG],
+        up[..],
+        "the retreat, sample for sample"
+    );
+    use StatusEvent::*;
+    assert_eq!(r.events(), vec![Accepted, Decided, Braked, JobCancelled]);
+    let s = r.last(JobCancelled);
+    assert_eq!(
+        (s.job_id, s.state, s.fault, s.objects_done),
+        (
+            7,
+            JobState::Cancelled as u32,
+            herb_ipc::Fault::None as u32,
+            0
+        )
+    );
+    assert_eq!(r.phase(), Phase::Idle);
+    let mark = r.fx.out.len();
+    r.ticks(20);
+    assert!(r.joints_since(mark).is_empty(), "no command after the job");
+    // Both buffers are home: the next job runs.
+    r.auto = true;
+    assert_eq!(r.submit(8, &[2]), (RejectReason::None, 0));
+    r.until_event(5000, JobDone);
+}
+
+#[test]
+fn a_cancel_at_rest_retreats_without_a_brake() {
+    // Waiting for a heightmap.
+    let mut r = Rig::started(&[1, 2]);
+    r.until_event(5000, StatusEvent::Placed);
+    r.frame_stamp = Some(0); // no newer frame: the job waits
+    while !matches!(r.phase(), Phase::WaitHeightmap { .. }) {
+        r.tick();
+    }
+    r.cancel(7);
+    assert_eq!(r.count(is_retreat), 1);
+    r.until_event(SEG + 5, StatusEvent::JobCancelled);
+    assert_eq!(r.last(StatusEvent::JobCancelled).objects_done, 1);
+    // At the gripper, holding the object: the retreat takes its height into account.
+    let (mut r, _) = streaming();
+    r.until(3000, "close", is_close);
+    r.auto = false;
+    r.tick(); // holding
+    r.cancel(7);
+    let Request::Retreat { held, .. } = r.take() else {
+        panic!()
+    };
+    assert_eq!(held, Some(3));
+    assert_eq!(r.count(is_brake), 0);
+    // Ordering.
+    let mut r = Rig::new();
+    r.auto = false;
+    r.submit(7, &[1]);
+    r.cancel(7);
+    assert!(matches!(r.phase(), Phase::Retreating { asked: true }));
+    r.auto = true;
+    r.until_event(SEG + 5, StatusEvent::JobCancelled);
+    assert!(!r.events().contains(&StatusEvent::Decided));
+}
+
+#[test]
+fn a_cancel_while_planning_waits_for_the_plan_then_retreats() {
+    let mut r = Rig::started(&[1]);
+    r.auto = false;
+    r.tick();
+    r.respond(); // ordered
+    r.until(50, "plan", is_plan);
+    r.cancel(7);
+    r.ticks(5);
+    assert_eq!(
+        r.count(is_retreat),
+        0,
+        "the only spare buffer is with the planner"
+    );
+    r.respond(); // the plan comes back: not used
+    assert!(!r.events().contains(&StatusEvent::Decided));
+    assert_eq!(r.count(is_retreat), 1);
+    r.auto = true;
+    r.until_event(SEG + 5, StatusEvent::JobCancelled);
+}
+
+#[test]
+fn a_cancel_of_a_faulted_job_ends_it_where_it_stands() {
+    let (mut r, _) = streaming();
+    r.ticks(2);
+    r.js_up = false;
+    r.until_event(300, StatusEvent::Braked);
+    r.cancel(7);
+    r.tick();
+    assert_eq!(r.events().last(), Some(&StatusEvent::JobCancelled));
+    assert_eq!(r.count(is_retreat), 0);
+    let s = r.last(StatusEvent::JobCancelled);
+    assert_eq!(
+        s.fault,
+        Fault::JointStateTimeout as u32,
+        "the last fault stays reported"
+    );
+}
+
+#[test]
+fn a_failed_or_empty_retreat_still_ends_the_job_cancelled() {
+    // The planner cannot lift the arm: cancelled where it stands, with the reason.
+    let mut r = Rig::new();
+    r.auto = false;
+    r.submit(7, &[1]);
+    r.take();
+    r.cancel(7);
+    let Request::Retreat { buf, .. } = r.take() else {
+        panic!()
+    };
+    r.deliver(Response::Failed {
+        fault: Fault::Unreachable,
+        buf,
+    });
+    let s = r.last(StatusEvent::JobCancelled);
+    assert_eq!(s.fault, Fault::Unreachable as u32);
+    // Already at the transit height: no segment, cancelled at once.
+    let mut r = Rig::new();
+    r.auto = false;
+    r.submit(7, &[1]);
+    r.take();
+    r.cancel(7);
+    let Request::Retreat { mut buf, .. } = r.take() else {
+        panic!()
+    };
+    buf.reset();
+    r.deliver(Response::Planned(buf));
+    r.tick();
+    assert_eq!(r.events().last(), Some(&StatusEvent::JobCancelled));
 }
 
 // ---------------------------------------------------------------------------------------

@@ -898,3 +898,77 @@ fn sigterm_mid_motion_brakes_reports_and_exits_zero() {
         "the job did not finish"
     );
 }
+
+/// `herbctl cancel` mid-motion (issue 18, item 7): the arm brakes and retreats, the job ends
+/// `JobCancelled` (herbctl cancel exits 0; the client that submitted it sees the end and exits
+/// 1), the arm then stands still, and the next job runs.
+#[test]
+fn a_job_cancelled_mid_motion_brakes_retreats_and_the_next_job_runs() {
+    use herb_ipc::{JointState, Services};
+    let (dir, prefix, cfg) = setup("cancel");
+    let (_lb, _hd) = start_cell(&dir, &cfg);
+    // herbctl's stdout and stderr (it gives up on its own: `--timeout`, 30 s by default).
+    let herbctl = |args: &[&str]| {
+        let o = Command::new(exe("herbctl"))
+            .args(["--prefix", prefix.as_str()])
+            .args(args)
+            .output()
+            .expect("herbctl runs");
+        let text =
+            String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
+        (o.status, text)
+    };
+    let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, false);
+    let mut ctl_out = Follow::new(&mut ctl);
+    ctl_out.wait_for("object  1/2", Duration::from_secs(60));
+    std::thread::sleep(Duration::from_millis(300)); // moving
+    let (st, out_of_cancel) = herbctl(&["cancel"]);
+    assert!(st.success(), "herbctl cancel: {out_of_cancel}");
+    assert!(
+        out_of_cancel.contains("braked") && out_of_cancel.contains("cancelled"),
+        "{out_of_cancel}"
+    );
+    // "cancelling job <id>"
+    let out_job_id = |out: &str| {
+        out.split_whitespace()
+            .skip_while(|w| *w != "job")
+            .nth(1)
+            .expect("a job id")
+            .to_string()
+    };
+    ctl_out.wait_for("job cancelled", Duration::from_secs(10));
+    assert!(
+        !ctl.wait_for(Duration::from_secs(10)).success(),
+        "the submitting client reports the job did not complete"
+    );
+    // Standing still: two joint states 200 ms apart at the same configuration.
+    let services = Services::new(&prefix).unwrap();
+    let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
+    let js = bus
+        .subscriber::<JointState>(&services.joint_state())
+        .unwrap();
+    let latest = || {
+        std::thread::sleep(Duration::from_millis(200));
+        let mut q = None;
+        while let Ok(Some(s)) = js.receive() {
+            q = Some(s.payload().position);
+        }
+        q.expect("joint states")
+    };
+    let (a, b) = (latest(), latest());
+    assert!(
+        a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-9),
+        "{a:?} {b:?}"
+    );
+    // Cancelled once: nothing runs now, and that job id is not running.
+    let (st, out) = herbctl(&["cancel"]);
+    assert!(!st.success() && out.contains("no job is running"), "{out}");
+    let job = out_job_id(&out_of_cancel);
+    let (st, out) = herbctl(&["cancel", "--job", &job]);
+    assert!(!st.success() && out.contains("is not running"), "{out}");
+    let mut next = pack_objects(&dir, &prefix, "011", 120, false);
+    assert!(
+        next.wait_for(Duration::from_secs(150)).success(),
+        "the next job runs"
+    );
+}
