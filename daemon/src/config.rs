@@ -112,6 +112,30 @@ pub struct Config {
     pub cell: CellConfig,
     /// Joint limits.
     pub limits: JointLimits,
+    /// Run logs (`herbctl replay`, `herbctl explain`).
+    pub record: RecordConfig,
+}
+
+/// Run logs: off unless `dir` is set (or `herbd --record DIR`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RecordConfig {
+    /// Folder of the run log's segment files; absent: no run log.
+    pub dir: Option<PathBuf>,
+    /// A segment is closed, between jobs, once past this size (MB).
+    pub segment_mb: u64,
+    /// The oldest segments are deleted beyond this total (MB).
+    pub keep_mb: u64,
+}
+
+impl Default for RecordConfig {
+    fn default() -> Self {
+        Self {
+            dir: None,
+            segment_mb: 64,
+            keep_mb: 1024,
+        }
+    }
 }
 
 impl Default for Config {
@@ -124,6 +148,7 @@ impl Default for Config {
             models: ModelsConfig::default(),
             cell: CellConfig::default(),
             limits: JointLimits::baxter_left(),
+            record: RecordConfig::default(),
         }
     }
 }
@@ -132,6 +157,11 @@ impl Config {
     /// Loop period (s).
     pub fn period_s(&self) -> f64 {
         1.0 / self.loop_.rate_hz
+    }
+
+    /// Samples a trajectory buffer holds: `max_trajectory_s` at the loop rate.
+    pub fn trajectory_samples(&self) -> usize {
+        (self.loop_.max_trajectory_s * self.loop_.rate_hz).ceil() as usize
     }
 
     /// Loop period (ns).
@@ -194,6 +224,13 @@ impl ConfigFile for Config {
             return Err(format!(
                 "models.clearance_m {} outside 0..=0.05",
                 self.models.clearance_m
+            ));
+        }
+        let r = &self.record;
+        if r.segment_mb == 0 || r.keep_mb < r.segment_mb {
+            return Err(format!(
+                "record.segment_mb {} must be at least 1 and at most record.keep_mb {}",
+                r.segment_mb, r.keep_mb
             ));
         }
         self.cell.validate()?;

@@ -12,15 +12,16 @@
 //! The job state machine, its faults and its guarantees are described in [`crate::job`].
 
 use crate::config::Config;
-use crate::job::{Effects, Job, JobParams, JobTimeouts};
-use crate::plan::{MotionPlan, Request};
+use crate::job::{Effects, Job, JobParams};
+use crate::plan::{MotionPlan, Request, Response};
 use crate::planner::PlannerLink;
+use crate::record::{FRAME_META, LoopRec, OutDigest, Recorder, RespRec};
 use hdrhistogram::Histogram;
 use herb_ipc::bus::{Bus, CancelServer, JobServer, Pub, Sub};
 use herb_ipc::{
     CancelJobReply, CancelJobRequest, GripperAction, GripperCommand, GripperState, Header,
-    HeightmapFrame, JointCommand, JointState, PackJobReply, PackJobRequest, RejectReason, Status,
-    StatusEvent, monotonic_ns,
+    HeightmapFrame, JointCommand, JointState, PackJobReply, PackJobRequest, Payload, RejectReason,
+    Status, StatusEvent, monotonic_ns,
 };
 use herb_robot::motion::Setpoint;
 use herb_robot::rt::{set_timer_slack, sleep_until};
@@ -162,6 +163,10 @@ struct Outbox<'a> {
     counters: LoopCounters,
     request: Option<JobRequest>,
     cancel: Option<CancelRequest>,
+    /// Digest of the machine's outputs this cycle (run log).
+    digest: OutDigest,
+    /// Planner requests handed over so far.
+    sent: &'a mut u64,
 }
 
 impl<'a> Outbox<'a> {
@@ -172,6 +177,7 @@ impl<'a> Outbox<'a> {
         planner: &'a mut PlannerLink,
         stats: &'a mut LoopStats,
         counters: LoopCounters,
+        sent: &'a mut u64,
     ) -> Self {
         Self {
             now,
@@ -182,6 +188,8 @@ impl<'a> Outbox<'a> {
             counters,
             request: None,
             cancel: None,
+            digest: OutDigest::new(),
+            sent,
         }
     }
 
@@ -193,6 +201,7 @@ impl<'a> Outbox<'a> {
 
 impl Effects for Outbox<'_> {
     fn reply(&mut self, job_id: u64, reason: RejectReason, detail: u32) {
+        self.digest.reply(job_id, reason, detail);
         let header = self.header();
         if let Some(req) = &self.request {
             let _ = req.send_copy(PackJobReply {
@@ -207,6 +216,7 @@ impl Effects for Outbox<'_> {
     }
 
     fn cancel_reply(&mut self, job_id: u64, reason: RejectReason) {
+        self.digest.cancel_reply(job_id, reason);
         let header = self.header();
         if let Some(req) = &self.cancel {
             let _ = req.send_copy(CancelJobReply {
@@ -219,6 +229,7 @@ impl Effects for Outbox<'_> {
     }
 
     fn status(&mut self, status: &Status) {
+        self.digest.status(status);
         let mut s = *status;
         s.header = self.header();
         s.cycles = self.counters.cycles;
@@ -232,6 +243,7 @@ impl Effects for Outbox<'_> {
     }
 
     fn joint(&mut self, c: &Setpoint) {
+        self.digest.joint(c);
         let header = self.header();
         let _ = self.ports.cmd.send_copy(JointCommand {
             header,
@@ -242,6 +254,7 @@ impl Effects for Outbox<'_> {
     }
 
     fn gripper(&mut self, job_id: u64, action: GripperAction, object_type: u32) {
+        self.digest.gripper(job_id, action, object_type);
         let header = self.header();
         let _ = self.ports.grip.send_copy(GripperCommand {
             header,
@@ -252,7 +265,10 @@ impl Effects for Outbox<'_> {
     }
 
     fn plan(&mut self, request: Request) -> Result<(), Request> {
-        self.planner.send(request)
+        self.digest.request(&request);
+        self.planner.send(request)?;
+        *self.sent += 1;
+        Ok(())
     }
 }
 
@@ -270,6 +286,12 @@ pub struct Controller {
     report_every: u64,
     seq: u64,
     counters: LoopCounters,
+    /// The run log's loop end, if recording.
+    recorder: Option<Recorder>,
+    /// Planner requests sent and responses received (a new run-log segment starts only when
+    /// none is outstanding).
+    sent: u64,
+    received: u64,
 }
 
 /// The reporter's ends of the statistics rings.
@@ -290,19 +312,14 @@ impl Controller {
         shared: Arc<Shared>,
         catalog_len: usize,
     ) -> (Self, StatsLink) {
-        let samples = (cfg.loop_.max_trajectory_s * cfg.loop_.rate_hz).ceil() as usize;
+        let samples = cfg.trajectory_samples();
         let (stats_tx, r_rx) = rtrb::RingBuffer::new(STATS_RING);
         let (mut r_tx, stats_rx) = rtrb::RingBuffer::new(STATS_RING);
         // Spare statistics boxes for the swap, allocated now.
         for _ in 0..STATS_SPARES {
             let _ = r_tx.push(Box::new(LoopStats::new()));
         }
-        let params = JobParams {
-            timeouts: JobTimeouts::from(&cfg.timeouts),
-            lower: cfg.limits.lower,
-            upper: cfg.limits.upper,
-            catalog_len,
-        };
+        let params = JobParams::from_config(cfg, catalog_len);
         let buffer = || Box::new(MotionPlan::with_capacity(samples));
         let c = Self {
             ports,
@@ -317,8 +334,18 @@ impl Controller {
             report_every: (cfg.loop_.report_interval_s * cfg.loop_.rate_hz).round() as u64,
             seq: 0,
             counters: LoopCounters::default(),
+            recorder: None,
+            sent: 0,
+            received: 0,
         };
         (c, StatsLink { rx: r_rx, tx: r_tx })
+    }
+
+    /// Records every input of the machine, and a digest of its outputs per cycle, to a run
+    /// log ([`crate::record`]).
+    pub fn with_recorder(mut self, r: Recorder) -> Self {
+        self.recorder = Some(r);
+        self
     }
 
     /// Runs until a stop is requested and the arm stands still; returns the statistics of
@@ -351,6 +378,7 @@ impl Controller {
                     &mut self.planner,
                     &mut self.stats,
                     self.counters,
+                    &mut self.sent,
                 )
                 .status(&status);
                 return self.stats;
@@ -382,20 +410,51 @@ impl Controller {
     /// One cycle: feed the machine everything that arrived, in the order documented in
     /// [`crate::job`]; true when the daemon may exit.
     fn cycle(&mut self, now: u64) -> bool {
+        if let Some(r) = &mut self.recorder
+            && r.wants_snapshot()
+            && self.sent == self.received
+            && let Some(s) = self.job.snapshot()
+        {
+            // Between jobs, nothing at the planner: a new segment may start here.
+            r.snapshot(self.sent, s);
+        }
         let job = &mut self.job;
         let p = &self.ports;
+        let rec = &mut self.recorder;
+        let mut log = |r: LoopRec| {
+            if let Some(rec) = rec.as_mut() {
+                rec.push(r);
+            }
+        };
+        log(LoopRec::Cycle { now });
         // States are read in place; the clock read after each tells a preempted loop's
         // late sample from one stamped in the future.
         while let Ok(Some(s)) = p.js.receive() {
-            let origin = s.header().publisher_id().value();
-            job.joint_state(origin, s.payload(), now, monotonic_ns());
+            let (publisher, received) = (s.header().publisher_id().value(), monotonic_ns());
+            let m = s.payload();
+            log(LoopRec::Js {
+                publisher,
+                received,
+                m: *m,
+            });
+            job.joint_state(publisher, m, now, received);
         }
         while let Ok(Some(s)) = p.gs.receive() {
-            let origin = s.header().publisher_id().value();
-            job.gripper_state(origin, s.payload(), now, monotonic_ns());
+            let (publisher, received) = (s.header().publisher_id().value(), monotonic_ns());
+            let m = s.payload();
+            log(LoopRec::Gs {
+                publisher,
+                received,
+                m: *m,
+            });
+            job.gripper_state(publisher, m, now, received);
         }
         while let Ok(Some(s)) = p.hm.receive() {
-            job.heightmap(s.payload(), now);
+            let f = s.payload();
+            if let Ok(meta) = f.as_bytes()[..FRAME_META].try_into() {
+                log(LoopRec::Frame(meta));
+            }
+            job.heightmap(f, now);
         }
         let mut fx = Outbox::new(
             now,
@@ -404,23 +463,42 @@ impl Controller {
             &mut self.planner,
             &mut self.stats,
             self.counters,
+            &mut self.sent,
         );
         while let Ok(resp) = fx.planner.rx.pop() {
+            self.received += 1;
+            let decision_ns = match &resp {
+                Response::Planned(b) | Response::Braked(b) | Response::Failed { buf: b, .. } => {
+                    b.decision_ns
+                }
+                _ => 0,
+            };
+            log(LoopRec::Resp(RespRec {
+                digest: resp.digest(),
+                decision_ns,
+            }));
             job.planner_response(resp, now, &mut fx);
         }
         while let Ok(Some(req)) = p.jobs.receive() {
             let r = *req.payload();
+            log(LoopRec::Job(r));
             fx.request = Some(req);
             job.job_request(&r, now, &mut fx);
             fx.request = None;
         }
         while let Ok(Some(req)) = p.cancel.receive() {
             let r = *req.payload();
+            log(LoopRec::Cancel(r));
             fx.cancel = Some(req);
             job.cancel_request(&r, &mut fx);
             fx.cancel = None;
         }
         let stop = self.shared.stop.load(Ordering::Relaxed);
-        job.tick(now, stop, &mut fx)
+        let finished = job.tick(now, stop, &mut fx);
+        log(LoopRec::Tick {
+            stop,
+            digest: fx.digest.finish(),
+        });
+        finished
     }
 }

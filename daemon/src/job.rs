@@ -86,6 +86,18 @@ pub struct JobParams {
     pub catalog_len: usize,
 }
 
+impl JobParams {
+    /// The parameters `cfg` gives, for a catalog of `catalog_len` types.
+    pub fn from_config(cfg: &crate::config::Config, catalog_len: usize) -> Self {
+        Self {
+            timeouts: JobTimeouts::from(&cfg.timeouts),
+            lower: cfg.limits.lower,
+            upper: cfg.limits.upper,
+            catalog_len,
+        }
+    }
+}
+
 /// Where the machine's outputs go, in the order they must be published. The shell numbers
 /// every message from one sequence counter in call order and stamps it with the cycle's start.
 pub trait Effects {
@@ -188,6 +200,58 @@ pub struct Job {
     last_heartbeat: u64,
     limit_holds: u64,
     stopping: bool,
+}
+
+/// The machine's state between jobs (no job, no request at the planner, both buffers home):
+/// what a run log's later segment starts from ([`Job::snapshot`], [`Job::restore`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JobSnapshot {
+    /// Latest joint state.
+    pub js: Option<JointState>,
+    /// Its stamp.
+    pub js_at: u64,
+    /// Order check of the joint states.
+    pub js_order: Option<(u128, u64, u64)>,
+    /// Latest gripper state.
+    pub gs: Option<GripperState>,
+    /// Its stamp.
+    pub gs_at: u64,
+    /// Order check of the gripper states.
+    pub gs_order: Option<(u128, u64, u64)>,
+    /// When the newest valid frame was received.
+    pub hm_rx_at: u64,
+    /// The newest valid frame's stamp.
+    pub hm_stamp: u64,
+    /// Inputs rejected.
+    pub rejected: u64,
+    /// The last job's id (0 between jobs).
+    pub job_id: u64,
+    /// The last job's order.
+    pub order: [u16; MAX_JOB_OBJECTS],
+    /// Its length.
+    pub count: u64,
+    /// Objects tried.
+    pub index: u64,
+    /// Objects placed.
+    pub done: u64,
+    /// The last release's stamp.
+    pub release_stamp: u64,
+    /// An object is believed held.
+    pub holding: bool,
+    /// The last fault (code).
+    pub fault: u32,
+    /// The last command.
+    pub cmd: [[f64; DOF]; 3],
+    /// Commanding.
+    pub commanding: bool,
+    /// The gripper command (code), its object, whether due, when last sent.
+    pub grip: (u32, u32, bool, u64),
+    /// The last heartbeat.
+    pub last_heartbeat: u64,
+    /// Commands held at the limits.
+    pub limit_holds: u64,
+    /// Stopping.
+    pub stopping: bool,
 }
 
 /// A state is not from the future when stamped at most [`MAX_FUTURE_STAMP_NS`] past the
@@ -494,6 +558,80 @@ impl Job {
         self.status_of(event, NO_OBJECT, [0.0; 4], 0)
     }
 
+    /// The state between jobs, when the machine is idle with both buffers home (else `None`).
+    pub fn snapshot(&self) -> Option<JobSnapshot> {
+        if self.phase != Phase::Idle || self.active.is_none() || self.spare.is_none() {
+            return None;
+        }
+        Some(JobSnapshot {
+            js: self.js,
+            js_at: self.js_at,
+            js_order: self.js_order.last(),
+            gs: self.gs,
+            gs_at: self.gs_at,
+            gs_order: self.gs_order.last(),
+            hm_rx_at: self.hm_rx_at,
+            hm_stamp: self.hm_stamp,
+            rejected: self.rejected,
+            job_id: self.job_id,
+            order: self.order,
+            count: self.count as u64,
+            index: self.index as u64,
+            done: self.done as u64,
+            release_stamp: self.release_stamp,
+            holding: self.holding,
+            fault: self.fault as u32,
+            cmd: [self.cmd.position, self.cmd.velocity, self.cmd.acceleration],
+            commanding: self.commanding,
+            grip: (
+                self.grip_cmd as u32,
+                self.grip_object,
+                self.grip_due,
+                self.grip_sent_at,
+            ),
+            last_heartbeat: self.last_heartbeat,
+            limit_holds: self.limit_holds,
+            stopping: self.stopping,
+        })
+    }
+
+    /// Takes up the state of `s` (an idle machine's), keeping this machine's buffers and
+    /// parameters.
+    pub fn restore(&mut self, s: &JobSnapshot) {
+        self.js = s.js;
+        self.js_at = s.js_at;
+        self.js_order = InOrder::with_last(s.js_order);
+        self.gs = s.gs;
+        self.gs_at = s.gs_at;
+        self.gs_order = InOrder::with_last(s.gs_order);
+        self.hm_rx_at = s.hm_rx_at;
+        self.hm_stamp = s.hm_stamp;
+        self.rejected = s.rejected;
+        self.phase = Phase::Idle;
+        self.job_id = s.job_id;
+        self.order = s.order;
+        self.count = (s.count as usize).min(MAX_JOB_OBJECTS);
+        self.index = s.index as usize;
+        self.done = s.done as usize;
+        self.release_stamp = s.release_stamp;
+        self.holding = s.holding;
+        self.fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
+        self.cancelling = false;
+        self.cmd = Setpoint {
+            position: s.cmd[0],
+            velocity: s.cmd[1],
+            acceleration: s.cmd[2],
+        };
+        self.commanding = s.commanding;
+        self.grip_cmd = GripperAction::from_code(s.grip.0).unwrap_or(GripperAction::Open);
+        self.grip_object = s.grip.1;
+        self.grip_due = s.grip.2;
+        self.grip_sent_at = s.grip.3;
+        self.last_heartbeat = s.last_heartbeat;
+        self.limit_holds = s.limit_holds;
+        self.stopping = s.stopping;
+    }
+
     /// The state reported in statuses.
     pub fn state(&self) -> JobState {
         match self.phase {
@@ -632,7 +770,12 @@ impl Job {
         let Some(buf) = self.spare.take() else {
             return;
         };
-        let pose = self.active.as_ref().map(|p| p.pose).unwrap_or_default();
+        // Only a place-only plan reuses the placement (a run log's replay from a snapshot
+        // does not know the last job's).
+        let pose = match (&self.active, place_only) {
+            (Some(p), true) => p.pose,
+            _ => [0.0; 4],
+        };
         let req = Request::Plan {
             index: self.index as u32,
             object: self.order[self.index],

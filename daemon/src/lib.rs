@@ -6,6 +6,9 @@
 
 pub mod config;
 pub mod controller;
+pub mod digest;
 pub mod job;
 pub mod plan;
 pub mod planner;
+pub mod record;
+pub mod replay;

@@ -2,6 +2,7 @@
 //! that move between them, [`Request`]s and [`Response`]s. Plain data (no I/O), shared by the
 //! planner ([`crate::planner`]), the job state machine ([`crate::job`]) and its tests.
 
+use crate::digest::Fnv;
 use herb_ipc::{Fault, GripperAction, MAX_JOB_OBJECTS};
 use herb_robot::kinematics::DOF;
 use herb_robot::motion::{Setpoint, Setpoints};
@@ -38,6 +39,9 @@ pub struct MotionPlan {
     pub decided: bool,
     /// Decision latency (one `herb_decide::Decider::decide` call), ns; 0 when not decided.
     pub decision_ns: u64,
+    /// Digest of everything above but the latency ([`MotionPlan::content_digest`]), set by
+    /// the planner when it fills the plan (the loop records it without hashing samples).
+    pub digest: u64,
 }
 
 impl MotionPlan {
@@ -52,6 +56,7 @@ impl MotionPlan {
             pose: [0.0; 4],
             decided: false,
             decision_ns: 0,
+            digest: 0,
         }
     }
 
@@ -61,6 +66,27 @@ impl MotionPlan {
         self.n_segments = 0;
         self.decided = false;
         self.decision_ns = 0;
+        self.digest = 0;
+    }
+
+    /// The digest of the plan's content: samples (bit for bit), segments, index, object, pose
+    /// and whether it was decided; not the measured latency.
+    pub fn content_digest(&self) -> u64 {
+        let mut h = Fnv::new();
+        for s in self.setpoints.as_slice() {
+            for v in s.position.iter().chain(&s.velocity).chain(&s.acceleration) {
+                h.f64(*v);
+            }
+        }
+        for sg in self.segments() {
+            h.u64(sg.end as u64)
+                .u64(sg.then.map_or(u64::MAX, |a| a as u64));
+        }
+        h.u64(self.index as u64).u64(self.object as u64);
+        for v in self.pose {
+            h.u64(v.to_bits() as u64);
+        }
+        h.u64(self.decided as u64).finish()
     }
 
     /// Ends a segment at the last sample, with `then` to do there.
@@ -159,4 +185,37 @@ pub enum Response {
         /// The buffer.
         buf: Box<MotionPlan>,
     },
+}
+
+impl Response {
+    /// The digest of a response as the loop receives it (a plan's by its
+    /// [`MotionPlan::digest`], filled by the planner): what a replay compares.
+    pub fn digest(&self) -> u64 {
+        let mut h = Fnv::new();
+        match self {
+            Response::Ordered {
+                job_id,
+                order,
+                count,
+            } => {
+                h.u64(1).u64(*job_id);
+                for o in &order[..*count] {
+                    h.u64(*o as u64);
+                }
+            }
+            Response::OrderFailed { job_id } => {
+                h.u64(2).u64(*job_id);
+            }
+            Response::Planned(p) => {
+                h.u64(3).u64(p.digest);
+            }
+            Response::Braked(p) => {
+                h.u64(4).u64(p.digest);
+            }
+            Response::Failed { fault, .. } => {
+                h.u64(5).u64(*fault as u64);
+            }
+        }
+        h.finish()
+    }
 }

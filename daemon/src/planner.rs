@@ -25,6 +25,11 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+/// Receives, for request number `n` (from 0, in the order the loop sent them), the frame it
+/// was served with: `None` for a request that needs none, or when none newer than the release
+/// came within the wait. Called on the planner thread (it may allocate).
+pub type FrameLog = Box<dyn Fn(u64, Option<&HeightmapFrame>) + Send>;
+
 /// Requests (and responses) the rings between the loop and the planner hold. The loop has at
 /// most two requests out (an order or a plan, and a brake).
 const RING: usize = 8;
@@ -66,7 +71,10 @@ impl PlannerLink {
     }
 }
 
-struct Worker {
+/// The planner's work without its thread and ports: ordering a job (Beam-3), deciding a
+/// placement on a given heightmap, planning the motion. herbd's planner thread and
+/// `herbctl replay` run this same code.
+pub struct PlannerCore {
     decider: Decider,
     catalog: SharedCatalog,
     sequence: SequenceModel,
@@ -74,12 +82,21 @@ struct Worker {
     arm: Arm,
     ik: IkOptions,
     motion: MotionPlanner,
+    /// The current job's order (from the last `Order` request).
+    job_order: Vec<TypeIdx>,
+}
+
+/// The planner thread: the core, and the heightmaps it decides on.
+struct Worker {
+    core: PlannerCore,
     hm_sub: Sub<HeightmapFrame>,
     latest: Option<Sample<ipc::Service, HeightmapFrame, ()>>,
     /// Frames dropped as invalid (shared with the loop's statistics).
     rejected_frames: Arc<AtomicU64>,
-    /// The current job's order (from the last `Order` request).
-    job_order: Vec<TypeIdx>,
+    /// Where the frame each request was served with goes (run log), if recording.
+    record: Option<FrameLog>,
+    /// Requests handled (the run log numbers them from 0, as the loop does its responses).
+    handled: u64,
     _bus: Bus,
 }
 
@@ -111,6 +128,47 @@ impl Worker {
             .is_some_and(|s| s.payload().header.stamp_ns > after)
     }
 
+    /// Serves one request: the frame it needs (a plan that decides waits for one newer than
+    /// the last release), recorded when a run log is written, then the core.
+    fn handle(&mut self, r: Request) -> Response {
+        let frame = match PlannerCore::frame_needed(&r) {
+            Some(after) if self.refresh_frame(after, FRAME_WAIT) => {
+                self.latest.as_ref().map(|s| s.payload())
+            }
+            _ => None,
+        };
+        if let Some(log) = &self.record {
+            log(self.handled, PlannerCore::frame_needed(&r).and(frame));
+        }
+        self.handled += 1;
+        self.core.handle(r, frame)
+    }
+}
+
+impl PlannerCore {
+    /// Loads the sequence model and the policy named by `cfg` for `catalog`.
+    pub fn new(cfg: &Config, catalog: SharedCatalog) -> Result<Self, String> {
+        let sequence =
+            SequenceModel::load(&cfg.models.sequence, &catalog).map_err(|e| e.to_string())?;
+        let decider = Decider::load(
+            &cfg.models.policy,
+            catalog.clone(),
+            cfg.models.clearance_m as f32,
+        )
+        .map_err(|e| e.to_string())?;
+        let limits = cfg.limits;
+        Ok(Self {
+            decider,
+            catalog,
+            sequence,
+            cell: cfg.cell,
+            arm: Arm::baxter_left().with_limits(&limits.lower, &limits.upper),
+            ik: IkOptions::default(),
+            motion: MotionPlanner::new(limits, cfg.period_s()),
+            job_order: Vec::with_capacity(MAX_JOB_OBJECTS),
+        })
+    }
+
     /// Orders a job's objects (Beam-3) and keeps the order for the decisions' lookahead.
     fn order(&mut self, objects: &[u16]) -> Option<Vec<TypeIdx>> {
         let v: Vec<TypeIdx> = objects.iter().map(|&o| TypeIdx(o)).collect();
@@ -120,11 +178,12 @@ impl Worker {
         Some(order)
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn plan(
         &mut self,
         index: u32,
         object: u16,
-        after: u64,
+        frame: Option<&HeightmapFrame>,
         from: [f64; DOF],
         place_only: Option<[f32; 4]>,
         buf: &mut MotionPlan,
@@ -136,25 +195,11 @@ impl Worker {
         let pose = match place_only {
             Some(p) => p,
             None => {
-                if !self.refresh_frame(after, FRAME_WAIT) {
+                let Some(frame) = frame else {
                     return Err(Fault::HeightmapTimeout);
-                }
-                let frame = self
-                    .latest
-                    .as_ref()
-                    .expect("refresh_frame found one")
-                    .payload();
-                let view = HeightmapView {
-                    nx: frame.nx as usize,
-                    ny: frame.ny as usize,
-                    cell_m: frame.cell_m,
-                    cells: frame.cells(),
                 };
-                let after = self.job_order.get(index as usize + 1..).unwrap_or(&[]);
-                // The decision latency is this call alone (herb_decide::decider).
-                let t0 = Instant::now();
-                let p = self.decider.decide(view, ty, index as usize, after);
-                buf.decision_ns = t0.elapsed().as_nanos() as u64;
+                let (p, ns) = self.decision(frame, object, index);
+                buf.decision_ns = ns;
                 buf.decided = true;
                 p.map_err(|e| match e {
                     DecideError::NoFeasiblePlacement => Fault::NoFeasiblePlacement,
@@ -218,7 +263,60 @@ impl Worker {
         Ok(())
     }
 
-    fn handle(&mut self, r: Request) -> Response {
+    /// Decides where object `index` of the current job's order (type `object`) goes on
+    /// `frame`; and the decision latency (ns), which is this call to the `Decider` alone.
+    pub fn decision(
+        &mut self,
+        frame: &HeightmapFrame,
+        object: u16,
+        index: u32,
+    ) -> (Result<herb_decide::Decision, DecideError>, u64) {
+        let view = HeightmapView {
+            nx: frame.nx as usize,
+            ny: frame.ny as usize,
+            cell_m: frame.cell_m,
+            cells: frame.cells(),
+        };
+        let after = self.job_order.get(index as usize + 1..).unwrap_or(&[]);
+        let t0 = Instant::now();
+        let p = self
+            .decider
+            .decide(view, TypeIdx(object), index as usize, after);
+        (p, t0.elapsed().as_nanos() as u64)
+    }
+
+    /// The catalog.
+    pub fn catalog(&self) -> &SharedCatalog {
+        &self.catalog
+    }
+
+    /// The stamp a request's frame must be newer than, for a plan that decides; else `None`
+    /// (the request needs no frame).
+    pub fn frame_needed(r: &Request) -> Option<u64> {
+        match r {
+            Request::Plan {
+                place_only: false,
+                after_stamp_ns,
+                ..
+            } => Some(*after_stamp_ns),
+            _ => None,
+        }
+    }
+
+    /// Serves a request; a plan that decides does so on `frame` (none: `HeightmapTimeout`).
+    /// Plans come back with their [`MotionPlan::digest`].
+    pub fn handle(&mut self, r: Request, frame: Option<&HeightmapFrame>) -> Response {
+        let mut resp = self.serve(r, frame);
+        match &mut resp {
+            Response::Planned(p) | Response::Braked(p) | Response::Failed { buf: p, .. } => {
+                p.digest = p.content_digest();
+            }
+            _ => {}
+        }
+        resp
+    }
+
+    fn serve(&mut self, r: Request, frame: Option<&HeightmapFrame>) -> Response {
         match r {
             Request::Order {
                 job_id,
@@ -241,14 +339,14 @@ impl Worker {
             Request::Plan {
                 index,
                 object,
-                after_stamp_ns,
                 from,
                 place_only,
                 pose,
                 mut buf,
+                ..
             } => {
                 let reuse = place_only.then_some(pose);
-                match self.plan(index, object, after_stamp_ns, from, reuse, &mut buf) {
+                match self.plan(index, object, frame, from, reuse, &mut buf) {
                     Ok(()) => Response::Planned(buf),
                     Err(fault) => Response::Failed { fault, buf },
                 }
@@ -288,6 +386,7 @@ pub fn spawn(
     cfg: &Config,
     catalog: SharedCatalog,
     stop: Arc<AtomicBool>,
+    record: Option<FrameLog>,
 ) -> Result<(PlannerLink, JoinHandle<()>), String> {
     let (tx, req_rx) = rtrb::RingBuffer::<Request>::new(RING);
     let (resp_tx, rx) = rtrb::RingBuffer::<Response>::new(RING);
@@ -304,27 +403,13 @@ pub fn spawn(
                 let hm_sub = bus
                     .subscriber::<HeightmapFrame>(&services.heightmap())
                     .map_err(|e| e.to_string())?;
-                let sequence = SequenceModel::load(&cfg.models.sequence, &catalog)
-                    .map_err(|e| e.to_string())?;
-                let decider = Decider::load(
-                    &cfg.models.policy,
-                    catalog.clone(),
-                    cfg.models.clearance_m as f32,
-                )
-                .map_err(|e| e.to_string())?;
-                let limits = cfg.limits;
                 Ok(Worker {
-                    decider,
-                    catalog: catalog.clone(),
-                    sequence,
-                    cell: cfg.cell,
-                    arm: Arm::baxter_left().with_limits(&limits.lower, &limits.upper),
-                    ik: IkOptions::default(),
-                    motion: MotionPlanner::new(limits, cfg.period_s()),
+                    core: PlannerCore::new(&cfg, catalog.clone())?,
                     hm_sub,
                     latest: None,
                     rejected_frames: rejected_frames.clone(),
-                    job_order: Vec::with_capacity(MAX_JOB_OBJECTS),
+                    record,
+                    handled: 0,
                     _bus: bus,
                 })
             })();

@@ -168,10 +168,29 @@ impl std::fmt::Display for Invalid {
 
 impl std::error::Error for Invalid {}
 
-/// A payload of this crate: `repr(C)`, numbers only (all-zero bytes are a valid value).
+/// A payload of this crate: `repr(C)`, numbers only (all-zero bytes are a valid value), and no
+/// padding (every field starts where the previous ends; `ipc/tests/contract_doc.rs` checks it
+/// for every payload).
 pub trait Payload: ZeroCopySend + Copy + std::fmt::Debug + 'static {
     /// The header.
     fn header(&self) -> &Header;
+
+    /// The payload's bytes as on the wire (for run logs).
+    fn as_bytes(&self) -> &[u8] {
+        // SAFETY: a payload is `repr(C)`, made of numbers and without padding, so every one of
+        // its `size_of` bytes is initialised.
+        unsafe { std::slice::from_raw_parts((self as *const Self).cast::<u8>(), size_of::<Self>()) }
+    }
+
+    /// A payload from bytes written by [`Payload::as_bytes`]; `None` if the length differs.
+    /// Any bytes make a value (all numbers; enums travel as `u32` codes): validate it.
+    fn from_bytes(b: &[u8]) -> Option<Self> {
+        if b.len() != size_of::<Self>() {
+            return None;
+        }
+        // SAFETY: the length matches and every bit pattern is a valid payload (numbers only).
+        Some(unsafe { std::ptr::read_unaligned(b.as_ptr().cast::<Self>()) })
+    }
 }
 
 macro_rules! payload {
@@ -964,6 +983,16 @@ pub struct InOrder {
 }
 
 impl InOrder {
+    /// The last accepted sample: publisher, sequence number, stamp (for a run log's snapshot).
+    pub fn last(&self) -> Option<(u128, u64, u64)> {
+        self.last
+    }
+
+    /// An order check that last accepted `last` (a snapshot's).
+    pub fn with_last(last: Option<(u128, u64, u64)>) -> Self {
+        Self { last }
+    }
+
     /// Whether a sample from `publisher` (iceoryx2's unique publisher id) with `header` comes
     /// after the last accepted one; a sample that repeats or goes back in sequence or stamp is
     /// refused (the caller drops and counts it) and changes nothing.
@@ -989,6 +1018,18 @@ mod tests {
             position: [0.1; DOF],
             velocity: [0.0; DOF],
         }
+    }
+
+    #[test]
+    fn payload_bytes_round_trip_bit_for_bit() {
+        let mut m = js();
+        m.position[2] = f64::from_bits(0x7ff8_dead_beef_0001); // a NaN with a payload
+        let b = m.as_bytes();
+        assert_eq!(b.len(), size_of::<JointState>());
+        let back = JointState::from_bytes(b).unwrap();
+        assert_eq!(back.position[2].to_bits(), 0x7ff8_dead_beef_0001);
+        assert_eq!(back.as_bytes(), b);
+        assert!(JointState::from_bytes(&b[1..]).is_none(), "wrong length");
     }
 
     #[test]

@@ -45,6 +45,14 @@ macro_rules! layout {
                 stringify!($t),
                 stringify!($f)
             );
+            // No padding either (`Payload::as_bytes` relies on it).
+            assert_eq!(
+                offset_of!($t, $f),
+                end,
+                "{}.{} follows padding: add a reserved field before it",
+                stringify!($t),
+                stringify!($f)
+            );
             end = offset_of!($t, $f) + size;
             writeln!(
                 $out,
@@ -64,6 +72,7 @@ macro_rules! layout {
             "{}: fields missing from the list at its end",
             stringify!($t)
         );
+        assert_eq!(end, size_of::<$t>(), "{}: padding at its end", stringify!($t));
         writeln!(
             $out,
             "| `{}` | (whole) | align {} | 0 | {} | type name `herb::v1::{}` |",

@@ -2,6 +2,8 @@
 //! summary; cancel a running job; empty the simulated box; print the daemon's state.
 
 use clap::{Parser, Subcommand};
+use herb_daemon::record::Log;
+use herb_daemon::replay::{Outcome, ReplayOptions, Replayed};
 use herb_ipc::bus::{Bus, Sub};
 use herb_ipc::{
     CancelJobRequest, Fault, Header, HeightmapFrame, JobState, PackJobRequest, RejectReason,
@@ -62,6 +64,32 @@ enum Cmd {
         /// Give up after this many seconds.
         #[arg(long, default_value_t = 30.0)]
         timeout: f64,
+    },
+    /// Re-run a run log (`herbd --record DIR`) offline: the job state machine on the recorded
+    /// inputs, the decisions and motion plans on the recorded heightmaps; report the first
+    /// divergence. Exit 0: reproduced bit for bit; 1: diverged; 3: the log is incomplete.
+    Replay {
+        /// A segment file (RUN-<start>-<n>.log).
+        log: PathBuf,
+        /// Replay even if the catalog or a model differs from the run's.
+        #[arg(long)]
+        force: bool,
+    },
+    /// Why object N (1-based, as `herbctl pack` numbers them) went where it did: the
+    /// heightmap it was decided on and the next one (PNGs), the policy's action, the z
+    /// estimate, the placement, the outcome.
+    Explain {
+        /// A segment file.
+        log: PathBuf,
+        /// The object (1-based, in the packing order).
+        #[arg(long)]
+        object: u32,
+        /// Where to write object-N-before.png and object-N-after.png.
+        #[arg(long, default_value = ".")]
+        out: PathBuf,
+        /// Explain even if the catalog or a model differs from the run's.
+        #[arg(long)]
+        force: bool,
     },
     /// Print the daemon's next heartbeat.
     Status {
@@ -513,6 +541,167 @@ fn cancel(cli: &Cli, job: Option<u64>, timeout: f64) -> Result<bool, String> {
     Err(format!("job {job_id} not cancelled within {timeout} s"))
 }
 
+/// `herbctl replay`.
+fn replay(cli: &Cli, path: &std::path::Path, force: bool) -> ExitCode {
+    let run = || -> Result<(Outcome, Replayed, Log), String> {
+        let log = Log::read(path)?;
+        let opts = ReplayOptions {
+            boxed: cli.boxed.clone(),
+            force,
+            explain: None,
+        };
+        let (o, r) = herb_daemon::replay::replay(&log, &opts)?;
+        Ok((o, r, log))
+    };
+    match run() {
+        Err(e) => {
+            eprintln!("herbctl: error: {e}");
+            ExitCode::from(2)
+        }
+        Ok((outcome, r, log)) => {
+            println!(
+                "{} (segment {}), recorded on {}",
+                log.header.herbd, log.header.segment, log.header.cpu
+            );
+            let done = format!(
+                "{} cycles, {} joint commands, {} planner responses, {} decisions",
+                r.cycles, r.joint_commands, r.responses, r.decisions
+            );
+            match outcome {
+                Outcome::Reproduced => {
+                    println!("reproduced bit for bit: {done}");
+                    ExitCode::SUCCESS
+                }
+                Outcome::Incomplete(why) => {
+                    println!("log incomplete ({why}); reproduced before that: {done}");
+                    ExitCode::from(3)
+                }
+                Outcome::Diverged { cycle, at_s, what } => {
+                    println!("DIVERGED at cycle {cycle} ({at_s:.3} s into the segment): {what}");
+                    println!("reproduced before that: {done}");
+                    ExitCode::from(1)
+                }
+            }
+        }
+    }
+}
+
+fn write_png(f: &HeightmapFrame, path: &std::path::Path) -> Result<(), String> {
+    let spec = GridSpec::for_box(f.cell_m).map_err(|e| e.to_string())?;
+    let hm = Heightmap::from_data(spec, f.cells().to_vec()).map_err(|e| e.to_string())?;
+    if let Some(d) = path.parent() {
+        let _ = std::fs::create_dir_all(d);
+    }
+    herb_sim::image::write_heightmap_png(path, &hm, 0.3, 4).map_err(|e| e.to_string())
+}
+
+/// `herbctl explain`.
+fn explain(
+    cli: &Cli,
+    catalog: &Catalog,
+    path: &std::path::Path,
+    object: u32,
+    out: &std::path::Path,
+    force: bool,
+) -> Result<bool, String> {
+    if object == 0 {
+        return Err("--object counts from 1".into());
+    }
+    let index = object - 1;
+    let log = Log::read(path)?;
+    let opts = ReplayOptions {
+        boxed: cli.boxed.clone(),
+        force,
+        explain: Some(index),
+    };
+    let (outcome, r) = herb_daemon::replay::replay(&log, &opts)?;
+    let cfg: herb_daemon::config::Config =
+        toml::from_str(&log.header.config_toml).map_err(|e| e.to_string())?;
+    let e = r.explained.ok_or_else(|| {
+        format!(
+            "object {object} was never decided in this log (it holds {} decisions)",
+            r.decisions
+        )
+    })?;
+    let f = &e.frame;
+    println!(
+        "object {object}: {} (planner request {})",
+        name(catalog, e.object as u32),
+        e.request
+    );
+    println!(
+        "heightmap: stamp {} ns, {}x{} cells of {:.4} m, {} objects in the box{}",
+        f.header.stamp_ns,
+        f.nx,
+        f.ny,
+        f.cell_m,
+        f.objects,
+        if f.objects == 0 { " (or unknown)" } else { "" }
+    );
+    println!("policy: {}", cfg.models.policy);
+    match &e.decision {
+        Ok(d) => {
+            println!(
+                "action (normalised x, y, theta): [{:+.4}, {:+.4}, {:+.4}]",
+                d.action[0], d.action[1], d.action[2]
+            );
+            println!(
+                "placement: x {:+.4} m, y {:+.4} m, yaw {:+.3} rad; z {:.4} m (resting height from the heightmap + {:.3} m clearance)",
+                d.position[0], d.position[1], d.theta, d.position[2], cfg.models.clearance_m
+            );
+        }
+        Err(why) => println!("no placement: {why}"),
+    }
+    let mine: Vec<&Status> = r
+        .statuses
+        .iter()
+        .map(|(_, s)| s)
+        .filter(|s| s.object_index == index || s.event == StatusEvent::JobDone as u32)
+        .collect();
+    for s in &mine {
+        let ev = StatusEvent::from_code(s.event);
+        let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
+        match ev {
+            Some(StatusEvent::Decided) => println!(
+                "decided in {:.3} ms (as measured in the run)",
+                s.decision_ns as f64 / 1e6
+            ),
+            Some(StatusEvent::Placed) => println!(
+                "outcome: released at x {:+.4} y {:+.4} z {:.4} m, yaw {:+.3} rad; {} of {} placed",
+                s.pose[0], s.pose[1], s.pose[2], s.pose[3], s.objects_done, s.objects_total
+            ),
+            Some(StatusEvent::Fault) if s.object_index == index => {
+                println!("fault while handling it: {fault:?}")
+            }
+            Some(StatusEvent::JobFailed) if s.object_index == index => {
+                println!("outcome: the job failed on it ({fault:?})")
+            }
+            Some(StatusEvent::JobCancelled) if s.object_index == index => {
+                println!("outcome: the job was cancelled while handling it")
+            }
+            _ => {}
+        }
+    }
+    let before = out.join(format!("object-{object}-before.png"));
+    write_png(f, &before)?;
+    println!("heightmap it was decided on: {}", before.display());
+    match r.decision_frames.iter().find(|(i, _)| *i > index) {
+        Some((_, next)) => {
+            let after = out.join(format!("object-{object}-after.png"));
+            write_png(next, &after)?;
+            println!(
+                "the next decision's heightmap (after it settled): {}",
+                after.display()
+            );
+        }
+        None => println!("no later heightmap in this log (it was the last decision)"),
+    }
+    if let Outcome::Diverged { cycle, what, .. } = outcome {
+        println!("warning: the replay diverged at cycle {cycle}: {what}");
+    }
+    Ok(true)
+}
+
 /// How long without a status message from herbd (it heartbeats at 10 Hz) before a client
 /// following a job says the daemon is lost: five heartbeat periods.
 const DAEMON_LOST_AFTER: Duration = Duration::from_millis(500);
@@ -538,6 +727,15 @@ fn main() -> ExitCode {
         Cmd::Status { timeout } => status(&cli, *timeout),
         Cmd::Reset { timeout } => reset(&cli, *timeout),
         Cmd::Cancel { job, timeout } => cancel(&cli, *job, *timeout),
+        Cmd::Replay { log, force } => {
+            return replay(&cli, log, *force);
+        }
+        Cmd::Explain {
+            log,
+            object,
+            out,
+            force,
+        } => explain(&cli, &catalog, log, *object, out, *force),
     };
     match r {
         Ok(true) => ExitCode::SUCCESS,

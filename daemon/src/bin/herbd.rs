@@ -4,7 +4,7 @@
 use clap::Parser;
 use herb_daemon::config::{Config, ConfigFile};
 use herb_daemon::controller::{Controller, LoopStats, Ports, Shared};
-use herb_daemon::planner;
+use herb_daemon::{planner, record};
 use herb_ipc::bus::{Bus, daemon_node_name, live_nodes_named};
 use herb_ipc::{Fault, JobState, Services, Status, StatusEvent};
 use herb_sim::{Catalog, paths};
@@ -51,6 +51,9 @@ struct Cli {
     /// Also write the final statistics (JSON) to this file.
     #[arg(long)]
     stats_json: Option<PathBuf>,
+    /// Write a run log into this folder (`herbctl replay`, `herbctl explain`).
+    #[arg(long)]
+    record: Option<PathBuf>,
 }
 
 fn config(cli: &Cli) -> Result<Config, String> {
@@ -78,6 +81,9 @@ fn config(cli: &Cli) -> Result<Config, String> {
     }
     if let Some(v) = cli.report_interval {
         c.loop_.report_interval_s = v;
+    }
+    if let Some(v) = &cli.record {
+        c.record.dir = Some(v.clone());
     }
     c.validate().map_err(|e| format!("configuration: {e}"))?;
     Ok(c)
@@ -170,11 +176,38 @@ fn run(cli: Cli) -> Result<(), String> {
             .map_err(|e| format!("cannot install the signal handler: {e}"))?;
     }
     let planner_stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let (link, planner_thread) = planner::spawn(&cfg, catalog.clone(), planner_stop.clone())?;
+    let recording = match &cfg.record.dir {
+        Some(dir) => {
+            let header = record::header_for(&cfg, &catalog)?;
+            let opts = record::RecordOptions {
+                dir: dir.clone(),
+                segment_bytes: cfg.record.segment_mb << 20,
+                keep_bytes: cfg.record.keep_mb << 20,
+            };
+            eprintln!("herbd: recording the run into {}", dir.display());
+            Some(record::start(opts, header)?)
+        }
+        None => None,
+    };
+    let (recorder, frame_log, writer) = match recording {
+        Some(record::Recording {
+            recorder,
+            frames,
+            writer,
+            stop,
+        }) => (Some(recorder), Some(frames), Some((writer, stop))),
+        None => (None, None, None),
+    };
+    let (link, planner_thread) =
+        planner::spawn(&cfg, catalog.clone(), planner_stop.clone(), frame_log)?;
     let bus = Bus::open(&node_name, &services).map_err(|e| e.to_string())?;
     let ports = Ports::open(bus).map_err(|e| e.to_string())?;
     let (controller, mut stats_link) =
         Controller::new(&cfg, ports, link, shared.clone(), catalog.len());
+    let controller = match recorder {
+        Some(r) => controller.with_recorder(r),
+        None => controller,
+    };
     eprintln!(
         "herbd: {} Hz, prefix {:?}, policy {}, {} objects in the catalog",
         cfg.loop_.rate_hz,
@@ -238,6 +271,18 @@ fn run(cli: Cli) -> Result<(), String> {
     total.add(&last);
     planner_stop.store(true, Ordering::Relaxed);
     let _ = planner_thread.join();
+    if let Some((writer, stop)) = writer {
+        stop.store(true, Ordering::Relaxed);
+        match writer.join() {
+            Ok(Ok(files)) => {
+                for f in files {
+                    eprintln!("herbd: run log {}", f.display());
+                }
+            }
+            Ok(Err(e)) => eprintln!("herbd: run log: {e}"),
+            Err(_) => eprintln!("herbd: the run-log writer panicked"),
+        }
+    }
     let report = serde_json::json!({ "herbd_final": summary(&total) });
     println!("{report}");
     if let Some(p) = &cli.stats_json {

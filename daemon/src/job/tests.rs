@@ -1809,6 +1809,28 @@ fn outputs_of_a_tick_come_status_then_joint_then_gripper_then_heartbeat() {
     }
 }
 
+#[test]
+fn a_restored_snapshot_behaves_as_the_original() {
+    let mut a = Rig::started(&[1, 2]);
+    a.until_event(10_000, StatusEvent::JobDone);
+    a.ticks(37);
+    let snap = a.job.snapshot().expect("idle");
+    let mut b = Rig::new();
+    b.job.restore(&snap);
+    assert_eq!(b.job.snapshot(), Some(snap));
+    // Same clock, same arm, same inputs from here: the same outputs.
+    (b.now, b.q, b.js_seq, b.gs_seq, b.last_frame) = (a.now, a.q, a.js_seq, a.gs_seq, a.last_frame);
+    b.frame.header = a.frame.header;
+    let (ma, mb) = (a.fx.out.len(), b.fx.out.len());
+    for r in [&mut a, &mut b] {
+        assert_eq!(r.submit(9, &[3, 4]), (RejectReason::None, 0));
+        r.until_event(10_000, StatusEvent::JobDone);
+    }
+    assert_eq!(a.fx.out[ma..], b.fx.out[mb..]);
+    // Not while a job runs.
+    assert!(Rig::started(&[1]).job.snapshot().is_none());
+}
+
 // ---------------------------------------------------------------------------------------
 // No allocation
 // ---------------------------------------------------------------------------------------

@@ -75,6 +75,9 @@ report_interval_s = 5.0
 [models]
 sequence = "{seq}"
 policy = "{policy}"
+[record]
+segment_mb = 1
+keep_mb = 256
 {limits}"#,
         seq = repo().join("models/sequence.json").display()
     );
@@ -131,6 +134,19 @@ fn pack_objects(dir: &Path, prefix: &str, objects: &str, timeout_s: u32, json: b
     }
     args.extend(["--timeout", &timeout]);
     spawn(&exe("herbctl"), &args, &dir.join("herbctl.log"))
+}
+
+/// Runs herbctl under `prefix` to its end (it gives up on its own): exit status, stdout and
+/// stderr.
+fn herbctl_output(prefix: &str, args: &[&str]) -> (ExitStatus, String) {
+    let o = Command::new(exe("herbctl"))
+        .args(["--prefix", prefix])
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .expect("herbctl runs");
+    let text = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
+    (o.status, text)
 }
 
 /// Lines of a child's stdout, as they come.
@@ -375,7 +391,12 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
     let cfg_s = cfg.to_str().unwrap();
     let lb_log = dir.join("loopback.log");
     let mut lb = spawn(&loopback_exe(), &["--config", cfg_s], &lb_log);
-    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let runs = dir.join("runs");
+    let mut hd = spawn(
+        &exe("herbd"),
+        &["--config", cfg_s, "--record", runs.to_str().unwrap()],
+        &dir.join("herbd.log"),
+    );
     let mut ctl = pack_objects(&dir, &prefix, "003,005,011", 300, true);
     let mut ctl_out = Follow::new(&mut ctl);
     // The first object is decided; the arm is on its way: kill the arm.
@@ -409,6 +430,75 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
         faults.contains(&"JointStateTimeout".to_string()),
         "{summary}"
     );
+
+    // The run log (issue 14, item 5): replayed offline, bit for bit, brake, fault and resume
+    // included; object 1 explained.
+    hd.signal(libc::SIGTERM);
+    assert!(hd.wait_for(Duration::from_secs(10)).success());
+    let mut logs: Vec<PathBuf> = std::fs::read_dir(&runs)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    logs.sort();
+    // The job is in the first segment (the test configuration's 1 MB segments close between
+    // jobs: after it, a second one may have started).
+    let log = logs[0].to_str().unwrap();
+    let (st, out) = herbctl_output(&prefix, &["replay", log]);
+    assert!(st.success(), "{out}");
+    assert!(out.contains("reproduced bit for bit"), "{out}");
+    // Three objects, and a new decision when one was started over after the resume.
+    let decisions: u32 = out
+        .split(" decisions")
+        .next()
+        .and_then(|h| h.rsplit(' ').next())
+        .and_then(|n| n.parse().ok())
+        .expect("a decision count");
+    assert!((3..=4).contains(&decisions), "{out}");
+    // A replay with other shapes (primitives instead of the BoxED meshes the run used) is
+    // refused, and with --force it diverges at the first plan and says so.
+    if herb_sim::paths::boxed_root_for_tests().is_some_and(|b| b.join("meshes").is_dir()) {
+        let elsewhere = ["--boxed", "/nonexistent", "replay", log];
+        let (st, out) = herbctl_output(&prefix, &elsewhere);
+        assert_eq!(st.code(), Some(2), "{out}");
+        assert!(out.contains("catalog"), "{out}");
+        let (st, out) = herbctl_output(&prefix, &[&elsewhere[..], &["--force"]].concat());
+        assert_eq!(st.code(), Some(1), "{out}");
+        assert!(
+            out.contains("DIVERGED") && out.contains("planner response"),
+            "{out}"
+        );
+    }
+    let pictures = dir.join("explain");
+    let (st, out) = herbctl_output(
+        &prefix,
+        &[
+            "explain",
+            log,
+            "--object",
+            "1",
+            "--out",
+            pictures.to_str().unwrap(),
+        ],
+    );
+    assert!(st.success(), "{out}");
+    for want in [
+        "action",
+        "placement",
+        "z ",
+        "outcome: released",
+        "decided in",
+    ] {
+        assert!(out.contains(want), "{want}: {out}");
+    }
+    assert!(pictures.join("object-1-before.png").is_file());
+    assert!(pictures.join("object-1-after.png").is_file());
+    // A log cut short (herbd killed) replays up to its end and says it is incomplete.
+    let cut = dir.join("cut.log");
+    let data = std::fs::read(log).unwrap();
+    std::fs::write(&cut, &data[..data.len() * 2 / 3]).unwrap();
+    let (st, out) = herbctl_output(&prefix, &["replay", cut.to_str().unwrap()]);
+    assert_eq!(st.code(), Some(3), "{out}");
+    assert!(out.contains("incomplete"), "{out}");
 }
 
 /// Sends `req` to the pack-job server and returns the reply (waits for the server).
@@ -834,7 +924,19 @@ fn outcomes_carry_their_job_across_jobs() {
 fn the_box_is_reset_between_jobs_and_not_during_one() {
     use herb_ipc::{Services, SimOutcome};
     let (dir, prefix, cfg) = setup("reset");
-    let (_lb, _hd) = start_cell(&dir, &cfg);
+    let cfg_s = cfg.to_str().unwrap();
+    let _lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s],
+        &dir.join("loopback.log"),
+    );
+    // Recorded in 1 MB segments (the test configuration's): several, cut between jobs.
+    let runs = dir.join("runs");
+    let mut hd = spawn(
+        &exe("herbd"),
+        &["--config", cfg_s, "--record", runs.to_str().unwrap()],
+        &dir.join("herbd.log"),
+    );
     let services = Services::new(&prefix).unwrap();
     let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
     let outcomes = bus
@@ -872,6 +974,30 @@ fn the_box_is_reset_between_jobs_and_not_during_one() {
         last = Some(o.payload().objects);
     }
     assert_eq!(last, Some(1), "the second job packed an empty box");
+
+    // The run log rotated between the jobs; every segment replays on its own, bit for bit,
+    // a later one from the snapshot it starts with.
+    hd.signal(libc::SIGTERM);
+    assert!(hd.wait_for(Duration::from_secs(10)).success());
+    let mut logs: Vec<PathBuf> = std::fs::read_dir(&runs)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    logs.sort();
+    assert!(logs.len() >= 2, "{logs:?}");
+    let mut decisions = 0;
+    for log in &logs {
+        let (st, out) = herbctl_output(&prefix, &["replay", log.to_str().unwrap()]);
+        assert!(st.success(), "{}: {out}", log.display());
+        assert!(out.contains("reproduced bit for bit"), "{out}");
+        decisions += out
+            .split(" decisions")
+            .next()
+            .and_then(|h| h.rsplit(' ').next())
+            .and_then(|n| n.parse::<u32>().ok())
+            .expect("a decision count");
+    }
+    assert_eq!(decisions, 3, "the two jobs' decisions, each in one segment");
 }
 
 #[test]
@@ -907,17 +1033,7 @@ fn a_job_cancelled_mid_motion_brakes_retreats_and_the_next_job_runs() {
     use herb_ipc::{JointState, Services};
     let (dir, prefix, cfg) = setup("cancel");
     let (_lb, _hd) = start_cell(&dir, &cfg);
-    // herbctl's stdout and stderr (it gives up on its own: `--timeout`, 30 s by default).
-    let herbctl = |args: &[&str]| {
-        let o = Command::new(exe("herbctl"))
-            .args(["--prefix", prefix.as_str()])
-            .args(args)
-            .output()
-            .expect("herbctl runs");
-        let text =
-            String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
-        (o.status, text)
-    };
+    let herbctl = |args: &[&str]| herbctl_output(&prefix, args);
     let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, false);
     let mut ctl_out = Follow::new(&mut ctl);
     ctl_out.wait_for("object  1/2", Duration::from_secs(60));
