@@ -119,11 +119,11 @@ class Scorer(nn.Module):
     (the decision's part computed once), which is the same function and keeps the exported
     graph free of broadcast concatenations."""
 
-    def __init__(self, heads, width=64):
+    def __init__(self, heads, width=64, ctx_len=G, cand_len=FEAT):
         super().__init__()
-        self.ctx = nn.Sequential(nn.Linear(G, 128), nn.LayerNorm(128), nn.ReLU(),
+        self.ctx = nn.Sequential(nn.Linear(ctx_len, 128), nn.LayerNorm(128), nn.ReLU(),
                                  nn.Linear(128, width), nn.ReLU())
-        self.cand_in = nn.Linear(FEAT, width)
+        self.cand_in = nn.Linear(cand_len, width)
         self.ctx_in = nn.Linear(width, width, bias=False)
         self.cand = nn.Sequential(nn.LayerNorm(width), nn.ReLU(), nn.Linear(width, width), nn.ReLU())
         self.own = nn.Linear(width, width)
@@ -187,10 +187,10 @@ class Replay:
 
     FIELDS = ("ctx", "cand", "count", "act", "c", "s", "inside", "done", "nxt", "prior", "mcp")
 
-    def __init__(self, cap):
+    def __init__(self, cap, ctx_len=G, cand_len=FEAT):
         self.cap, self.n = cap, 0
-        self.ctx = np.zeros((cap, G), np.float16)
-        self.cand = np.zeros((cap, C, FEAT), np.float16)
+        self.ctx = np.zeros((cap, ctx_len), np.float16)
+        self.cand = np.zeros((cap, C, cand_len), np.float16)
         self.count = np.zeros(cap, np.uint8)
         self.act = np.full(cap, -1, np.int16)
         self.c = np.zeros(cap, np.float32)
@@ -229,11 +229,14 @@ class Replay:
         os.replace(tmp, path)
 
     @classmethod
-    def load(cls, path, cap):
+    def load(cls, path, cap, any_layout=False):
+        """The buffer at `path` with room for `cap` states; a clear error if it is corrupt,
+        truncated or of another feature layout (`any_layout`: take the file's, for probes)."""
         try:
             z = np.load(path)
             n = int(z["n"])
-            r = cls(max(cap, n))
+            dims = (z["ctx"].shape[1], z["cand"].shape[2]) if any_layout else (G, FEAT)
+            r = cls(max(cap, n), *dims)
             for k in cls.FIELDS:
                 a = z[k]
                 want = getattr(r, k)
