@@ -18,10 +18,22 @@ fn baxter_messages_hash_as_the_robot_publishes_them() {
             md5::<baxter_core_msgs::EndEffectorState>(),
         ],
         [
-            ("baxter_core_msgs/JointCommand", "19bfec8434dd568ab3c633d187c36f2e"),
-            ("baxter_core_msgs/AssemblyState", "356d9dd237ce73b2667da9235f541933"),
-            ("baxter_core_msgs/EndEffectorCommand", "c003234e90416f2ca02ac7837c42cbb7"),
-            ("baxter_core_msgs/EndEffectorState", "ade777f069d738595bc19e246b8ec7a0"),
+            (
+                "baxter_core_msgs/JointCommand",
+                "19bfec8434dd568ab3c633d187c36f2e"
+            ),
+            (
+                "baxter_core_msgs/AssemblyState",
+                "356d9dd237ce73b2667da9235f541933"
+            ),
+            (
+                "baxter_core_msgs/EndEffectorCommand",
+                "c003234e90416f2ca02ac7837c42cbb7"
+            ),
+            (
+                "baxter_core_msgs/EndEffectorState",
+                "ade777f069d738595bc19e246b8ec7a0"
+            ),
         ]
     );
 }
