@@ -1,0 +1,203 @@
+//! `herb-baxter`: bridges herbd's arm services (iceoryx2) and a Baxter's left arm and gripper
+//! (ROS 1). See the crate docs. SIGINT/SIGTERM: prints a JSON summary on stdout and exits 0.
+
+use clap::Parser;
+use herb_adapter::ArmPorts;
+use herb_baxter::bridge::HerbdCommand;
+use herb_baxter::config::{BaxterConfig, HerbdView};
+use herb_baxter::ros::{self, Shared, lock};
+use herb_ipc::bus::Bus;
+use herb_ipc::{GripperState, Header, JointState, NO_OBJECT, Services, monotonic_ns};
+use herb_robot::config_file::ConfigFile;
+use herb_robot::rt::{set_timer_slack, sleep_until};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+
+/// Bridges herbd and a Rethink Baxter (left arm, electric gripper) over ROS 1.
+#[derive(Debug, Parser)]
+#[command(name = "herb-baxter", version)]
+struct Cli {
+    /// herbd's configuration file (IPC prefix, joint limits).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// This adapter's file (ROS master, rates, modes, topics, gripper).
+    #[arg(long)]
+    baxter: Option<PathBuf>,
+    /// IPC service-name prefix (overrides herbd's file).
+    #[arg(long)]
+    prefix: Option<String>,
+    /// ROS master URI (overrides the adapter's file).
+    #[arg(long)]
+    master_uri: Option<String>,
+    /// Ask the robot to enable (`/robot/set_super_enable`) until it reports enabled.
+    #[arg(long)]
+    enable: bool,
+    /// Rate of the iceoryx2 side (Hz): how often herbd's commands are taken and the robot's
+    /// states passed on.
+    #[arg(long, default_value_t = 1000.0)]
+    rate_hz: f64,
+    /// Also write the final summary (JSON) here.
+    #[arg(long)]
+    report: Option<PathBuf>,
+}
+
+fn run(cli: Cli) -> Result<serde_json::Value, String> {
+    let mut herbd = match &cli.config {
+        Some(p) => HerbdView::load(p)?,
+        None => HerbdView::default(),
+    };
+    if let Some(p) = &cli.prefix {
+        herbd.ipc_prefix = p.clone();
+    }
+    herbd.validate()?;
+    let mut cfg = match &cli.baxter {
+        Some(p) => BaxterConfig::load(p)?,
+        None => BaxterConfig::default(),
+    };
+    if let Some(u) = &cli.master_uri {
+        cfg.ros.master_uri = u.clone();
+    }
+    cfg.validate()?;
+    if !(cli.rate_hz.is_finite() && (10.0..=10_000.0).contains(&cli.rate_hz)) {
+        return Err(format!("--rate-hz {} outside 10..=10000", cli.rate_hz));
+    }
+    let services = Services::new(&herbd.ipc_prefix).map_err(|e| e.to_string())?;
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let s = stop.clone();
+        ctrlc::set_handler(move || s.store(true, Ordering::Relaxed)).map_err(|e| e.to_string())?;
+    }
+    let bus = Bus::open("herb-baxter", &services).map_err(|e| e.to_string())?;
+    let mut arm = ArmPorts::open(&bus).map_err(|e| e.to_string())?;
+    let shared = Arc::new(Mutex::new(Shared::default()));
+    let ros_thread = {
+        let (cfg, shared, stop) = (cfg.clone(), shared.clone(), stop.clone());
+        let enable = cli.enable;
+        std::thread::Builder::new()
+            .name("herb-baxter-ros".into())
+            .spawn(move || {
+                let r = ros::run(cfg, enable, shared, stop.clone());
+                // The ROS side ending ends the process: herbd sees the states stop.
+                stop.store(true, Ordering::Relaxed);
+                r
+            })
+            .map_err(|e| e.to_string())?
+    };
+    eprintln!(
+        "herb-baxter: prefix {:?}, master {}, commands at {} Hz ({:?} mode)",
+        herbd.ipc_prefix, cfg.ros.master_uri, cfg.arm.command_rate_hz, cfg.arm.mode
+    );
+    let (lower, upper) = (herbd.limits.lower, herbd.limits.upper);
+    let period = (1e9 / cli.rate_hz) as u64;
+    set_timer_slack();
+    let mut next = monotonic_ns() + period;
+    let (mut joint_seen, mut grip_seen, mut seq) = (0u64, 0u64, 0u64);
+    let (mut withheld, mut max_excess) = (0u64, 0.0f64);
+    while !stop.load(Ordering::Relaxed) {
+        sleep_until(next, 0);
+        next += period;
+        let now = monotonic_ns();
+        if now > next {
+            next = now + period;
+        }
+        let mut latest = None;
+        arm.drain_joint_commands(&lower, &upper, |c, valid| {
+            for i in 0..herb_ipc::DOF {
+                let p = c.position[i];
+                if p.is_finite() {
+                    max_excess = max_excess.max((lower[i] - p).max(p - upper[i]).max(0.0));
+                }
+            }
+            if valid {
+                latest = Some(HerbdCommand {
+                    stamp_ns: c.header.stamp_ns,
+                    position: c.position,
+                });
+            }
+        });
+        let mut request = None;
+        // The catalog is herbd's business: a real gripper ignores the object type, so any
+        // type is accepted here.
+        arm.drain_gripper_commands(usize::MAX, |_, a| request = Some(a));
+        let (joint, grip, blocker) = {
+            let mut s = lock(&shared);
+            if latest.is_some() {
+                s.command = latest;
+            }
+            if request.is_some() {
+                s.grip_request = request;
+            }
+            (s.joint, s.grip, s.blocker)
+        };
+        if let Some((n, m)) = joint
+            && n != joint_seen
+        {
+            joint_seen = n;
+            if blocker.is_none() {
+                seq += 1;
+                arm.publish_joint_state(JointState {
+                    header: Header::at(seq, m.stamp_ns),
+                    position: m.position,
+                    velocity: m.velocity,
+                });
+            } else {
+                withheld += 1;
+            }
+        }
+        if let Some((n, at, g)) = grip
+            && n != grip_seen
+        {
+            grip_seen = n;
+            arm.publish_gripper_state(GripperState {
+                header: Header::at(n, at),
+                closed: g.closed as u32,
+                holding: g.holding as u32,
+                object_type: NO_OBJECT,
+                reserved: 0,
+            });
+        }
+    }
+    let ros_result = ros_thread
+        .join()
+        .unwrap_or_else(|_| Err("the ROS thread panicked".into()));
+    let c = lock(&shared).counters;
+    let summary = serde_json::json!({ "baxter_final": {
+        "commands": arm.joint.received,
+        "commands_rejected": arm.joint.rejected,
+        "gripper_commands_rejected": arm.gripper.rejected,
+        "max_limit_excess_rad": max_excess,
+        "joint_states_withheld": withheld,
+        "ros": c,
+        "ros_error": ros_result.as_ref().err(),
+    }});
+    match ros_result {
+        Ok(()) => Ok(summary),
+        Err(e) => {
+            println!("{summary}");
+            Err(e)
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let report = cli.report.clone();
+    match run(cli) {
+        Ok(v) => {
+            println!("{v}");
+            if let Some(p) = report
+                && let Err(e) = std::fs::write(&p, format!("{v}\n"))
+            {
+                eprintln!("herb-baxter: cannot write {}: {e}", p.display());
+                return ExitCode::from(2);
+            }
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("herb-baxter: error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}

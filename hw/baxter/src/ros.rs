@@ -1,0 +1,353 @@
+//! The ROS 1 side: one thread running a single-threaded tokio runtime with roslibrust's native
+//! client. It subscribes to the robot's joint states, assembly state and gripper state, sends
+//! herbd's latest fresh command at the configured rate, drives the gripper, watches the master,
+//! and exchanges only small values with the iceoryx2 loop through [`Shared`].
+
+use crate::bridge::{Grip, GripperDriver, HerbdCommand, JointMap, command_to_send, robot_blocker};
+use crate::config::{BaxterConfig, Mode};
+use herb_ipc::{DOF, GripperAction, monotonic_ns};
+use herb_ros1::baxter_core_msgs::{AssemblyState, EndEffectorState, JointCommand};
+use herb_ros1::sensor_msgs::JointState as RosJointState;
+use herb_ros1::std_msgs::{Bool, Float64};
+use roslibrust::ros1::{MasterClient, NodeHandle, Subscriber};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// An assembly state older than this blocks motion: the robot stopped reporting.
+pub const ROBOT_STATE_MAX_AGE_NS: u64 = 1_000_000_000;
+/// How often `--enable` asks the robot to enable until it reports enabled.
+const ENABLE_PERIOD_NS: u64 = 500_000_000;
+/// Wait between attempts to reach the master at start.
+const CONNECT_RETRY: Duration = Duration::from_millis(500);
+
+/// A joint state from the robot, mapped to herbd's order.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Measured {
+    /// Receipt time (CLOCK_MONOTONIC ns): the stamp herbd sees.
+    pub stamp_ns: u64,
+    /// Angles (rad).
+    pub position: [f64; DOF],
+    /// Speeds (rad/s).
+    pub velocity: [f64; DOF],
+}
+
+/// Counters of what came from ROS.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct RosCounters {
+    /// Joint states received.
+    pub joint_states: u64,
+    /// Joint states refused (names, lengths, non-finite values, undecodable).
+    pub joint_states_rejected: u64,
+    /// Messages the subscriptions dropped because this side fell behind.
+    pub lagged: u64,
+    /// Joint commands sent to the robot.
+    pub commands_sent: u64,
+    /// Gripper commands sent (calibration, moves and resends).
+    pub gripper_commands_sent: u64,
+    /// Times the master stopped answering.
+    pub master_lost: u64,
+}
+
+/// What the two threads share (a short lock on each side, no allocation).
+#[derive(Debug, Default)]
+pub struct Shared {
+    /// Latest valid joint state and its number (ROS -> loop).
+    pub joint: Option<(u64, Measured)>,
+    /// Latest gripper state, its number and receipt time (ROS -> loop).
+    pub grip: Option<(u64, u64, Grip)>,
+    /// Why the robot must not move now, if it must not (ROS -> loop).
+    pub blocker: Option<&'static str>,
+    /// Latest valid herbd joint command (loop -> ROS).
+    pub command: Option<HerbdCommand>,
+    /// herbd's latest gripper request (loop -> ROS).
+    pub grip_request: Option<GripperAction>,
+    /// Counters.
+    pub counters: RosCounters,
+}
+
+/// Locks `shared`, recovering from a poisoned lock (a panic elsewhere leaves plain values).
+pub fn lock(shared: &Mutex<Shared>) -> std::sync::MutexGuard<'_, Shared> {
+    shared.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Runs the ROS side until `stop` is set; an error ends it (the process then exits).
+pub fn run(
+    cfg: BaxterConfig,
+    enable: bool,
+    shared: Arc<Mutex<Shared>>,
+    stop: Arc<AtomicBool>,
+) -> Result<(), String> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| format!("tokio runtime: {e}"))?;
+    rt.block_on(session(cfg, enable, shared, stop))
+}
+
+async fn connect(cfg: &BaxterConfig, stop: &AtomicBool) -> Result<Option<NodeHandle>, String> {
+    let mut told = false;
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return Ok(None);
+        }
+        match NodeHandle::new(&cfg.ros.master_uri, &cfg.ros.node_name).await {
+            Ok(nh) => {
+                eprintln!(
+                    "herb-baxter: connected to the ROS master at {} as {}",
+                    cfg.ros.master_uri, cfg.ros.node_name
+                );
+                return Ok(Some(nh));
+            }
+            Err(e) if !told => {
+                eprintln!(
+                    "herb-baxter: ROS master {} not reachable ({e}); retrying",
+                    cfg.ros.master_uri
+                );
+                told = true;
+            }
+            Err(_) => {}
+        }
+        tokio::time::sleep(CONNECT_RETRY).await;
+    }
+}
+
+fn ros_err(what: &str, topic: &str) -> impl FnOnce(roslibrust::ros1::NodeError) -> String {
+    let (what, topic) = (what.to_string(), topic.to_string());
+    move |e| format!("{what} {topic}: {e}")
+}
+
+/// What a subscription yielded.
+enum Next<T> {
+    Msg(T),
+    /// This side fell behind: so many messages were skipped (the loop goes on).
+    Lagged(u64),
+    /// Undecodable (the error's text).
+    Bad(String),
+    /// The subscription ended.
+    Closed,
+}
+
+/// The next item of `s`. roslibrust 0.26 does not export its subscriber's error type; its
+/// `Lagged(n)` variant is told apart by its debug form (the version is pinned).
+async fn next<T: roslibrust::RosMessageType>(s: &mut Subscriber<T>) -> Next<T> {
+    match s.next().await {
+        Some(Ok(m)) => Next::Msg(m),
+        Some(Err(e)) => {
+            let debug = format!("{e:?}");
+            match debug
+                .strip_prefix("Lagged(")
+                .and_then(|r| r.strip_suffix(')'))
+                .and_then(|n| n.parse().ok())
+            {
+                Some(n) => Next::Lagged(n),
+                None => Next::Bad(e.to_string()),
+            }
+        }
+        None => Next::Closed,
+    }
+}
+
+async fn session(
+    cfg: BaxterConfig,
+    enable: bool,
+    shared: Arc<Mutex<Shared>>,
+    stop: Arc<AtomicBool>,
+) -> Result<(), String> {
+    let Some(nh) = connect(&cfg, &stop).await? else {
+        return Ok(());
+    };
+    let t = &cfg.topics;
+    let cmd_pub = nh
+        .advertise::<JointCommand>(&t.joint_command, 1, false)
+        .await
+        .map_err(ros_err("advertise", &t.joint_command))?;
+    let grip_pub = nh
+        .advertise::<herb_ros1::baxter_core_msgs::EndEffectorCommand>(&t.gripper_command, 8, false)
+        .await
+        .map_err(ros_err("advertise", &t.gripper_command))?;
+    // Latched: the robot (or a driver restarted later) reads them on connection.
+    let timeout_pub = nh
+        .advertise::<Float64>(&t.command_timeout, 1, true)
+        .await
+        .map_err(ros_err("advertise", &t.command_timeout))?;
+    timeout_pub
+        .publish(&Float64 {
+            data: cfg.arm.command_timeout_s,
+        })
+        .await
+        .map_err(|e| format!("publish {}: {e}", t.command_timeout))?;
+    let ratio_pub = if cfg.arm.mode == Mode::Position {
+        let p = nh
+            .advertise::<Float64>(&t.speed_ratio, 1, true)
+            .await
+            .map_err(ros_err("advertise", &t.speed_ratio))?;
+        p.publish(&Float64 {
+            data: cfg.arm.speed_ratio,
+        })
+        .await
+        .map_err(|e| format!("publish {}: {e}", t.speed_ratio))?;
+        Some(p)
+    } else {
+        None
+    };
+    let enable_pub = if enable {
+        Some(
+            nh.advertise::<Bool>(&t.enable, 1, false)
+                .await
+                .map_err(ros_err("advertise", &t.enable))?,
+        )
+    } else {
+        None
+    };
+    let mut joints = nh
+        .subscribe::<RosJointState>(&t.joint_states, 8)
+        .await
+        .map_err(ros_err("subscribe", &t.joint_states))?;
+    let mut robot = nh
+        .subscribe::<AssemblyState>(&t.robot_state, 8)
+        .await
+        .map_err(ros_err("subscribe", &t.robot_state))?;
+    let mut gripper = nh
+        .subscribe::<EndEffectorState>(&t.gripper_state, 8)
+        .await
+        .map_err(ros_err("subscribe", &t.gripper_state))?;
+    let client_uri = nh
+        .get_client_uri()
+        .await
+        .map_err(|e| format!("node URI: {e}"))?;
+    let master = MasterClient::new(&cfg.ros.master_uri, client_uri, &cfg.ros.node_name)
+        .await
+        .map_err(|e| format!("master client: {e}"))?;
+
+    let map = JointMap::new(&cfg.arm);
+    let mut driver = GripperDriver::new(cfg.gripper.clone(), &cfg.ros.node_name);
+    let mut command = JointCommand {
+        mode: cfg.arm.mode.code(),
+        command: vec![0.0; DOF],
+        names: map.names().to_vec(),
+    };
+    let max_age_ns = (cfg.arm.max_command_age_s * 1e9) as u64;
+    let period = Duration::from_secs_f64(1.0 / cfg.arm.command_rate_hz);
+    let mut tick = tokio::time::interval(period);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let check_period = Duration::from_secs_f64(cfg.ros.master_check_s);
+    let mut check = tokio::time::interval(check_period);
+    check.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+
+    let mut assembly: Option<(AssemblyState, u64)> = None;
+    let mut master_ok = true;
+    let (mut joint_seq, mut grip_seq) = (0u64, 0u64);
+    let mut last_enable = 0u64;
+    let mut last_reject: Option<String> = None;
+    let mut blocker_said: Option<&'static str> = Some("no robot state yet");
+    while !stop.load(Ordering::Relaxed) {
+        tokio::select! {
+            m = next(&mut joints) => {
+                let now = monotonic_ns();
+                let mut s = lock(&shared);
+                match m {
+                    Next::Msg(m) => {
+                        s.counters.joint_states += 1;
+                        match map.map(&m) {
+                            Ok((position, velocity)) => {
+                                joint_seq += 1;
+                                s.joint = Some((joint_seq, Measured { stamp_ns: now, position, velocity }));
+                            }
+                            Err(e) => {
+                                s.counters.joint_states_rejected += 1;
+                                let e = e.to_string();
+                                if last_reject.as_deref() != Some(e.as_str()) {
+                                    eprintln!("herb-baxter: joint state refused: {e}");
+                                    last_reject = Some(e);
+                                }
+                            }
+                        }
+                    }
+                    Next::Lagged(n) => s.counters.lagged += n,
+                    Next::Bad(e) => {
+                        s.counters.joint_states += 1;
+                        s.counters.joint_states_rejected += 1;
+                        eprintln!("herb-baxter: joint state undecodable: {e}");
+                    }
+                    Next::Closed => return Err(format!("subscription {} closed", t.joint_states)),
+                }
+            }
+            m = next(&mut robot) => match m {
+                Next::Msg(m) => assembly = Some((m, monotonic_ns())),
+                Next::Lagged(n) => lock(&shared).counters.lagged += n,
+                Next::Bad(e) => eprintln!("herb-baxter: robot state undecodable: {e}"),
+                Next::Closed => return Err(format!("subscription {} closed", t.robot_state)),
+            },
+            m = next(&mut gripper) => match m {
+                Next::Msg(m) => {
+                    let g = driver.state(&m);
+                    grip_seq += 1;
+                    lock(&shared).grip = Some((grip_seq, monotonic_ns(), g));
+                }
+                Next::Lagged(n) => lock(&shared).counters.lagged += n,
+                Next::Bad(e) => eprintln!("herb-baxter: gripper state undecodable: {e}"),
+                Next::Closed => return Err(format!("subscription {} closed", t.gripper_state)),
+            },
+            _ = check.tick() => {
+                let ok = matches!(tokio::time::timeout(check_period, master.get_uri()).await, Ok(Ok(_)));
+                if ok != master_ok {
+                    master_ok = ok;
+                    if ok {
+                        eprintln!("herb-baxter: ROS master back");
+                    } else {
+                        lock(&shared).counters.master_lost += 1;
+                        eprintln!("herb-baxter: ROS master lost: joint state withheld, nothing commanded");
+                    }
+                }
+            }
+            _ = tick.tick() => {
+                let now = monotonic_ns();
+                let blocker = if !master_ok {
+                    Some("ROS master lost")
+                } else {
+                    match &assembly {
+                        Some((_, at)) if now.saturating_sub(*at) > ROBOT_STATE_MAX_AGE_NS => Some("no robot state for 1 s"),
+                        a => robot_blocker(a.as_ref().map(|(a, _)| a)),
+                    }
+                };
+                if blocker != blocker_said {
+                    match blocker {
+                        Some(b) => eprintln!("herb-baxter: {b}: joint state withheld, nothing commanded"),
+                        None => eprintln!("herb-baxter: robot ready"),
+                    }
+                    blocker_said = blocker;
+                }
+                let (latest, request) = {
+                    let mut s = lock(&shared);
+                    s.blocker = blocker;
+                    (s.command, s.grip_request)
+                };
+                if let Some(p) = &enable_pub
+                    && assembly.as_ref().is_none_or(|(a, _)| !a.enabled)
+                    && now.saturating_sub(last_enable) >= ENABLE_PERIOD_NS
+                {
+                    last_enable = now;
+                    p.publish(&Bool { data: true }).await.map_err(|e| format!("publish {}: {e}", t.enable))?;
+                }
+                if blocker.is_some() {
+                    continue;
+                }
+                if let Some(q) = command_to_send(latest, now, max_age_ns) {
+                    command.command.copy_from_slice(&q);
+                    cmd_pub.publish(&command).await.map_err(|e| format!("publish {}: {e}", t.joint_command))?;
+                    lock(&shared).counters.commands_sent += 1;
+                }
+                if let Some(a) = request {
+                    driver.request(a);
+                }
+                if let Some(c) = driver.poll(now) {
+                    grip_pub.publish(&c).await.map_err(|e| format!("publish {}: {e}", t.gripper_command))?;
+                    lock(&shared).counters.gripper_commands_sent += 1;
+                }
+            }
+        }
+    }
+    drop(ratio_pub);
+    Ok(())
+}
