@@ -54,6 +54,32 @@ const RULES: &[(&str, &[&str])] = &[
         ],
     ),
     ("herb-loopback", ROBOT_SIDE_NEVER),
+    (
+        "herb-baxter",
+        &[
+            "tract-onnx",
+            "herb-decide",
+            "herb-daemon",
+            "herb-sim",
+            "herb-loopback",
+            "herb-testkit",
+        ],
+    ),
+    // The ROS side knows ROS only: no HERB crate, no IPC, no motion.
+    (
+        "herb-ros1",
+        &[
+            "iceoryx2",
+            "ruckig",
+            "tract-onnx",
+            "herb-ipc",
+            "herb-robot",
+            "herb-adapter",
+            "herb-sim",
+            "herb-decide",
+            "herb-daemon",
+        ],
+    ),
 ];
 
 /// What the simulation-side crates (decision core, CLI, bindings) never reach.
@@ -66,8 +92,9 @@ const SIM_SIDE_NEVER: &[&str] = &[
     "herb-daemon",
 ];
 
-/// What the robot-side crates (robot, adapters, loopback) never reach.
-const ROBOT_SIDE_NEVER: &[&str] = &["tract-onnx", "herb-decide", "herb-daemon"];
+/// What the robot-side crates (robot, adapters, loopback) never reach (the test helpers are
+/// for tests only).
+const ROBOT_SIDE_NEVER: &[&str] = &["tract-onnx", "herb-decide", "herb-daemon", "herb-testkit"];
 
 /// Violations still to be removed by the restructuring (package, forbidden crate reached);
 /// empty since the loopback left herb-daemon.

@@ -18,6 +18,9 @@ use std::time::Duration;
 pub const ROBOT_STATE_MAX_AGE_NS: u64 = 1_000_000_000;
 /// How often `--enable` asks the robot to enable until it reports enabled.
 const ENABLE_PERIOD_NS: u64 = 500_000_000;
+/// Messages a subscription holds for this side: 320 ms of the robot's 100 Hz states (older
+/// ones are skipped and counted as lagged).
+const SUBSCRIBER_QUEUE: usize = 32;
 /// Wait between attempts to reach the master at start.
 const CONNECT_RETRY: Duration = Duration::from_millis(500);
 
@@ -201,15 +204,15 @@ async fn session(
         None
     };
     let mut joints = nh
-        .subscribe::<RosJointState>(&t.joint_states, 8)
+        .subscribe::<RosJointState>(&t.joint_states, SUBSCRIBER_QUEUE)
         .await
         .map_err(ros_err("subscribe", &t.joint_states))?;
     let mut robot = nh
-        .subscribe::<AssemblyState>(&t.robot_state, 8)
+        .subscribe::<AssemblyState>(&t.robot_state, SUBSCRIBER_QUEUE)
         .await
         .map_err(ros_err("subscribe", &t.robot_state))?;
     let mut gripper = nh
-        .subscribe::<EndEffectorState>(&t.gripper_state, 8)
+        .subscribe::<EndEffectorState>(&t.gripper_state, SUBSCRIBER_QUEUE)
         .await
         .map_err(ros_err("subscribe", &t.gripper_state))?;
     let client_uri = nh

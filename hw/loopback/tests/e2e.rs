@@ -7,122 +7,18 @@
 //! 2. The loopback is killed mid-motion: the daemon reports the joint-state timeout, brakes,
 //!    holds, and resumes the job when the loopback is restarted; the job completes.
 
-use herb_robot::kinematics::LEFT_ARM;
-use herb_robot::motion::JointLimits;
-use std::io::{BufRead, BufReader};
+use herb_testkit::{Follow, Proc, config, last_json, lines, repo, spawn, tmp};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::mpsc;
+use std::process::{Command, ExitStatus};
 use std::time::{Duration, Instant};
 
 fn loopback_exe() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_herb-loopback"))
 }
 
-/// `herbd` / `herbctl`, next to the loopback in the same target folder (built by
-/// `cargo test --workspace`; built here when this package is tested alone).
+/// `herbd` / `herbctl` (built when this package is tested alone).
 fn exe(name: &str) -> PathBuf {
-    let p = loopback_exe().with_file_name(name);
-    if !p.exists() {
-        let profile = if cfg!(debug_assertions) {
-            vec![]
-        } else {
-            vec!["--release"]
-        };
-        let st = Command::new(env!("CARGO"))
-            .args(["build", "-p", "herb-daemon", "--bins"])
-            .args(profile)
-            .status()
-            .expect("cargo runs");
-        assert!(st.success(), "building herbd and herbctl failed");
-    }
-    p
-}
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-/// Joint limits for tests: the shipped position limits, and faster motion than the shipped
-/// defaults (the URDF speed limits instead of 60 % of them, 3 x the accelerations and 6 x the
-/// jerks) so an episode takes about a minute.
-fn fast_limits() -> JointLimits {
-    let mut l = JointLimits::baxter_left();
-    l.velocity = LEFT_ARM.map(|j| j.max_velocity);
-    l.acceleration = l.acceleration.map(|a| 3.0 * a);
-    l.jerk = l.jerk.map(|j| 6.0 * j);
-    l.validate_baxter_left()
-        .expect("test limits within the URDF's");
-    l
-}
-
-/// A configuration for tests: a unique prefix, placement `policy` (`blbf` or an ONNX path),
-/// and [`fast_limits`].
-fn config(dir: &Path, prefix: &str, policy: &str) -> PathBuf {
-    #[derive(serde::Serialize)]
-    struct Limits {
-        limits: JointLimits,
-    }
-    let p = dir.join(format!("{prefix}.toml"));
-    let limits = toml::to_string(&Limits {
-        limits: fast_limits(),
-    })
-    .unwrap();
-    let text = format!(
-        r#"ipc_prefix = "{prefix}"
-[loop]
-report_interval_s = 5.0
-[models]
-sequence = "{seq}"
-policy = "{policy}"
-[record]
-segment_mb = 1
-keep_mb = 256
-{limits}"#,
-        seq = repo().join("models/sequence.json").display()
-    );
-    std::fs::write(&p, text).unwrap();
-    p
-}
-
-struct Proc(Child);
-
-impl Proc {
-    fn signal(&self, sig: i32) {
-        // SAFETY: kill on a child we own.
-        unsafe { libc::kill(self.0.id() as i32, sig) };
-    }
-
-    fn wait_for(&mut self, limit: Duration) -> ExitStatus {
-        let t0 = Instant::now();
-        loop {
-            if let Some(st) = self.0.try_wait().unwrap() {
-                return st;
-            }
-            assert!(t0.elapsed() < limit, "process did not exit in {limit:?}");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-}
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn spawn(exe: &Path, args: &[&str], log: &Path) -> Proc {
-    let err = std::fs::File::create(log).unwrap();
-    Proc(
-        Command::new(exe)
-            .args(args)
-            .current_dir(repo())
-            .stdout(Stdio::piped())
-            .stderr(err)
-            .spawn()
-            .unwrap_or_else(|e| panic!("cannot start {}: {e}", exe.display())),
-    )
+    herb_testkit::exe(name, "herb-daemon")
 }
 
 /// `herbctl pack --objects <objects>` under `prefix`, logging to `dir/herbctl.log`.
@@ -147,52 +43,6 @@ fn herbctl_output(prefix: &str, args: &[&str]) -> (ExitStatus, String) {
         .expect("herbctl runs");
     let text = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
     (o.status, text)
-}
-
-/// Lines of a child's stdout, as they come.
-fn lines(p: &mut Proc) -> mpsc::Receiver<String> {
-    let out = p.0.stdout.take().unwrap();
-    let (tx, rx) = mpsc::channel();
-    std::thread::spawn(move || {
-        for l in BufReader::new(out).lines().map_while(Result::ok) {
-            if tx.send(l).is_err() {
-                break;
-            }
-        }
-    });
-    rx
-}
-
-/// A child's stdout lines, followed until an expected one appears.
-struct Follow {
-    rx: mpsc::Receiver<String>,
-    seen: Vec<String>,
-}
-
-impl Follow {
-    fn new(p: &mut Proc) -> Self {
-        Self {
-            rx: lines(p),
-            seen: Vec::new(),
-        }
-    }
-
-    /// Waits for a line containing `what`; panics with everything seen after `limit`.
-    fn wait_for(&mut self, what: &str, limit: Duration) {
-        let t0 = Instant::now();
-        while t0.elapsed() < limit {
-            if let Ok(l) = self.rx.recv_timeout(Duration::from_millis(100)) {
-                self.seen.push(l.clone());
-                if l.contains(what) {
-                    return;
-                }
-            }
-        }
-        panic!(
-            "no {what:?} within {limit:?}; the process said:\n{}",
-            self.seen.join("\n")
-        );
-    }
 }
 
 /// herbd's count of rejected inputs from its heartbeats on `status`: the newest one once `done`
@@ -239,24 +89,6 @@ fn setup_with(tag: &str, policy: &str) -> (PathBuf, String, PathBuf) {
     let prefix = format!("e2e{}{tag}", std::process::id());
     let cfg = config(&dir, &prefix, policy);
     (dir, prefix, cfg)
-}
-
-fn last_json(rx: &mpsc::Receiver<String>, key: &str) -> serde_json::Value {
-    let mut found = None;
-    while let Ok(l) = rx.recv_timeout(Duration::from_secs(5)) {
-        if let Ok(v) = serde_json::from_str::<serde_json::Value>(&l)
-            && v.get(key).is_some()
-        {
-            found = Some(v[key].clone());
-        }
-    }
-    found.unwrap_or_else(|| panic!("no {key} line"))
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("herb-e2e-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
 }
 
 /// The session with the fewest objects (ties: name), and its object count.

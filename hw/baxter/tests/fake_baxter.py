@@ -1,0 +1,197 @@
+#!/usr/bin/python3
+"""A fake Baxter for herb-baxter's tests: a rospy node speaking the Baxter SDK 1.2 topics.
+
+A test fixture, not a robot model: the left arm follows position commands at most at the given
+joint speeds (a command older than the latched joint_command_timeout is not followed: the arm
+holds), joint states of the whole robot are published at 100 Hz with the joint names in a new
+random order each time, /robot/state reports enabled unless SIGUSR1 toggled it, and the
+electric gripper calibrates and moves on command, echoing the command's sender and sequence.
+Closing grips (an object is always there), opening releases.
+
+With --corrupt-every N, every Nth joint state is made bad (a NaN angle, a misspelt joint name
+or a short velocity array, in turn). Every joint command is checked: its names must be the left arm's seven joints and every angle
+within the given limits. On SIGTERM the node writes a JSON report (--report) and exits 0.
+
+    fake_baxter.py --report R.json --start q0,..,q6 --lower ... --upper ... --vmax ...
+"""
+
+import argparse
+import json
+import math
+import os
+import random
+import signal
+import sys
+import threading
+import time
+
+import rospy
+from baxter_core_msgs.msg import AssemblyState, EndEffectorCommand, EndEffectorState, JointCommand
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+
+LEFT = ["left_s0", "left_s1", "left_e0", "left_e1", "left_w0", "left_w1", "left_w2"]
+OTHERS = ["head_pan", "right_s0", "right_s1", "right_e0", "right_e1", "right_w0", "right_w1",
+          "right_w2", "torso_t0"]
+GRIPPER_ID = 65664
+
+
+def floats(text, n=7):
+    v = [float(x) for x in text.split(",")]
+    if len(v) != n:
+        raise SystemExit(f"expected {n} comma-separated numbers, got {text!r}")
+    return v
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--report", required=True)
+    ap.add_argument("--start", required=True)
+    ap.add_argument("--lower", required=True)
+    ap.add_argument("--upper", required=True)
+    ap.add_argument("--vmax", required=True)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--corrupt-every", type=int, default=0,
+                    help="make every Nth joint state bad, in turn: a NaN angle, a misspelt "
+                         "joint name, a short velocity array (0: never)")
+    a = ap.parse_args()
+    q = floats(a.start)
+    lower, upper, vmax = floats(a.lower), floats(a.upper), floats(a.vmax)
+    rng = random.Random(a.seed)
+    lock = threading.Lock()
+    st = {
+        "enabled": True, "target": list(q), "target_at": 0.0, "timeout": 0.2,
+        "commands": 0, "out_of_limits": 0, "bad_names": 0, "modes": [],
+        "timeouts_latched": [], "speed_ratios": [],
+        "grip": {"calibrated": 0, "position": 100.0, "target": 100.0, "gripping": 0,
+                 "sender": "", "sequence": 0, "command": ""},
+        "grip_events": [], "calibrations": 0, "enable_toggles": 0, "corrupted": 0, "published": 0,
+    }
+
+    def on_command(m):
+        with lock:
+            st["commands"] += 1
+            if sorted(m.names) != sorted(LEFT) or len(m.names) != len(m.command):
+                st["bad_names"] += 1
+                return
+            if m.mode not in st["modes"]:
+                st["modes"].append(m.mode)
+            byname = dict(zip(m.names, m.command))
+            cmd = [byname[j] for j in LEFT]
+            if any(not (lower[i] <= c <= upper[i]) or not math.isfinite(c) for i, c in enumerate(cmd)):
+                st["out_of_limits"] += 1
+                return
+            st["target"], st["target_at"] = cmd, time.monotonic()
+
+    def on_timeout(m):
+        with lock:
+            st["timeout"] = m.data
+            st["timeouts_latched"].append(m.data)
+
+    def on_ratio(m):
+        with lock:
+            st["speed_ratios"].append(m.data)
+
+    def on_gripper(m):
+        with lock:
+            g = st["grip"]
+            if m.id != GRIPPER_ID:
+                return
+            g["sender"], g["sequence"], g["command"] = m.sender, m.sequence, m.command
+            if m.command == "calibrate":
+                if not g["calibrated"]:
+                    st["calibrations"] += 1
+                g["calibrated"] = 1
+            elif m.command == "go" and g["calibrated"]:
+                target = float(json.loads(m.args)["position"])
+                if target != g["target"]:
+                    st["grip_events"].append("close" if target < 50 else "open")
+                g["target"] = target
+
+    def toggle(*_):
+        with lock:
+            st["enabled"] = not st["enabled"]
+            st["enable_toggles"] += 1
+
+    stop = threading.Event()
+    signal.signal(signal.SIGUSR1, toggle)
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    rospy.init_node("fake_baxter", anonymous=False, disable_signals=True)
+    js_pub = rospy.Publisher("/robot/joint_states", JointState, queue_size=10)
+    as_pub = rospy.Publisher("/robot/state", AssemblyState, queue_size=10)
+    gs_pub = rospy.Publisher("/robot/end_effector/left_gripper/state", EndEffectorState, queue_size=10)
+    rospy.Subscriber("/robot/limb/left/joint_command", JointCommand, on_command)
+    rospy.Subscriber("/robot/limb/left/joint_command_timeout", Float64, on_timeout)
+    rospy.Subscriber("/robot/limb/left/set_speed_ratio", Float64, on_ratio)
+    rospy.Subscriber("/robot/end_effector/left_gripper/command", EndEffectorCommand, on_gripper)
+    dt = 0.01
+    seq = 0
+    others = {n: 0.0 for n in OTHERS}
+    next_t = time.monotonic()
+    while not stop.is_set():
+        next_t += dt
+        with lock:
+            now = time.monotonic()
+            qd = [0.0] * 7
+            fresh = now - st["target_at"] <= st["timeout"]
+            if st["enabled"] and fresh:
+                for i in range(7):
+                    step = max(-vmax[i] * dt, min(vmax[i] * dt, st["target"][i] - q[i]))
+                    q[i] += step
+                    qd[i] = step / dt
+            g = st["grip"]
+            if g["target"] < 50:
+                g["position"], g["gripping"] = 40.0, 1
+            else:
+                g["position"], g["gripping"] = g["target"], 0
+            names = LEFT + OTHERS
+            pos = q + [others[n] for n in OTHERS]
+            vel = qd + [0.0] * len(OTHERS)
+            order = list(range(len(names)))
+            rng.shuffle(order)
+            seq += 1
+            js = JointState()
+            js.header.seq = seq
+            js.header.stamp = rospy.Time.now()
+            js.name = [names[i] for i in order]
+            js.position = [pos[i] for i in order]
+            js.velocity = [vel[i] for i in order]
+            js.effort = [0.0] * len(order)
+            if a.corrupt_every and seq % a.corrupt_every == 0:
+                kind = (seq // a.corrupt_every) % 3
+                k = js.name.index("left_e0")
+                if kind == 0:
+                    js.position[k] = float("nan")
+                elif kind == 1:
+                    js.name[k] = "left_eO"
+                else:
+                    js.velocity = js.velocity[:3]
+                st["corrupted"] += 1
+            asm = AssemblyState(ready=st["enabled"], enabled=st["enabled"], stopped=False,
+                                error=False, estop_button=0, estop_source=0)
+            es = EndEffectorState(id=GRIPPER_ID, enabled=1, calibrated=g["calibrated"], ready=1,
+                                  moving=0, gripping=g["gripping"], missed=0, error=0, reverse=0,
+                                  position=g["position"], force=0.0, state="{}",
+                                  command=g["command"], command_sender=g["sender"],
+                                  command_sequence=g["sequence"])
+            es.timestamp = rospy.Time.now()
+        js_pub.publish(js)
+        st["published"] += 1
+        as_pub.publish(asm)
+        gs_pub.publish(es)
+        time.sleep(max(0.0, next_t - time.monotonic()))
+    with lock:
+        report = {k: st[k] for k in ("commands", "out_of_limits", "bad_names", "modes",
+                                     "timeouts_latched", "speed_ratios", "grip_events",
+                                     "calibrations", "enable_toggles", "corrupted", "published")}
+    tmp = a.report + ".tmp"
+    with open(tmp, "w") as f:
+        json.dump(report, f)
+    os.replace(tmp, a.report)
+    rospy.signal_shutdown("done")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
