@@ -65,6 +65,16 @@ const RULES: &[(&str, &[&str])] = &[
             "herb-testkit",
         ],
     ),
+    (
+        "herb-camera",
+        &[
+            "tract-onnx",
+            "herb-decide",
+            "herb-daemon",
+            "herb-loopback",
+            "herb-testkit",
+        ],
+    ),
     // The ROS side knows ROS only: no HERB crate, no IPC, no motion.
     (
         "herb-ros1",

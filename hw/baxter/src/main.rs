@@ -95,6 +95,8 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
     let mut next = monotonic_ns() + period;
     let (mut joint_seen, mut grip_seen, mut seq) = (0u64, 0u64, 0u64);
     let (mut withheld, mut max_excess) = (0u64, 0.0f64);
+    // A joint state's ROS receipt to its publication to herbd.
+    let mut state_latency = ros::latency();
     while !stop.load(Ordering::Relaxed) {
         sleep_until(next, 0);
         next += period;
@@ -142,6 +144,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
                     position: m.position,
                     velocity: m.velocity,
                 });
+                let _ = state_latency.record(monotonic_ns().saturating_sub(m.stamp_ns).max(1));
             } else {
                 withheld += 1;
             }
@@ -162,7 +165,10 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
     let ros_result = ros_thread
         .join()
         .unwrap_or_else(|_| Err("the ROS thread panicked".into()));
-    let c = lock(&shared).counters;
+    let (c, command_latency) = {
+        let s = lock(&shared);
+        (s.counters, ros::latency_json(&s.command_latency))
+    };
     let summary = serde_json::json!({ "baxter_final": {
         "commands": arm.joint.received,
         "commands_rejected": arm.joint.rejected,
@@ -170,6 +176,8 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         "max_limit_excess_rad": max_excess,
         "joint_states_withheld": withheld,
         "ros": c,
+        "joint_state_to_herbd_ms": ros::latency_json(&state_latency),
+        "command_to_ros_ms": command_latency,
         "ros_error": ros_result.as_ref().err(),
     }});
     match ros_result {

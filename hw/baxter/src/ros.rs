@@ -7,9 +7,10 @@ use crate::bridge::{Grip, GripperDriver, HerbdCommand, JointMap, command_to_send
 use crate::config::{BaxterConfig, Mode};
 use herb_ipc::{DOF, GripperAction, monotonic_ns};
 use herb_ros1::baxter_core_msgs::{AssemblyState, EndEffectorState, JointCommand};
+use herb_ros1::node::{Next, connect, next};
 use herb_ros1::sensor_msgs::JointState as RosJointState;
 use herb_ros1::std_msgs::{Bool, Float64};
-use roslibrust::ros1::{MasterClient, NodeHandle, Subscriber};
+use roslibrust::ros1::MasterClient;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -21,8 +22,6 @@ const ENABLE_PERIOD_NS: u64 = 500_000_000;
 /// Messages a subscription holds for this side: 320 ms of the robot's 100 Hz states (older
 /// ones are skipped and counted as lagged).
 const SUBSCRIBER_QUEUE: usize = 32;
-/// Wait between attempts to reach the master at start.
-const CONNECT_RETRY: Duration = Duration::from_millis(500);
 
 /// A joint state from the robot, mapped to herbd's order.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -52,8 +51,27 @@ pub struct RosCounters {
     pub master_lost: u64,
 }
 
+/// A latency histogram (ns, 1 ns to 100 s, 3 significant digits).
+pub type Latency = hdrhistogram::Histogram<u64>;
+
+/// An empty [`Latency`].
+pub fn latency() -> Latency {
+    Latency::new_with_bounds(1, 100_000_000_000, 3).expect("valid bounds")
+}
+
+/// p50, p99 and max of `h` in milliseconds, with the count.
+pub fn latency_json(h: &Latency) -> serde_json::Value {
+    let ms = |ns: u64| ns as f64 * 1e-6;
+    serde_json::json!({
+        "n": h.len(),
+        "p50": ms(h.value_at_quantile(0.5)),
+        "p99": ms(h.value_at_quantile(0.99)),
+        "max": ms(h.max()),
+    })
+}
+
 /// What the two threads share (a short lock on each side, no allocation).
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct Shared {
     /// Latest valid joint state and its number (ROS -> loop).
     pub joint: Option<(u64, Measured)>,
@@ -67,6 +85,23 @@ pub struct Shared {
     pub grip_request: Option<GripperAction>,
     /// Counters.
     pub counters: RosCounters,
+    /// herbd's command stamp to the ROS publish returning (the wait for the pacing tick
+    /// included).
+    pub command_latency: Latency,
+}
+
+impl Default for Shared {
+    fn default() -> Self {
+        Self {
+            joint: None,
+            grip: None,
+            blocker: None,
+            command: None,
+            grip_request: None,
+            counters: RosCounters::default(),
+            command_latency: latency(),
+        }
+    }
 }
 
 /// Locks `shared`, recovering from a poisoned lock (a panic elsewhere leaves plain values).
@@ -88,67 +123,9 @@ pub fn run(
     rt.block_on(session(cfg, enable, shared, stop))
 }
 
-async fn connect(cfg: &BaxterConfig, stop: &AtomicBool) -> Result<Option<NodeHandle>, String> {
-    let mut told = false;
-    loop {
-        if stop.load(Ordering::Relaxed) {
-            return Ok(None);
-        }
-        match NodeHandle::new(&cfg.ros.master_uri, &cfg.ros.node_name).await {
-            Ok(nh) => {
-                eprintln!(
-                    "herb-baxter: connected to the ROS master at {} as {}",
-                    cfg.ros.master_uri, cfg.ros.node_name
-                );
-                return Ok(Some(nh));
-            }
-            Err(e) if !told => {
-                eprintln!(
-                    "herb-baxter: ROS master {} not reachable ({e}); retrying",
-                    cfg.ros.master_uri
-                );
-                told = true;
-            }
-            Err(_) => {}
-        }
-        tokio::time::sleep(CONNECT_RETRY).await;
-    }
-}
-
 fn ros_err(what: &str, topic: &str) -> impl FnOnce(roslibrust::ros1::NodeError) -> String {
     let (what, topic) = (what.to_string(), topic.to_string());
     move |e| format!("{what} {topic}: {e}")
-}
-
-/// What a subscription yielded.
-enum Next<T> {
-    Msg(T),
-    /// This side fell behind: so many messages were skipped (the loop goes on).
-    Lagged(u64),
-    /// Undecodable (the error's text).
-    Bad(String),
-    /// The subscription ended.
-    Closed,
-}
-
-/// The next item of `s`. roslibrust 0.26 does not export its subscriber's error type; its
-/// `Lagged(n)` variant is told apart by its debug form (the version is pinned).
-async fn next<T: roslibrust::RosMessageType>(s: &mut Subscriber<T>) -> Next<T> {
-    match s.next().await {
-        Some(Ok(m)) => Next::Msg(m),
-        Some(Err(e)) => {
-            let debug = format!("{e:?}");
-            match debug
-                .strip_prefix("Lagged(")
-                .and_then(|r| r.strip_suffix(')'))
-                .and_then(|n| n.parse().ok())
-            {
-                Some(n) => Next::Lagged(n),
-                None => Next::Bad(e.to_string()),
-            }
-        }
-        None => Next::Closed,
-    }
 }
 
 async fn session(
@@ -157,7 +134,14 @@ async fn session(
     shared: Arc<Mutex<Shared>>,
     stop: Arc<AtomicBool>,
 ) -> Result<(), String> {
-    let Some(nh) = connect(&cfg, &stop).await? else {
+    let Some(nh) = connect(
+        &cfg.ros.master_uri,
+        &cfg.ros.node_name,
+        "herb-baxter",
+        &stop,
+    )
+    .await
+    else {
         return Ok(());
     };
     let t = &cfg.topics;
@@ -339,7 +323,11 @@ async fn session(
                 if let Some(q) = command_to_send(latest, now, max_age_ns) {
                     command.command.copy_from_slice(&q);
                     cmd_pub.publish(&command).await.map_err(|e| format!("publish {}: {e}", t.joint_command))?;
-                    lock(&shared).counters.commands_sent += 1;
+                    let mut s = lock(&shared);
+                    s.counters.commands_sent += 1;
+                    if let Some(c) = latest {
+                        let _ = s.command_latency.record(monotonic_ns().saturating_sub(c.stamp_ns).max(1));
+                    }
                 }
                 if let Some(a) = request {
                     driver.request(a);

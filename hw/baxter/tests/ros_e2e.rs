@@ -10,155 +10,50 @@
 //! README); `.ci/run` installs them. Without them the tests say so and pass, except under
 //! `CI=true`, where they fail.
 
-use herb_adapter::{CameraPort, Heightmap};
-use herb_ipc::bus::Bus;
-use herb_ipc::{Services, monotonic_ns};
 use herb_robot::kinematics::LEFT_TOP_DOWN_NOMINAL;
+use herb_testkit::ros::{Camera, PYTHON, RosWorld, ros_available};
 use herb_testkit::{
     Follow, Proc, config, exe, fast_limits, last_json, lines, repo, spawn, spawn_env, tmp,
 };
-use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-const PYTHON: &str = "/usr/bin/python3";
-
-/// Whether rosmaster and rospy are here; under `CI=true` their absence fails the test.
-fn ros_available() -> bool {
-    let master = Command::new("rosmaster").arg("--help").output().is_ok();
-    let rospy = Command::new(PYTHON)
-        .args([
-            "-c",
-            "import rospy, genpy, genmsg, std_msgs.msg, sensor_msgs.msg",
-        ])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if master && rospy {
-        return true;
-    }
-    let what = format!("rosmaster found: {master}, rospy importable by {PYTHON}: {rospy}");
-    if std::env::var("CI").as_deref() == Ok("true") {
-        panic!(
-            "ROS 1 is missing under CI=true ({what}); .ci/run installs Debian's python3-rospy, python3-rosmaster, python3-genpy, python3-genmsg, python3-std-msgs, python3-sensor-msgs"
-        );
-    }
-    eprintln!("skipped: ROS 1 is not installed ({what})");
-    false
+/// The fake Baxter in `ros`: a joint state in `corrupt_every` corrupted (0: none).
+fn fake_baxter(ros: &RosWorld, report: &Path, corrupt_every: u32) -> Proc {
+    let l = fast_limits();
+    let list = |v: &[f64]| {
+        v.iter()
+            .map(|x| x.to_string())
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    let script = repo().join("hw/baxter/tests/fake_baxter.py");
+    // `--x=v` form: the values may start with '-'.
+    let args = [
+        format!("--report={}", report.display()),
+        format!("--start={}", list(&LEFT_TOP_DOWN_NOMINAL)),
+        format!("--lower={}", list(&l.lower)),
+        format!("--upper={}", list(&l.upper)),
+        format!("--vmax={}", list(&l.velocity)),
+        format!("--corrupt-every={corrupt_every}"),
+    ];
+    ros.python(&script, &args, "fake_baxter", Duration::from_millis(1500))
 }
 
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("a free port")
-        .port()
-}
-
-/// One test's ROS world: its folder, master port and the environment its peers share.
-struct RosWorld {
-    dir: PathBuf,
-    port: u16,
-    env: Vec<(String, String)>,
-}
-
-impl RosWorld {
-    fn new(dir: &Path) -> Self {
-        let port = free_port();
-        let home = dir.join("roshome");
-        std::fs::create_dir_all(&home).unwrap();
-        let py = generate_python_messages(dir);
-        let env = vec![
-            ("ROS_MASTER_URI".into(), format!("http://127.0.0.1:{port}")),
-            ("ROS_HOSTNAME".into(), "127.0.0.1".into()),
-            ("ROS_HOME".into(), home.display().to_string()),
-            ("PYTHONPATH".into(), py.display().to_string()),
-        ];
-        Self {
-            dir: dir.into(),
-            port,
-            env,
-        }
-    }
-
-    fn env(&self) -> Vec<(&str, &str)> {
-        self.env
-            .iter()
-            .map(|(k, v)| (k.as_str(), v.as_str()))
-            .collect()
-    }
-
-    fn uri(&self) -> String {
-        format!("http://127.0.0.1:{}", self.port)
-    }
-
-    /// Starts a master on the world's port and waits until it accepts connections.
-    fn master(&self, tag: &str) -> Proc {
-        let p = self.port.to_string();
-        let m = spawn_env(
-            Path::new("rosmaster"),
-            &["--core", "-p", &p],
-            &self.env(),
-            &self.dir.join(format!("rosmaster-{tag}.log")),
-        );
-        let t0 = Instant::now();
-        while TcpStream::connect(("127.0.0.1", self.port)).is_err() {
-            assert!(
-                t0.elapsed() < Duration::from_secs(15),
-                "rosmaster did not start"
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        m
-    }
-
-    fn fake_baxter(&self, report: &Path, corrupt_every: u32) -> Proc {
-        let l = fast_limits();
-        let list = |v: &[f64]| {
-            v.iter()
-                .map(|x| x.to_string())
-                .collect::<Vec<_>>()
-                .join(",")
-        };
-        let script = repo().join("hw/baxter/tests/fake_baxter.py");
-        // `--x=v` form: the values may start with '-'.
-        let args = [
-            format!("--report={}", report.display()),
-            format!("--start={}", list(&LEFT_TOP_DOWN_NOMINAL)),
-            format!("--lower={}", list(&l.lower)),
-            format!("--upper={}", list(&l.upper)),
-            format!("--vmax={}", list(&l.velocity)),
-            format!("--corrupt-every={corrupt_every}"),
-        ];
-        let mut args: Vec<&str> = args.iter().map(String::as_str).collect();
-        args.insert(0, script.to_str().unwrap());
-        let log = self.dir.join("fake_baxter.log");
-        let mut p = spawn_env(Path::new(PYTHON), &args, &self.env(), &log);
-        // A fake that cannot start (arguments, imports) says so now, not as a timeout later.
-        std::thread::sleep(Duration::from_millis(1500));
-        if let Some(st) = p.0.try_wait().unwrap() {
-            panic!(
-                "fake Baxter exited ({st}): {}",
-                std::fs::read_to_string(&log).unwrap_or_default()
-            );
-        }
-        p
-    }
-
-    fn adapter(&self, cfg: &Path, tag: &str) -> Proc {
-        spawn_env(
-            Path::new(env!("CARGO_BIN_EXE_herb-baxter")),
-            &[
-                "--config",
-                cfg.to_str().unwrap(),
-                "--master-uri",
-                &self.uri(),
-            ],
-            &self.env(),
-            &self.dir.join(format!("herb-baxter-{tag}.log")),
-        )
-    }
+/// herb-baxter in `ros` on herbd's configuration `cfg`.
+fn adapter(ros: &RosWorld, cfg: &Path, tag: &str) -> Proc {
+    spawn_env(
+        Path::new(env!("CARGO_BIN_EXE_herb-baxter")),
+        &[
+            "--config",
+            cfg.to_str().unwrap(),
+            "--master-uri",
+            &ros.uri(),
+        ],
+        &ros.env(),
+        &ros.dir.join(format!("herb-baxter-{tag}.log")),
+    )
 }
 
 /// The rospy modules of the vendored baxter_core_msgs, generated without catkin.
@@ -201,81 +96,33 @@ fn generate_python_messages(dir: &Path) -> PathBuf {
     root
 }
 
-/// The fixture camera: the empty box's heightmap under `prefix` every 100 ms until dropped.
-struct FixtureCamera {
-    stop: Arc<AtomicBool>,
-    thread: Option<std::thread::JoinHandle<()>>,
-}
-
-impl FixtureCamera {
-    fn start(prefix: &str) -> Self {
-        let stop = Arc::new(AtomicBool::new(false));
-        let (s, prefix) = (stop.clone(), prefix.to_string());
-        let thread = std::thread::spawn(move || {
-            let catalog =
-                herb_sim::Catalog::builtin(&herb_sim::paths::MeshSource::None("fixture".into()))
-                    .unwrap();
-            let world =
-                herb_sim::PackingWorld::new(Arc::new(catalog), herb_sim::WorldConfig::default())
-                    .unwrap();
-            let hm = world.heightmap();
-            let services = Services::new(&prefix).unwrap();
-            let bus = Bus::open("fixture-camera", &services).unwrap();
-            let camera = CameraPort::open(&bus).unwrap();
-            let mut seq = 0;
-            while !s.load(Ordering::Relaxed) {
-                seq += 1;
-                let frame = Heightmap {
-                    stamp_ns: monotonic_ns(),
-                    nx: hm.spec().nx as u32,
-                    ny: hm.spec().ny as u32,
-                    cell_m: hm.spec().cell,
-                    objects: 0,
-                    cells: hm.data(),
-                };
-                camera.publish(seq, &frame).unwrap();
-                std::thread::sleep(Duration::from_millis(100));
-            }
-        });
-        Self {
-            stop,
-            thread: Some(thread),
-        }
-    }
-}
-
-impl Drop for FixtureCamera {
-    fn drop(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
-
-fn herbd(cfg: &Path, dir: &Path) -> Proc {
+fn herbd(cfg: &Path, dir: &Path, extra: &[&str]) -> Proc {
+    let cfg = cfg.to_str().unwrap();
     spawn(
         &exe("herbd", "herb-daemon"),
-        &["--config", cfg.to_str().unwrap()],
+        &[&["--config", cfg], extra].concat(),
         &dir.join("herbd.log"),
     )
 }
 
-fn pack(prefix: &str, objects: &str, dir: &Path) -> Proc {
+/// `herbctl` under `prefix` with `args` (a `pack` of objects or a session), JSON summary.
+fn pack(prefix: &str, args: &[&str], dir: &Path) -> Proc {
     spawn(
         &exe("herbctl", "herb-daemon"),
         &[
-            "--prefix",
-            prefix,
-            "pack",
-            "--objects",
-            objects,
-            "--json",
-            "--timeout",
-            "300",
-        ],
+            &["--prefix", prefix][..],
+            args,
+            &["--json", "--timeout", "300"],
+        ]
+        .concat(),
         &dir.join("herbctl.log"),
     )
+}
+
+/// The empty box's heightmap (the fake camera's scene: the fake Baxter places nothing).
+fn empty_box() -> (herb_sim::GridSpec, Vec<f32>) {
+    let spec = herb_sim::GridSpec::for_box(herb_sim::ObsLayout::CELL_M).unwrap();
+    (spec, vec![0.0; spec.len()])
 }
 
 /// Stops the fake Baxter and reads its report.
@@ -299,34 +146,58 @@ fn adapter_summary(mut a: Proc) -> serde_json::Value {
     last_json(&rx, "baxter_final")
 }
 
-/// Three objects packed through ROS: every one decided and placed, every joint command sent
-/// to the robot within the limits and addressed to the left arm's joints by name, the gripper
-/// calibrated once then closed and opened once per object, the command timeout latched; one
-/// joint state in 25 is bad (NaN, misspelt name, short array): each is refused and counted by
-/// herb-baxter and never reaches herbd.
+/// The shortest BoxED episode packed through ROS, the arm by the fake Baxter and herb-baxter,
+/// the heightmaps by the fake camera and herb-camera: every object decided and placed, every
+/// joint command sent to the robot within the limits and addressed to the left arm's joints by
+/// name, the gripper calibrated once then closed and opened once per object, the command
+/// timeout latched; one joint state in 25 is bad (NaN, misspelt name, short array): each is
+/// refused and counted by herb-baxter and never reaches herbd.
 #[test]
 fn packs_through_ros_with_a_fake_baxter() {
     if !ros_available() {
         return;
     }
+    let Some(root) = herb_sim::paths::boxed_root_for_tests() else {
+        return;
+    };
+    let (session, n) = herb_testkit::shortest_session(&root);
+    let boxed = root.to_str().unwrap();
     let dir = tmp("ros-pack");
     let prefix = format!("ros{}pack", std::process::id());
     let cfg = config(&dir, &prefix, "blbf");
-    let ros = RosWorld::new(&dir);
+    let ros = RosWorld::new(&dir, Some(&generate_python_messages(&dir)));
     let _master = ros.master("1");
     let report = dir.join("fake.json");
-    let fake = ros.fake_baxter(&report, 25);
-    let adapter = ros.adapter(&cfg, "1");
-    let _camera = FixtureCamera::start(&prefix);
-    let mut hd = herbd(&cfg, &dir);
-    let mut ctl = pack(&prefix, "003,005,011", &dir);
+    let fake = fake_baxter(&ros, &report, 25);
+    let adapter = adapter(&ros, &cfg, "1");
+    let (spec, truth) = empty_box();
+    let camera = Camera::start(&ros, &cfg, &spec, &truth, 0, 0.0);
+    let mut hd = herbd(&cfg, &dir, &["--boxed", boxed]);
+    // The job is submitted once the robot is ready and a frame is out, so that herbd refuses
+    // nothing (a job sent earlier is answered NotReady, which herbd counts).
+    herb_testkit::wait_for_log(
+        &dir.join("herb-baxter-1.log"),
+        "robot ready",
+        Duration::from_secs(30),
+    );
+    herb_testkit::wait_for_log(
+        &dir.join("herb-camera.log"),
+        "first heightmap published",
+        Duration::from_secs(30),
+    );
+    std::thread::sleep(Duration::from_millis(500));
+    let mut ctl = pack(
+        &prefix,
+        &["--boxed", boxed, "pack", "--session", &session],
+        &dir,
+    );
     let mut out = Follow::new(&mut ctl);
-    out.wait_for("placed 3/3", Duration::from_secs(240));
+    out.wait_for(&format!("placed {n}/{n}"), Duration::from_secs(300));
     let st = ctl.wait_for(Duration::from_secs(30));
     let summary = out.last_json().expect("herbctl's JSON summary");
     assert!(st.success(), "{summary}");
-    assert_eq!(summary["placed"], 3, "{summary}");
-    assert_eq!(summary["decisions"], 3, "{summary}");
+    assert_eq!(summary["placed"], n as u64, "{summary}");
+    assert_eq!(summary["decisions"], n as u64, "{summary}");
     let faults = summary["faults"].as_array().map_or(0, |f| f.len());
     assert_eq!(faults, 0, "no fault: {summary}");
 
@@ -336,7 +207,16 @@ fn packs_through_ros_with_a_fake_baxter() {
     let stats = last_json(&hd_lines, "herbd_final");
     let a = adapter_summary(adapter);
     let f = fake_report(fake, &report);
-    eprintln!("herbctl: {summary}\nherbd: {stats}\nherb-baxter: {a}\nfake Baxter: {f}");
+    let mut cam = camera.adapter;
+    let cam_rx = lines(&mut cam);
+    cam.signal(libc::SIGTERM);
+    assert!(cam.wait_for(Duration::from_secs(10)).success());
+    let c = last_json(&cam_rx, "camera_final");
+    eprintln!(
+        "episode {session} ({n} objects)\nherbctl: {summary}\nherbd: {stats}\nherb-baxter: {a}\nfake Baxter: {f}\nherb-camera: {c}"
+    );
+    assert!(c["counters"]["published"].as_u64().unwrap() > 10, "{c}");
+    assert_eq!(c["counters"]["images_rejected"], 0, "{c}");
     assert_eq!(a["commands_rejected"], 0, "{a}");
     assert_eq!(a["max_limit_excess_rad"], 0.0, "{a}");
     assert!(a["ros"]["commands_sent"].as_u64().unwrap() > 100, "{a}");
@@ -349,7 +229,7 @@ fn packs_through_ros_with_a_fake_baxter() {
     assert_eq!(f["calibrations"], 1, "{f}");
     assert_eq!(
         f["grip_events"],
-        serde_json::json!(["close", "open", "close", "open", "close", "open"]),
+        serde_json::json!(["close", "open"].repeat(n)),
         "{f}"
     );
     // Every corrupted state that reached the adapter refused: at most the states it never
@@ -385,14 +265,15 @@ fn a_disabled_robot_or_a_lost_master_brakes_and_the_job_resumes() {
     let dir = tmp("ros-faults");
     let prefix = format!("ros{}faults", std::process::id());
     let cfg = config(&dir, &prefix, "blbf");
-    let ros = RosWorld::new(&dir);
+    let ros = RosWorld::new(&dir, Some(&generate_python_messages(&dir)));
     let master = ros.master("1");
     let report = dir.join("fake.json");
-    let fake = ros.fake_baxter(&report, 0);
-    let adapter = ros.adapter(&cfg, "1");
-    let _camera = FixtureCamera::start(&prefix);
-    let _hd = herbd(&cfg, &dir);
-    let mut ctl = pack(&prefix, "003,005,011", &dir);
+    let fake = fake_baxter(&ros, &report, 0);
+    let adapter = adapter(&ros, &cfg, "1");
+    let (spec, truth) = empty_box();
+    let _camera = Camera::start(&ros, &cfg, &spec, &truth, 0, 0.0);
+    let _hd = herbd(&cfg, &dir, &[]);
+    let mut ctl = pack(&prefix, &["pack", "--objects", "003,005,011"], &dir);
     let mut out = Follow::new(&mut ctl);
     out.wait_for("object  1/3", Duration::from_secs(60));
     std::thread::sleep(Duration::from_millis(700));

@@ -7,7 +7,7 @@
 //! 2. The loopback is killed mid-motion: the daemon reports the joint-state timeout, brakes,
 //!    holds, and resumes the job when the loopback is restarted; the job completes.
 
-use herb_testkit::{Follow, Proc, config, last_json, lines, repo, spawn, tmp};
+use herb_testkit::{Follow, Proc, config, last_json, lines, repo, shortest_session, spawn, tmp};
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus};
 use std::time::{Duration, Instant};
@@ -89,24 +89,6 @@ fn setup_with(tag: &str, policy: &str) -> (PathBuf, String, PathBuf) {
     let prefix = format!("e2e{}{tag}", std::process::id());
     let cfg = config(&dir, &prefix, policy);
     (dir, prefix, cfg)
-}
-
-/// The session with the fewest objects (ties: name), and its object count.
-fn shortest_session(root: &Path) -> (String, usize) {
-    let catalog =
-        herb_sim::Catalog::builtin(&herb_sim::paths::MeshSource::None("t".into())).unwrap();
-    let (sessions, _) = herb_sim::boxed::load_all(root, &catalog).unwrap();
-    sessions
-        .iter()
-        .map(|s| {
-            (
-                s.episode(&catalog).objects.len(),
-                s.episode(&catalog).name.clone(),
-            )
-        })
-        .min()
-        .map(|(n, name)| (name, n))
-        .unwrap()
 }
 
 /// With the shipped SAC policy (CS0.6): herbd loads it and decides every placement with it; the

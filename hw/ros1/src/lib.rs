@@ -16,3 +16,6 @@ mod generated {
 }
 pub use generated::*;
 pub use roslibrust::RosMessageType;
+
+pub mod node;
+pub mod time;

@@ -211,9 +211,45 @@ pub fn last_json(rx: &mpsc::Receiver<String>, key: &str) -> serde_json::Value {
     found.unwrap_or_else(|| panic!("no {key} line"))
 }
 
+/// The BoxED session with the fewest objects (ties: name) and its object count.
+pub fn shortest_session(root: &Path) -> (String, usize) {
+    let catalog =
+        herb_sim::Catalog::builtin(&herb_sim::paths::MeshSource::None("t".into())).unwrap();
+    let (sessions, _) = herb_sim::boxed::load_all(root, &catalog).unwrap();
+    sessions
+        .iter()
+        .map(|s| {
+            (
+                s.episode(&catalog).objects.len(),
+                s.episode(&catalog).name.clone(),
+            )
+        })
+        .min()
+        .map(|(n, name)| (name, n))
+        .unwrap()
+}
+
+/// Waits until the file `log` contains `what`; panics with the file after `limit`.
+pub fn wait_for_log(log: &Path, what: &str, limit: Duration) {
+    let t0 = Instant::now();
+    loop {
+        let text = std::fs::read_to_string(log).unwrap_or_default();
+        if text.contains(what) {
+            return;
+        }
+        assert!(
+            t0.elapsed() < limit,
+            "no {what:?} in {} within {limit:?}:\n{text}",
+            log.display()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
 /// A temporary folder for test `name` of this process.
 pub fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("herb-e2e-{}-{name}", std::process::id()));
     std::fs::create_dir_all(&d).unwrap();
     d
 }
+pub mod ros;

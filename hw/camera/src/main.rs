@@ -1,0 +1,325 @@
+//! `herb-camera`: depth images from ROS 1 to herbd's heightmap service. The ROS side (a
+//! single-threaded tokio runtime in its own thread) projects each image into a heightmap and
+//! hands it over; the main thread publishes it in shared memory. SIGINT/SIGTERM: prints a JSON
+//! summary on stdout and exits 0.
+
+use clap::Parser;
+use herb_adapter::{CameraPort, Heightmap};
+use herb_camera::config::CameraConfig;
+use herb_camera::project::{Depth, FrameStats, Intrinsics, Median, Projector};
+use herb_ipc::bus::Bus;
+use herb_ipc::{Services, monotonic_ns};
+use herb_robot::config_file::ConfigFile;
+use herb_ros1::node::{Next, connect, next};
+use herb_ros1::sensor_msgs::{CameraInfo, Image};
+use herb_sim::heightmap::GridSpec;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, mpsc};
+use std::time::{Duration, SystemTime};
+
+/// Depth camera (ROS 1) to heightmap (iceoryx2).
+#[derive(Debug, Parser)]
+#[command(name = "herb-camera", version)]
+struct Cli {
+    /// herbd's configuration file (the IPC prefix).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// This adapter's file (ROS master, topics, camera pose, depth limits, heightmap).
+    #[arg(long)]
+    camera: Option<PathBuf>,
+    /// IPC service-name prefix (overrides herbd's file).
+    #[arg(long)]
+    prefix: Option<String>,
+    /// ROS master URI (overrides the adapter's file).
+    #[arg(long)]
+    master_uri: Option<String>,
+    /// Also write the final summary (JSON) here.
+    #[arg(long)]
+    report: Option<PathBuf>,
+}
+
+/// The prefix from herbd's file; its other tables are herbd's.
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(default)]
+struct HerbdPrefix {
+    ipc_prefix: String,
+}
+
+impl Default for HerbdPrefix {
+    fn default() -> Self {
+        Self {
+            ipc_prefix: Services::DEFAULT_PREFIX.into(),
+        }
+    }
+}
+
+impl ConfigFile for HerbdPrefix {
+    fn validate(&self) -> Result<(), String> {
+        Services::new(&self.ipc_prefix)
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    }
+}
+
+/// A projected frame on its way to the publisher.
+struct Frame {
+    /// When the image arrived (CLOCK_MONOTONIC ns).
+    received_ns: u64,
+    stamp_ns: u64,
+    cells: Vec<f32>,
+    stats: FrameStats,
+}
+
+/// Counters of the ROS side.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+struct Counters {
+    images: u64,
+    images_rejected: u64,
+    camera_infos_rejected: u64,
+    lagged: u64,
+    published: u64,
+    cells_filled: u64,
+}
+
+fn lock(c: &Mutex<Counters>) -> std::sync::MutexGuard<'_, Counters> {
+    c.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Logs `what` when it differs from the last thing logged this way.
+fn say_once(last: &mut String, what: String) {
+    if *last != what {
+        eprintln!("herb-camera: {what}");
+        *last = what;
+    }
+}
+
+async fn ros_side(
+    cfg: CameraConfig,
+    spec: GridSpec,
+    frames: mpsc::SyncSender<Frame>,
+    spare: mpsc::Receiver<Vec<f32>>,
+    counters: Arc<Mutex<Counters>>,
+    stop: Arc<AtomicBool>,
+) -> Result<(), String> {
+    let Some(nh) = connect(
+        &cfg.ros.master_uri,
+        &cfg.ros.node_name,
+        "herb-camera",
+        &stop,
+    )
+    .await
+    else {
+        return Ok(());
+    };
+    let t = &cfg.topics;
+    let mut images = nh
+        .subscribe::<Image>(&t.image, 4)
+        .await
+        .map_err(|e| format!("subscribe {}: {e}", t.image))?;
+    let mut infos = nh
+        .subscribe::<CameraInfo>(&t.camera_info, 4)
+        .await
+        .map_err(|e| format!("subscribe {}: {e}", t.camera_info))?;
+    let (pose, params) = (cfg.b_from_c(), cfg.params());
+    let max_age_ns = (cfg.depth.max_age_s * 1e9) as u64;
+    let mut projector = Projector::new(spec);
+    let mut median = Median::new(cfg.heightmap.median_frames, spec.len());
+    let mut raw = vec![0.0f32; spec.len()];
+    let mut intr: Option<Intrinsics> = None;
+    let mut last_said = String::new();
+    let mut poll = tokio::time::interval(Duration::from_millis(100));
+    while !stop.load(Ordering::Relaxed) {
+        tokio::select! {
+            m = next(&mut infos) => match m {
+                Next::Msg(ci) => match Intrinsics::from_k(ci.width, ci.height, &ci.K) {
+                    Ok(i) => intr = Some(i),
+                    Err(e) => {
+                        lock(&counters).camera_infos_rejected += 1;
+                        say_once(&mut last_said, format!("camera info refused: {e}"));
+                    }
+                },
+                Next::Lagged(n) => lock(&counters).lagged += n,
+                Next::Bad(e) => {
+                    lock(&counters).camera_infos_rejected += 1;
+                    say_once(&mut last_said, format!("camera info undecodable: {e}"));
+                }
+                Next::Closed => return Err(format!("subscription {} closed", t.camera_info)),
+            },
+            m = next(&mut images) => {
+                let img = match m {
+                    Next::Msg(img) => img,
+                    Next::Lagged(n) => {
+                        lock(&counters).lagged += n;
+                        continue;
+                    }
+                    Next::Bad(e) => {
+                        let mut c = lock(&counters);
+                        c.images += 1;
+                        c.images_rejected += 1;
+                        drop(c);
+                        say_once(&mut last_said, format!("image undecodable: {e}"));
+                        continue;
+                    }
+                    Next::Closed => return Err(format!("subscription {} closed", t.image)),
+                };
+                let received_ns = monotonic_ns();
+                lock(&counters).images += 1;
+                let checked = intr
+                    .ok_or_else(|| "no camera info yet".to_string())
+                    .and_then(|i| {
+                        let d = Depth::from_image(&img.encoding, img.is_bigendian, img.width, img.height, img.step, &img.data, &i)?;
+                        let stamp = herb_ros1::time::to_monotonic(&img.header.stamp, monotonic_ns(), SystemTime::now(), max_age_ns)?;
+                        Ok((i, d, stamp))
+                    });
+                let (i, depth, stamp_ns) = match checked {
+                    Ok(v) => v,
+                    Err(e) => {
+                        lock(&counters).images_rejected += 1;
+                        say_once(&mut last_said, format!("image refused: {e}"));
+                        continue;
+                    }
+                };
+                let stats = projector.project(&depth, &i, &pose, &params, &mut raw);
+                let mut cells = spare.try_recv().unwrap_or_else(|_| vec![0.0; spec.len()]);
+                median.push(&raw, &mut cells);
+                if frames.try_send(Frame { received_ns, stamp_ns, cells, stats }).is_err() {
+                    // The publisher is behind: this frame is dropped, the next one goes.
+                    lock(&counters).lagged += 1;
+                }
+                if !last_said.is_empty() {
+                    say_once(&mut last_said, "images accepted".into());
+                }
+            }
+            _ = poll.tick() => {}
+        }
+    }
+    Ok(())
+}
+
+fn run(cli: Cli) -> Result<serde_json::Value, String> {
+    let mut herbd = match &cli.config {
+        Some(p) => HerbdPrefix::load(p)?,
+        None => HerbdPrefix::default(),
+    };
+    if let Some(p) = &cli.prefix {
+        herbd.ipc_prefix = p.clone();
+    }
+    herbd.validate()?;
+    let mut cfg = match &cli.camera {
+        Some(p) => CameraConfig::load(p)?,
+        None => CameraConfig::default(),
+    };
+    if let Some(u) = &cli.master_uri {
+        cfg.ros.master_uri = u.clone();
+    }
+    cfg.validate()?;
+    let spec = GridSpec::for_box(cfg.heightmap.cell_m).map_err(|e| e.to_string())?;
+    let services = Services::new(&herbd.ipc_prefix).map_err(|e| e.to_string())?;
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let s = stop.clone();
+        ctrlc::set_handler(move || s.store(true, Ordering::Relaxed)).map_err(|e| e.to_string())?;
+    }
+    let bus = Bus::open("herb-camera", &services).map_err(|e| e.to_string())?;
+    let camera = CameraPort::open(&bus).map_err(|e| e.to_string())?;
+    let counters = Arc::new(Mutex::new(Counters::default()));
+    let (tx, rx) = mpsc::sync_channel::<Frame>(2);
+    let (spare_tx, spare_rx) = mpsc::channel::<Vec<f32>>();
+    let ros = {
+        let (cfg, counters, stop) = (cfg.clone(), counters.clone(), stop.clone());
+        std::thread::Builder::new()
+            .name("herb-camera-ros".into())
+            .spawn(move || {
+                let r = tokio::runtime::Builder::new_current_thread()
+                    .enable_all()
+                    .build()
+                    .map_err(|e| format!("tokio runtime: {e}"))
+                    .and_then(|rt| {
+                        rt.block_on(ros_side(cfg, spec, tx, spare_rx, counters, stop.clone()))
+                    });
+                stop.store(true, Ordering::Relaxed);
+                r
+            })
+            .map_err(|e| e.to_string())?
+    };
+    eprintln!(
+        "herb-camera: prefix {:?}, master {}, {} x {} cells of {} m",
+        herbd.ipc_prefix, cfg.ros.master_uri, spec.nx, spec.ny, spec.cell
+    );
+    let mut seq = 0u64;
+    // Image arrival to heightmap published (projection, median, hand-over, shared-memory write).
+    let mut latency = hdrhistogram::Histogram::<u64>::new_with_bounds(1, 10_000_000_000, 3)
+        .map_err(|e| e.to_string())?;
+    while !stop.load(Ordering::Relaxed) {
+        let Ok(f) = rx.recv_timeout(Duration::from_millis(100)) else {
+            continue;
+        };
+        seq += 1;
+        let hm = Heightmap {
+            stamp_ns: f.stamp_ns,
+            nx: spec.nx as u32,
+            ny: spec.ny as u32,
+            cell_m: spec.cell,
+            objects: 0,
+            cells: &f.cells,
+        };
+        match camera.publish(seq, &hm) {
+            Ok(()) => {
+                if seq == 1 {
+                    eprintln!("herb-camera: first heightmap published");
+                }
+                let _ = latency.record(monotonic_ns().saturating_sub(f.received_ns).max(1));
+                let mut c = lock(&counters);
+                c.published += 1;
+                c.cells_filled += u64::from(f.stats.filled_near + f.stats.filled_far);
+            }
+            Err(e) => eprintln!("herb-camera: heightmap not published: {e}"),
+        }
+        let _ = spare_tx.send(f.cells);
+    }
+    let ros_result = ros
+        .join()
+        .unwrap_or_else(|_| Err("the ROS thread panicked".into()));
+    let c = *lock(&counters);
+    let summary = serde_json::json!({ "camera_final": {
+        "counters": c,
+        "cells_per_frame": spec.len(),
+        "image_to_heightmap_ms": {
+            "n": latency.len(),
+            "p50": latency.value_at_quantile(0.5) as f64 * 1e-6,
+            "p99": latency.value_at_quantile(0.99) as f64 * 1e-6,
+            "max": latency.max() as f64 * 1e-6,
+        },
+        "ros_error": ros_result.as_ref().err(),
+    }});
+    match ros_result {
+        Ok(()) => Ok(summary),
+        Err(e) => {
+            println!("{summary}");
+            Err(e)
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let report = cli.report.clone();
+    match run(cli) {
+        Ok(v) => {
+            println!("{v}");
+            if let Some(p) = report
+                && let Err(e) = std::fs::write(&p, format!("{v}\n"))
+            {
+                eprintln!("herb-camera: cannot write {}: {e}", p.display());
+                return ExitCode::from(2);
+            }
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("herb-camera: error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}

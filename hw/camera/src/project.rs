@@ -1,0 +1,320 @@
+//! From a depth image to a heightmap of the box interior, with no ROS or IPC types: deproject
+//! each pixel with the pinhole intrinsics, move it into the box frame B with the calibrated
+//! camera pose, keep the points over the interior, take the highest per heightmap cell,
+//! threshold the floor, and fill the cells no pixel saw.
+//!
+//! **Unseen cells** (occluded behind a wall or a tall object, or without a valid depth) are
+//! filled conservatively: with the highest seen cell within `fill_radius` cells, or, with none
+//! that near, with the highest seen cell of the whole frame. A placement is never planned into a
+//! hole the camera could not see; the count of filled cells is reported with every frame.
+
+use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y};
+use herb_sim::heightmap::GridSpec;
+use nalgebra::{Isometry3, Point3};
+
+/// Pinhole intrinsics of the depth image (from `sensor_msgs/CameraInfo`'s K).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Intrinsics {
+    /// Image width (pixels).
+    pub width: u32,
+    /// Image height (pixels).
+    pub height: u32,
+    /// Focal length along u (pixels).
+    pub fx: f64,
+    /// Focal length along v (pixels).
+    pub fy: f64,
+    /// Principal point u (pixels).
+    pub cx: f64,
+    /// Principal point v (pixels).
+    pub cy: f64,
+}
+
+impl Intrinsics {
+    /// From a CameraInfo's size and row-major K; `Err` names what is unusable.
+    pub fn from_k(width: u32, height: u32, k: &[f64]) -> Result<Self, String> {
+        if k.len() != 9 {
+            return Err(format!("K has {} values, expected 9", k.len()));
+        }
+        let i = Self {
+            width,
+            height,
+            fx: k[0],
+            fy: k[4],
+            cx: k[2],
+            cy: k[5],
+        };
+        if width == 0 || height == 0 || width > 4096 || height > 4096 {
+            return Err(format!("image size {width} x {height}"));
+        }
+        let usable =
+            [i.fx, i.fy, i.cx, i.cy].iter().all(|v| v.is_finite()) && i.fx > 0.0 && i.fy > 0.0;
+        if !usable {
+            return Err(format!(
+                "K: fx {} fy {} cx {} cy {} unusable",
+                i.fx, i.fy, i.cx, i.cy
+            ));
+        }
+        Ok(i)
+    }
+}
+
+/// Depth pixels as they come in `sensor_msgs/Image`.
+#[derive(Debug, Clone, Copy)]
+pub enum Depth<'a> {
+    /// `16UC1`: millimetres, 0 = no reading (little-endian bytes).
+    Millimetres(&'a [u8]),
+    /// `32FC1`: metres, NaN or 0 = no reading (little-endian bytes).
+    Metres(&'a [u8]),
+}
+
+impl<'a> Depth<'a> {
+    /// The image's pixels from its encoding, size, row step and data; `Err` names what is wrong
+    /// (an encoding other than 16UC1 or 32FC1, big-endian data, a size other than the camera
+    /// info's, or data shorter than the rows).
+    pub fn from_image(
+        encoding: &str,
+        is_bigendian: u8,
+        width: u32,
+        height: u32,
+        step: u32,
+        data: &'a [u8],
+        intr: &Intrinsics,
+    ) -> Result<Self, String> {
+        let bytes = match encoding {
+            "16UC1" | "mono16" => 2,
+            "32FC1" => 4,
+            e => return Err(format!("encoding {e:?}: expected 16UC1 or 32FC1")),
+        };
+        if is_bigendian != 0 {
+            return Err("big-endian depth".into());
+        }
+        if (width, height) != (intr.width, intr.height) {
+            return Err(format!(
+                "image {width} x {height}, camera info {} x {}",
+                intr.width, intr.height
+            ));
+        }
+        if step as usize != width as usize * bytes {
+            return Err(format!(
+                "row step {step}, expected {}",
+                width as usize * bytes
+            ));
+        }
+        if data.len() != step as usize * height as usize {
+            return Err(format!(
+                "{} bytes of data, expected {}",
+                data.len(),
+                step as usize * height as usize
+            ));
+        }
+        Ok(if bytes == 2 {
+            Self::Millimetres(data)
+        } else {
+            Self::Metres(data)
+        })
+    }
+
+    /// Depth of pixel `i` (m); `None` without a reading.
+    #[inline]
+    fn at(&self, i: usize) -> Option<f64> {
+        let d = match self {
+            Self::Millimetres(b) => u16::from_le_bytes([b[2 * i], b[2 * i + 1]]) as f64 * 1e-3,
+            Self::Metres(b) => {
+                f32::from_le_bytes([b[4 * i], b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]]) as f64
+            }
+        };
+        (d.is_finite() && d > 0.0).then_some(d)
+    }
+}
+
+/// Settings of the projection.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Params {
+    /// Depth readings outside `[min_depth, max_depth]` are ignored (m).
+    pub min_depth: f64,
+    /// See `min_depth`.
+    pub max_depth: f64,
+    /// Heights below this are the floor: 0 (m).
+    pub floor_threshold: f32,
+    /// Unseen cells take the highest seen cell within this many cells.
+    pub fill_radius: usize,
+    /// Heights are clamped to `[0, max_height]` (m).
+    pub max_height: f32,
+}
+
+/// What one frame's projection did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FrameStats {
+    /// Pixels with a valid depth.
+    pub valid_pixels: u32,
+    /// Pixels whose point fell over the box interior.
+    pub interior_points: u32,
+    /// Cells filled from a neighbour (unseen).
+    pub filled_near: u32,
+    /// Cells filled with the frame's highest cell (nothing seen near them).
+    pub filled_far: u32,
+}
+
+/// The projection's buffers, allocated once for a grid.
+#[derive(Debug, Clone)]
+pub struct Projector {
+    spec: GridSpec,
+    seen: Vec<bool>,
+    scratch: Vec<f32>,
+}
+
+impl Projector {
+    /// For heightmaps of grid `spec` (the box interior).
+    pub fn new(spec: GridSpec) -> Self {
+        Self {
+            spec,
+            seen: vec![false; spec.len()],
+            scratch: vec![0.0; spec.len()],
+        }
+    }
+
+    /// The grid.
+    pub fn spec(&self) -> &GridSpec {
+        &self.spec
+    }
+
+    /// Which cells the last projection saw (the others were filled).
+    pub fn seen(&self) -> &[bool] {
+        &self.seen
+    }
+
+    /// Writes the heightmap of `depth` (camera pose `b_from_c`: the optical frame, z along the
+    /// view, in the box frame B) into `out` (`spec.len()` cells).
+    pub fn project(
+        &mut self,
+        depth: &Depth<'_>,
+        intr: &Intrinsics,
+        b_from_c: &Isometry3<f64>,
+        p: &Params,
+        out: &mut [f32],
+    ) -> FrameStats {
+        let spec = self.spec;
+        assert_eq!(out.len(), spec.len(), "heightmap buffer of the grid's size");
+        out.fill(f32::NEG_INFINITY);
+        self.seen.fill(false);
+        let mut stats = FrameStats::default();
+        let (w, h) = (intr.width as usize, intr.height as usize);
+        for v in 0..h {
+            for u in 0..w {
+                let Some(d) = depth.at(v * w + u) else {
+                    continue;
+                };
+                if !(p.min_depth..=p.max_depth).contains(&d) {
+                    continue;
+                }
+                stats.valid_pixels += 1;
+                let c = Point3::new(
+                    (u as f64 - intr.cx) / intr.fx * d,
+                    (v as f64 - intr.cy) / intr.fy * d,
+                    d,
+                );
+                let b = b_from_c * c;
+                let (x, y) = (b.x as f32, b.y as f32);
+                if x.abs() > BOX_HALF_X || y.abs() > BOX_HALF_Y {
+                    continue;
+                }
+                let (cu, cv) = spec.to_pixel(x, y);
+                let (col, row) = (cu.floor(), cv.floor());
+                if col < 0.0 || row < 0.0 || col as usize >= spec.nx || row as usize >= spec.ny {
+                    continue;
+                }
+                stats.interior_points += 1;
+                let i = row as usize * spec.nx + col as usize;
+                let z = b.z as f32;
+                if z > out[i] {
+                    out[i] = z;
+                }
+                self.seen[i] = true;
+            }
+        }
+        let mut highest = 0.0f32;
+        for (o, &s) in out.iter_mut().zip(&self.seen) {
+            if s {
+                *o = if *o < p.floor_threshold {
+                    0.0
+                } else {
+                    o.min(p.max_height)
+                };
+                highest = highest.max(*o);
+            }
+        }
+        // Unseen cells: the highest seen cell within the radius (a square window), else the
+        // frame's highest.
+        self.scratch.copy_from_slice(out);
+        let r = p.fill_radius as isize;
+        for row in 0..spec.ny {
+            for col in 0..spec.nx {
+                let i = row * spec.nx + col;
+                if self.seen[i] {
+                    continue;
+                }
+                let mut best = f32::NEG_INFINITY;
+                for dr in -r..=r {
+                    let rr = row as isize + dr;
+                    if rr < 0 || rr as usize >= spec.ny {
+                        continue;
+                    }
+                    for dc in -r..=r {
+                        let cc = col as isize + dc;
+                        if cc < 0 || cc as usize >= spec.nx {
+                            continue;
+                        }
+                        let j = rr as usize * spec.nx + cc as usize;
+                        if self.seen[j] {
+                            best = best.max(self.scratch[j]);
+                        }
+                    }
+                }
+                if best.is_finite() {
+                    out[i] = best;
+                    stats.filled_near += 1;
+                } else {
+                    out[i] = highest;
+                    stats.filled_far += 1;
+                }
+            }
+        }
+        stats
+    }
+}
+
+/// Per-cell median of the last `n` heightmaps (`n` = 1: the latest as is).
+#[derive(Debug, Clone)]
+pub struct Median {
+    frames: Vec<Vec<f32>>,
+    next: usize,
+    filled: usize,
+    column: Vec<f32>,
+}
+
+impl Median {
+    /// Over `n` frames (at least 1) of `cells` cells.
+    pub fn new(n: usize, cells: usize) -> Self {
+        Self {
+            frames: vec![vec![0.0; cells]; n.max(1)],
+            next: 0,
+            filled: 0,
+            column: Vec::with_capacity(n.max(1)),
+        }
+    }
+
+    /// Adds `hm` and writes the median of the frames held (fewer than `n` at start) to `out`.
+    pub fn push(&mut self, hm: &[f32], out: &mut [f32]) {
+        let n = self.frames.len();
+        self.frames[self.next].copy_from_slice(hm);
+        self.next = (self.next + 1) % n;
+        self.filled = (self.filled + 1).min(n);
+        for (i, o) in out.iter_mut().enumerate() {
+            self.column.clear();
+            self.column
+                .extend(self.frames[..self.filled].iter().map(|f| f[i]));
+            self.column.sort_unstable_by(f32::total_cmp);
+            *o = self.column[self.column.len() / 2];
+        }
+    }
+}

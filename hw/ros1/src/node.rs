@@ -1,0 +1,69 @@
+//! Connecting to the master and reading subscriptions, the same way in every adapter.
+
+use roslibrust::ros1::{NodeHandle, Subscriber};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+/// Wait between attempts to reach the master at start.
+pub const CONNECT_RETRY: Duration = Duration::from_millis(500);
+
+/// Registers node `name` with the master at `master_uri`, retrying every [`CONNECT_RETRY`]
+/// until it answers (said once on stderr, prefixed with `who`); `None` if `stop` is set first.
+pub async fn connect(
+    master_uri: &str,
+    name: &str,
+    who: &str,
+    stop: &AtomicBool,
+) -> Option<NodeHandle> {
+    let mut told = false;
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return None;
+        }
+        match NodeHandle::new(master_uri, name).await {
+            Ok(nh) => {
+                eprintln!("{who}: connected to the ROS master at {master_uri} as {name}");
+                return Some(nh);
+            }
+            Err(e) if !told => {
+                eprintln!("{who}: ROS master {master_uri} not reachable ({e}); retrying");
+                told = true;
+            }
+            Err(_) => {}
+        }
+        tokio::time::sleep(CONNECT_RETRY).await;
+    }
+}
+
+/// What a subscription yielded.
+#[derive(Debug)]
+pub enum Next<T> {
+    /// A message.
+    Msg(T),
+    /// This side fell behind: so many messages were skipped (the reader goes on).
+    Lagged(u64),
+    /// Undecodable (the error's text).
+    Bad(String),
+    /// The subscription ended.
+    Closed,
+}
+
+/// The next item of `s`. roslibrust 0.26 does not export its subscriber's error type; its
+/// `Lagged(n)` variant is told apart by its debug form (the version is pinned).
+pub async fn next<T: roslibrust::RosMessageType>(s: &mut Subscriber<T>) -> Next<T> {
+    match s.next().await {
+        Some(Ok(m)) => Next::Msg(m),
+        Some(Err(e)) => {
+            let debug = format!("{e:?}");
+            match debug
+                .strip_prefix("Lagged(")
+                .and_then(|r| r.strip_suffix(')'))
+                .and_then(|n| n.parse().ok())
+            {
+                Some(n) => Next::Lagged(n),
+                None => Next::Bad(e.to_string()),
+            }
+        }
+        None => Next::Closed,
+    }
+}
