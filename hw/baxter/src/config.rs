@@ -291,6 +291,13 @@ mod tests {
     }
 
     #[test]
+    fn the_shipped_file_holds_the_defaults() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../systemd/baxter.toml");
+        let c = BaxterConfig::load(std::path::Path::new(path)).unwrap();
+        assert_eq!(c, BaxterConfig::default());
+    }
+
+    #[test]
     fn herbd_s_shipped_file_reads_as_the_adapter_s_view() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../systemd/herbd.toml");
         let v = HerbdView::load(std::path::Path::new(path)).unwrap();

@@ -218,6 +218,13 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_shipped_file_holds_the_defaults() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../systemd/camera.toml");
+        let c = CameraConfig::load(std::path::Path::new(path)).unwrap();
+        assert_eq!(c, CameraConfig::default());
+    }
+
+    #[test]
     fn defaults_are_valid_and_bad_values_are_named() {
         let c = CameraConfig::default();
         c.validate().unwrap();

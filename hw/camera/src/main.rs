@@ -38,6 +38,107 @@ struct Cli {
     /// Also write the final summary (JSON) here.
     #[arg(long)]
     report: Option<PathBuf>,
+    #[command(subcommand)]
+    command: Option<Sub>,
+}
+
+#[derive(Debug, clap::Subcommand)]
+enum Sub {
+    /// Fit the camera's pose from depth images of the EMPTY box with its whole rim in view,
+    /// and print it as the `[pose]` table of the camera file (nothing is published).
+    Calibrate {
+        /// Depth images to take (their per-pixel median is fitted).
+        #[arg(long, default_value_t = 5)]
+        frames: usize,
+        /// The image direction the box's +x (long side) points closest to: u, -u, v or -v
+        /// (settles the box's 180-degree symmetry by how the camera is mounted).
+        #[arg(long, default_value = "u", allow_hyphen_values = true)]
+        x_hint: String,
+        /// Give up after this long (s).
+        #[arg(long, default_value_t = 30.0)]
+        timeout_s: f64,
+    },
+}
+
+/// `herb-camera calibrate`: the fitted pose as TOML.
+fn calibrate(
+    cfg: &CameraConfig,
+    frames: usize,
+    x_hint: &str,
+    timeout_s: f64,
+) -> Result<String, String> {
+    let hint = match x_hint {
+        "u" => nalgebra::Vector3::x(),
+        "-u" => -nalgebra::Vector3::x(),
+        "v" => nalgebra::Vector3::y(),
+        "-v" => -nalgebra::Vector3::y(),
+        h => return Err(format!("--x-hint {h:?}: expected u, -u, v or -v")),
+    };
+    if !(1..=100).contains(&frames) || !(timeout_s.is_finite() && timeout_s > 0.0) {
+        return Err(format!(
+            "--frames {frames} (1 to 100) or --timeout-s {timeout_s} out of range"
+        ));
+    }
+    let stop = AtomicBool::new(false);
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| format!("tokio runtime: {e}"))?;
+    let (intr, depths) = rt.block_on(async {
+        // Its own node name: a running adapter keeps its registration.
+        let name = format!("{}_calibrate", cfg.ros.node_name);
+        let nh = connect(&cfg.ros.master_uri, &name, "herb-camera", &stop)
+            .await
+            .ok_or("stopped")?;
+        let t = &cfg.topics;
+        let mut images = nh.subscribe::<Image>(&t.image, 4).await.map_err(|e| format!("subscribe {}: {e}", t.image))?;
+        let mut infos = nh.subscribe::<CameraInfo>(&t.camera_info, 4).await.map_err(|e| format!("subscribe {}: {e}", t.camera_info))?;
+        let mut intr = None;
+        let mut depths: Vec<Vec<f64>> = Vec::new();
+        let deadline = tokio::time::Instant::now() + Duration::from_secs_f64(timeout_s);
+        while depths.len() < frames {
+            tokio::select! {
+                _ = tokio::time::sleep_until(deadline) => {
+                    return Err(format!("{} of {frames} images in {timeout_s} s (camera info: {})", depths.len(), intr.is_some()));
+                }
+                m = next(&mut infos) => if let Next::Msg(ci) = m {
+                    intr = Some(Intrinsics::from_k(ci.width, ci.height, &ci.K)?);
+                },
+                m = next(&mut images) => if let (Next::Msg(img), Some(i)) = (m, intr) {
+                    let d = Depth::from_image(&img.encoding, img.is_bigendian, img.width, img.height, img.step, &img.data, &i)?;
+                    depths.push((0..(i.width * i.height) as usize).map(|k| d.depth_m(k).unwrap_or(f64::NAN)).collect());
+                },
+            }
+        }
+        Ok::<_, String>((intr.expect("set before any image is taken"), depths))
+    })?;
+    // Per-pixel median of the valid readings, as a 32FC1 image.
+    let mut column = Vec::with_capacity(depths.len());
+    let median: Vec<u8> = (0..depths[0].len())
+        .flat_map(|k| {
+            column.clear();
+            column.extend(depths.iter().map(|d| d[k]).filter(|v| v.is_finite()));
+            column.sort_unstable_by(f64::total_cmp);
+            let m = column.get(column.len() / 2).copied().unwrap_or(f64::NAN);
+            (m as f32).to_le_bytes()
+        })
+        .collect();
+    let depth = Depth::from_image(
+        "32FC1",
+        0,
+        intr.width,
+        intr.height,
+        4 * intr.width,
+        &median,
+        &intr,
+    )?;
+    let pose =
+        herb_camera::calibrate::fit_pose(&depth, &intr, cfg.depth.min_m, cfg.depth.max_m, hint)?;
+    let (t, q) = (pose.translation.vector, pose.rotation.coords);
+    Ok(format!(
+        "# herb-camera calibrate: {frames} images of the empty box\n[pose]\ntranslation = [{:.5}, {:.5}, {:.5}]\nrotation = [{:.6}, {:.6}, {:.6}, {:.6}]\n",
+        t.x, t.y, t.z, q.x, q.y, q.z, q.w
+    ))
 }
 
 /// The prefix from herbd's file; its other tables are herbd's.
@@ -304,7 +405,35 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let mut cli = Cli::parse();
+    if let Some(Sub::Calibrate {
+        frames,
+        x_hint,
+        timeout_s,
+    }) = cli.command.take()
+    {
+        let cfg = match &cli.camera {
+            Some(p) => CameraConfig::load(p),
+            None => Ok(CameraConfig::default()),
+        }
+        .map(|mut c| {
+            if let Some(u) = &cli.master_uri {
+                c.ros.master_uri = u.clone();
+            }
+            c
+        })
+        .and_then(|c| c.validate().map(|()| c));
+        return match cfg.and_then(|c| calibrate(&c, frames, &x_hint, timeout_s)) {
+            Ok(toml) => {
+                print!("{toml}");
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("herb-camera calibrate: error: {e}");
+                ExitCode::from(2)
+            }
+        };
+    }
     let report = cli.report.clone();
     match run(cli) {
         Ok(v) => {

@@ -114,9 +114,9 @@ impl<'a> Depth<'a> {
         })
     }
 
-    /// Depth of pixel `i` (m); `None` without a reading.
+    /// Depth of pixel `i` (row-major; m); `None` without a reading.
     #[inline]
-    fn at(&self, i: usize) -> Option<f64> {
+    pub fn depth_m(&self, i: usize) -> Option<f64> {
         let d = match self {
             Self::Millimetres(b) => u16::from_le_bytes([b[2 * i], b[2 * i + 1]]) as f64 * 1e-3,
             Self::Metres(b) => {
@@ -201,7 +201,7 @@ impl Projector {
         let (w, h) = (intr.width as usize, intr.height as usize);
         for v in 0..h {
             for u in 0..w {
-                let Some(d) = depth.at(v * w + u) else {
+                let Some(d) = depth.depth_m(v * w + u) else {
                     continue;
                 };
                 if !(p.min_depth..=p.max_depth).contains(&d) {

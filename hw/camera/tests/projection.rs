@@ -4,6 +4,7 @@
 //! within 2 mm (16UC1 millimetres and 32FC1 metres); cells no pixel saw are filled never lower
 //! than the truth; bad images are refused with a reason.
 
+use herb_camera::calibrate::fit_pose;
 use herb_camera::project::{Depth, Intrinsics, Params, Projector};
 use herb_sim::ObsLayout;
 use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, BOX_WALL_THICKNESS};
@@ -164,6 +165,32 @@ fn a_rendered_scene_projects_back_to_its_heightmap() {
     check(&f, &spec, &t, "32FC1");
     let m = Depth::from_image("16UC1", 0, W, H, 2 * W, &mm, &i).unwrap();
     check(&m, &spec, &t, "16UC1");
+}
+
+/// `herb-camera calibrate`'s fit: the empty box rendered from the test pose gives that pose
+/// back within 2 mm and 0.3 degrees.
+#[test]
+fn the_camera_pose_is_fitted_from_the_empty_box() {
+    let spec = GridSpec::for_box(ObsLayout::CELL_M).unwrap();
+    let d = render(&spec, &vec![0.0; spec.len()]);
+    let mm: Vec<u8> = d
+        .iter()
+        .flat_map(|&x| ((x * 1000.0).round() as u16).to_le_bytes())
+        .collect();
+    let i = intrinsics();
+    let depth = Depth::from_image("16UC1", 0, W, H, 2 * W, &mm, &i).unwrap();
+    let fitted = fit_pose(&depth, &i, 0.2, 1.5, Vector3::x()).unwrap();
+    let truth = pose();
+    let dt = (fitted.translation.vector - truth.translation.vector).norm();
+    let da = fitted.rotation.angle_to(&truth.rotation).to_degrees();
+    eprintln!("fitted {fitted:?}: {dt:.4} m, {da:.3} degrees from the truth");
+    assert!(dt < 0.002, "translation off by {dt} m");
+    assert!(da < 0.3, "rotation off by {da} degrees");
+    // Nothing to fit: a clear error.
+    let empty = vec![0u8; (2 * W * H) as usize];
+    let none = Depth::from_image("16UC1", 0, W, H, 2 * W, &empty, &i).unwrap();
+    let e = fit_pose(&none, &i, 0.2, 1.5, Vector3::x()).unwrap_err();
+    assert!(e.contains("too few"), "{e}");
 }
 
 #[test]

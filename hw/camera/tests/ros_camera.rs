@@ -141,3 +141,46 @@ fn depth_images_become_heightmaps_that_match_the_truth() {
     }
     assert!(summary["image_to_heightmap_ms"]["p99"].as_f64().unwrap() > 0.0);
 }
+
+/// `herb-camera calibrate` against the fake camera showing the empty box: the `[pose]` it
+/// prints is the fake's pose within 2 mm and 0.3 degrees, and the adapter reads it.
+#[test]
+fn calibrate_fits_the_camera_pose_from_the_empty_box() {
+    if !ros_available() {
+        return;
+    }
+    let dir = tmp("ros-calibrate");
+    let prefix = format!("cal{}", std::process::id());
+    let cfg = config(&dir, &prefix, "blbf");
+    let spec = GridSpec::for_box(ObsLayout::CELL_M).unwrap();
+    let ros = RosWorld::new(&dir, None);
+    let _master = ros.master("1");
+    let _camera = Camera::start(&ros, &cfg, &spec, &vec![0.0; spec.len()], 0, 0.0);
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_herb-camera"))
+        .args(["--master-uri", &ros.uri(), "calibrate", "--frames", "3"])
+        .envs(ros.env())
+        .output()
+        .expect("herb-camera runs");
+    let text = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let file = dir.join("calibrated.toml");
+    std::fs::write(&file, &text).unwrap();
+    let c = <herb_camera::config::CameraConfig as herb_robot::config_file::ConfigFile>::load(&file)
+        .expect("the printed pose is a valid camera file");
+    let want = herb_testkit::ros::TEST_CAMERA_POSE;
+    let t = c.pose.translation;
+    let dt =
+        ((t[0] - want[0]).powi(2) + (t[1] - want[1]).powi(2) + (t[2] - want[2]).powi(2)).sqrt();
+    let q = c.b_from_c().rotation;
+    let truth = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+        want[6], want[3], want[4], want[5],
+    ));
+    let da = q.angle_to(&truth).to_degrees();
+    eprintln!("{text}{dt:.4} m and {da:.3} degrees from the fake's pose");
+    assert!(dt < 0.002, "{dt} m: {text}");
+    assert!(da < 0.3, "{da} degrees: {text}");
+}
