@@ -74,7 +74,7 @@ fn calibrate(
         "-v" => -nalgebra::Vector3::y(),
         h => return Err(format!("--x-hint {h:?}: expected u, -u, v or -v")),
     };
-    if !(1..=100).contains(&frames) || !(timeout_s.is_finite() && timeout_s > 0.0) {
+    if !((1..=100).contains(&frames) && timeout_s.is_finite() && timeout_s > 0.0) {
         return Err(format!(
             "--frames {frames} (1 to 100) or --timeout-s {timeout_s} out of range"
         ));
