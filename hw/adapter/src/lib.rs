@@ -12,6 +12,32 @@ use herb_ipc::{
     JointCommand, JointState, Services, zeroed_in_place,
 };
 
+/// The end of an adapter process: its final summary (JSON) on stdout and, if asked, in the
+/// `report` file; or its error on stderr. Exit code 0, or 2 on an error or an unwritable report.
+pub fn finish(
+    name: &str,
+    result: Result<serde_json::Value, String>,
+    report: Option<&std::path::Path>,
+) -> std::process::ExitCode {
+    use std::process::ExitCode;
+    match result {
+        Ok(v) => {
+            println!("{v}");
+            if let Some(p) = report
+                && let Err(e) = std::fs::write(p, format!("{v}\n"))
+            {
+                eprintln!("{name}: cannot write {}: {e}", p.display());
+                return ExitCode::from(2);
+            }
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("{name}: error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
 /// What came in on one command service.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Counters {

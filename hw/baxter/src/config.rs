@@ -2,7 +2,7 @@
 //! command is checked against, so the adapter and herbd agree) and its own file (the ROS
 //! master, rates, modes, topic names, gripper settings). Unknown keys are errors, as in herbd.
 
-use herb_robot::config_file::ConfigFile;
+use herb_robot::config_file::{ConfigFile, in_range};
 use herb_robot::motion::JointLimits;
 use serde::Deserialize;
 
@@ -188,36 +188,11 @@ impl Default for Topics {
     }
 }
 
-fn in_range(name: &str, v: f64, lo: f64, hi: f64) -> Result<(), String> {
-    if v.is_finite() && (lo..=hi).contains(&v) {
-        Ok(())
-    } else {
-        Err(format!("{name} = {v} is outside {lo}..={hi}"))
-    }
-}
-
 impl ConfigFile for BaxterConfig {
     fn validate(&self) -> Result<(), String> {
         let r = &self.ros;
-        let uri = r.master_uri.strip_prefix("http://").unwrap_or("");
-        if uri.is_empty() || !uri.contains(':') {
-            return Err(format!(
-                "ros.master_uri = {:?}: expected http://host:port",
-                r.master_uri
-            ));
-        }
-        if r.node_name.trim_start_matches('/').is_empty()
-            || !r
-                .node_name
-                .trim_start_matches('/')
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '/')
-        {
-            return Err(format!(
-                "ros.node_name = {:?}: letters, digits, '_' and '/' only",
-                r.node_name
-            ));
-        }
+        herb_ros1::check_master_uri("ros.master_uri", &r.master_uri)?;
+        herb_ros1::check_name("ros.node_name", &r.node_name)?;
         in_range("ros.master_check_s", r.master_check_s, 0.01, 10.0)?;
         let a = &self.arm;
         for (i, j) in a.joints.iter().enumerate() {
@@ -242,20 +217,16 @@ impl ConfigFile for BaxterConfig {
         in_range("gripper.resend_s", g.resend_s, 0.01, 10.0)?;
         let t = &self.topics;
         for (name, topic) in [
-            ("joint_states", &t.joint_states),
-            ("joint_command", &t.joint_command),
-            ("command_timeout", &t.command_timeout),
-            ("speed_ratio", &t.speed_ratio),
-            ("robot_state", &t.robot_state),
-            ("enable", &t.enable),
-            ("gripper_command", &t.gripper_command),
-            ("gripper_state", &t.gripper_state),
+            ("topics.joint_states", &t.joint_states),
+            ("topics.joint_command", &t.joint_command),
+            ("topics.command_timeout", &t.command_timeout),
+            ("topics.speed_ratio", &t.speed_ratio),
+            ("topics.robot_state", &t.robot_state),
+            ("topics.enable", &t.enable),
+            ("topics.gripper_command", &t.gripper_command),
+            ("topics.gripper_state", &t.gripper_state),
         ] {
-            if !topic.starts_with('/') || topic.len() < 2 || topic.contains(char::is_whitespace) {
-                return Err(format!(
-                    "topics.{name} = {topic:?}: expected an absolute ROS name"
-                ));
-            }
+            herb_ros1::check_name(name, topic)?;
         }
         Ok(())
     }

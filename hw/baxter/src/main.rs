@@ -31,7 +31,8 @@ struct Cli {
     /// ROS master URI (overrides the adapter's file).
     #[arg(long)]
     master_uri: Option<String>,
-    /// Ask the robot to enable (`/robot/set_super_enable`) until it reports enabled.
+    /// Ask the robot to enable (`/robot/set_super_enable`) at start, until it first reports
+    /// enabled; a later disable is never undone by the adapter.
     #[arg(long)]
     enable: bool,
     /// Rate of the iceoryx2 side (Hz): how often herbd's commands are taken and the robot's
@@ -44,18 +45,12 @@ struct Cli {
 }
 
 fn run(cli: Cli) -> Result<serde_json::Value, String> {
-    let mut herbd = match &cli.config {
-        Some(p) => HerbdView::load(p)?,
-        None => HerbdView::default(),
-    };
+    let mut herbd = HerbdView::load_or_default(cli.config.as_deref())?;
     if let Some(p) = &cli.prefix {
         herbd.ipc_prefix = p.clone();
     }
     herbd.validate()?;
-    let mut cfg = match &cli.baxter {
-        Some(p) => BaxterConfig::load(p)?,
-        None => BaxterConfig::default(),
-    };
+    let mut cfg = BaxterConfig::load_or_default(cli.baxter.as_deref())?;
     if let Some(u) = &cli.master_uri {
         cfg.ros.master_uri = u.clone();
     }
@@ -192,20 +187,5 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let report = cli.report.clone();
-    match run(cli) {
-        Ok(v) => {
-            println!("{v}");
-            if let Some(p) = report
-                && let Err(e) = std::fs::write(&p, format!("{v}\n"))
-            {
-                eprintln!("herb-baxter: cannot write {}: {e}", p.display());
-                return ExitCode::from(2);
-            }
-            ExitCode::SUCCESS
-        }
-        Err(e) => {
-            eprintln!("herb-baxter: error: {e}");
-            ExitCode::from(2)
-        }
-    }
+    herb_adapter::finish("herb-baxter", run(cli), report.as_deref())
 }

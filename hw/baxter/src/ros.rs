@@ -17,7 +17,7 @@ use std::time::Duration;
 
 /// An assembly state older than this blocks motion: the robot stopped reporting.
 pub const ROBOT_STATE_MAX_AGE_NS: u64 = 1_000_000_000;
-/// How often `--enable` asks the robot to enable until it reports enabled.
+/// How often `--enable` asks the robot to enable until it first reports enabled.
 const ENABLE_PERIOD_NS: u64 = 500_000_000;
 /// Messages a subscription holds for this side: 320 ms of the robot's 100 Hz states (older
 /// ones are skipped and counted as lagged).
@@ -178,7 +178,7 @@ async fn session(
     } else {
         None
     };
-    let enable_pub = if enable {
+    let mut enable_pub = if enable {
         Some(
             nh.advertise::<Bool>(&t.enable, 1, false)
                 .await
@@ -310,8 +310,12 @@ async fn session(
                     s.blocker = blocker;
                     (s.command, s.grip_request)
                 };
+                // Enabling is asked for at start only: once the robot reports enabled, a later
+                // disable (an operator, the e-stop) is never undone from here.
+                if assembly.as_ref().is_some_and(|(a, _)| a.enabled) {
+                    enable_pub = None;
+                }
                 if let Some(p) = &enable_pub
-                    && assembly.as_ref().is_none_or(|(a, _)| !a.enabled)
                     && now.saturating_sub(last_enable) >= ENABLE_PERIOD_NS
                 {
                     last_enable = now;

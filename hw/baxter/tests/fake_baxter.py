@@ -4,7 +4,8 @@
 A test fixture, not a robot model: the left arm follows position commands at most at the given
 joint speeds (a command older than the latched joint_command_timeout is not followed: the arm
 holds), joint states of the whole robot are published at 100 Hz with the joint names in a new
-random order each time, /robot/state reports enabled unless SIGUSR1 toggled it, and the
+random order each time, /robot/state reports enabled unless SIGUSR1 toggled it (or --start-disabled and no enable request
+came on /robot/set_super_enable yet), and the
 electric gripper calibrates and moves on command, echoing the command's sender and sequence.
 Closing grips (an object is always there), opening releases.
 
@@ -28,7 +29,7 @@ import time
 import rospy
 from baxter_core_msgs.msg import AssemblyState, EndEffectorCommand, EndEffectorState, JointCommand
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64
+from std_msgs.msg import Bool, Float64
 
 LEFT = ["left_s0", "left_s1", "left_e0", "left_e1", "left_w0", "left_w1", "left_w2"]
 OTHERS = ["head_pan", "right_s0", "right_s1", "right_e0", "right_e1", "right_w0", "right_w1",
@@ -51,6 +52,8 @@ def main():
     ap.add_argument("--upper", required=True)
     ap.add_argument("--vmax", required=True)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--start-disabled", action="store_true",
+                    help="start disabled: enabled by /robot/set_super_enable (or SIGUSR1)")
     ap.add_argument("--corrupt-every", type=int, default=0,
                     help="make every Nth joint state bad, in turn: a NaN angle, a misspelt "
                          "joint name, a short velocity array (0: never)")
@@ -60,7 +63,8 @@ def main():
     rng = random.Random(a.seed)
     lock = threading.Lock()
     st = {
-        "enabled": True, "target": list(q), "target_at": 0.0, "timeout": 0.2,
+        "enabled": not a.start_disabled, "enable_requests": 0,
+        "enable_requests_after_toggle": 0, "target": list(q), "target_at": 0.0, "timeout": 0.2,
         "commands": 0, "out_of_limits": 0, "bad_names": 0, "modes": [],
         "timeouts_latched": [], "speed_ratios": [],
         "grip": {"calibrated": 0, "position": 100.0, "target": 100.0, "gripping": 0,
@@ -108,6 +112,14 @@ def main():
                     st["grip_events"].append("close" if target < 50 else "open")
                 g["target"] = target
 
+    def on_enable(m):
+        with lock:
+            st["enable_requests"] += 1
+            if st["enable_toggles"]:
+                st["enable_requests_after_toggle"] += 1
+            if m.data:
+                st["enabled"] = True
+
     def toggle(*_):
         with lock:
             st["enabled"] = not st["enabled"]
@@ -125,6 +137,7 @@ def main():
     rospy.Subscriber("/robot/limb/left/joint_command_timeout", Float64, on_timeout)
     rospy.Subscriber("/robot/limb/left/set_speed_ratio", Float64, on_ratio)
     rospy.Subscriber("/robot/end_effector/left_gripper/command", EndEffectorCommand, on_gripper)
+    rospy.Subscriber("/robot/set_super_enable", Bool, on_enable)
     dt = 0.01
     seq = 0
     others = {n: 0.0 for n in OTHERS}
@@ -184,7 +197,8 @@ def main():
     with lock:
         report = {k: st[k] for k in ("commands", "out_of_limits", "bad_names", "modes",
                                      "timeouts_latched", "speed_ratios", "grip_events",
-                                     "calibrations", "enable_toggles", "corrupted", "published")}
+                                     "calibrations", "enable_toggles", "corrupted", "published",
+                                     "enable_requests", "enable_requests_after_toggle")}
     tmp = a.report + ".tmp"
     with open(tmp, "w") as f:
         json.dump(report, f)

@@ -19,8 +19,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-/// The fake Baxter in `ros`: a joint state in `corrupt_every` corrupted (0: none).
-fn fake_baxter(ros: &RosWorld, report: &Path, corrupt_every: u32) -> Proc {
+/// The fake Baxter in `ros`: a joint state in `corrupt_every` corrupted (0: none); `extra`
+/// arguments.
+fn fake_baxter(ros: &RosWorld, report: &Path, corrupt_every: u32, extra: &[&str]) -> Proc {
     let l = fast_limits();
     let list = |v: &[f64]| {
         v.iter()
@@ -38,19 +39,20 @@ fn fake_baxter(ros: &RosWorld, report: &Path, corrupt_every: u32) -> Proc {
         format!("--vmax={}", list(&l.velocity)),
         format!("--corrupt-every={corrupt_every}"),
     ];
+    let args: Vec<String> = args
+        .into_iter()
+        .chain(extra.iter().map(|a| a.to_string()))
+        .collect();
     ros.python(&script, &args, "fake_baxter", Duration::from_millis(1500))
 }
 
-/// herb-baxter in `ros` on herbd's configuration `cfg`.
-fn adapter(ros: &RosWorld, cfg: &Path, tag: &str) -> Proc {
+/// herb-baxter in `ros` on herbd's configuration `cfg`, with `extra` arguments.
+fn adapter(ros: &RosWorld, cfg: &Path, tag: &str, extra: &[&str]) -> Proc {
+    let uri = ros.uri();
+    let base = ["--config", cfg.to_str().unwrap(), "--master-uri", &uri];
     spawn_env(
         Path::new(env!("CARGO_BIN_EXE_herb-baxter")),
-        &[
-            "--config",
-            cfg.to_str().unwrap(),
-            "--master-uri",
-            &ros.uri(),
-        ],
+        &[&base[..], extra].concat(),
         &ros.env(),
         &ros.dir.join(format!("herb-baxter-{tag}.log")),
     )
@@ -168,8 +170,8 @@ fn packs_through_ros_with_a_fake_baxter() {
     let ros = RosWorld::new(&dir, Some(&generate_python_messages(&dir)));
     let _master = ros.master("1");
     let report = dir.join("fake.json");
-    let fake = fake_baxter(&ros, &report, 25);
-    let adapter = adapter(&ros, &cfg, "1");
+    let fake = fake_baxter(&ros, &report, 25, &[]);
+    let adapter = adapter(&ros, &cfg, "1", &[]);
     let (spec, truth) = empty_box();
     let camera = Camera::start(&ros, &cfg, &spec, &truth, 0, 0.0);
     let mut hd = herbd(&cfg, &dir, &["--boxed", boxed]);
@@ -254,8 +256,9 @@ fn packs_through_ros_with_a_fake_baxter() {
     assert!(stats["cycles"].as_u64().unwrap() > 1000, "{stats}");
 }
 
-/// The robot disabled mid-motion (its assembly state says so): herb-baxter withholds joint
-/// state, herbd faults, brakes and reports; enabled again, the job resumes. Then the master
+/// The robot starts disabled and `--enable` enables it. Disabled mid-motion (its assembly
+/// state says so): herb-baxter withholds joint state and does not enable it again, herbd
+/// faults, brakes and reports; enabled again by hand, the job resumes. Then the master
 /// dies mid-motion: the same, and a new master on the same port lets the job finish.
 #[test]
 fn a_disabled_robot_or_a_lost_master_brakes_and_the_job_resumes() {
@@ -268,8 +271,10 @@ fn a_disabled_robot_or_a_lost_master_brakes_and_the_job_resumes() {
     let ros = RosWorld::new(&dir, Some(&generate_python_messages(&dir)));
     let master = ros.master("1");
     let report = dir.join("fake.json");
-    let fake = fake_baxter(&ros, &report, 0);
-    let adapter = adapter(&ros, &cfg, "1");
+    // The robot starts disabled and herb-baxter enables it (--enable), once: the disable below
+    // must not be undone by the adapter.
+    let fake = fake_baxter(&ros, &report, 0, &["--start-disabled"]);
+    let adapter = adapter(&ros, &cfg, "1", &["--enable"]);
     let (spec, truth) = empty_box();
     let _camera = Camera::start(&ros, &cfg, &spec, &truth, 0, 0.0);
     let _hd = herbd(&cfg, &dir, &[]);
@@ -299,6 +304,14 @@ fn a_disabled_robot_or_a_lost_master_brakes_and_the_job_resumes() {
     let f = fake_report(fake, &report);
     eprintln!("herbctl: {summary}\nherb-baxter: {a}\nfake Baxter: {f}");
     assert_eq!(f["enable_toggles"], 2, "{f}");
+    assert!(
+        f["enable_requests"].as_u64().unwrap() >= 1,
+        "enabled at start: {f}"
+    );
+    assert_eq!(
+        f["enable_requests_after_toggle"], 0,
+        "a disabled robot is not re-enabled by the adapter: {f}"
+    );
     assert_eq!(f["out_of_limits"], 0, "{f}");
     assert_eq!(a["ros"]["master_lost"], 1, "{a}");
     let log = std::fs::read_to_string(dir.join("herb-baxter-1.log")).unwrap();

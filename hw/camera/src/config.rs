@@ -3,7 +3,7 @@
 //! key. The IPC prefix comes from herbd's file (`--config`), as for every adapter.
 
 use crate::project::Params;
-use herb_robot::config_file::ConfigFile;
+use herb_robot::config_file::{ConfigFile, in_range};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use serde::Deserialize;
 
@@ -154,31 +154,15 @@ impl CameraConfig {
     }
 }
 
-fn in_range(name: &str, v: f64, lo: f64, hi: f64) -> Result<(), String> {
-    if v.is_finite() && (lo..=hi).contains(&v) {
-        Ok(())
-    } else {
-        Err(format!("{name} = {v} is outside {lo}..={hi}"))
-    }
-}
-
 impl ConfigFile for CameraConfig {
     fn validate(&self) -> Result<(), String> {
-        let uri = self.ros.master_uri.strip_prefix("http://").unwrap_or("");
-        if uri.is_empty() || !uri.contains(':') {
-            return Err(format!(
-                "ros.master_uri = {:?}: expected http://host:port",
-                self.ros.master_uri
-            ));
-        }
+        herb_ros1::check_master_uri("ros.master_uri", &self.ros.master_uri)?;
         for (name, topic) in [
             ("ros.node_name", &self.ros.node_name),
             ("topics.image", &self.topics.image),
             ("topics.camera_info", &self.topics.camera_info),
         ] {
-            if !topic.starts_with('/') || topic.len() < 2 || topic.contains(char::is_whitespace) {
-                return Err(format!("{name} = {topic:?}: expected an absolute ROS name"));
-            }
+            herb_ros1::check_name(name, topic)?;
         }
         for (i, t) in self.pose.translation.iter().enumerate() {
             in_range(&format!("pose.translation[{i}]"), *t, -5.0, 5.0)?;

@@ -300,18 +300,12 @@ async fn ros_side(
 }
 
 fn run(cli: Cli) -> Result<serde_json::Value, String> {
-    let mut herbd = match &cli.config {
-        Some(p) => HerbdPrefix::load(p)?,
-        None => HerbdPrefix::default(),
-    };
+    let mut herbd = HerbdPrefix::load_or_default(cli.config.as_deref())?;
     if let Some(p) = &cli.prefix {
         herbd.ipc_prefix = p.clone();
     }
     herbd.validate()?;
-    let mut cfg = match &cli.camera {
-        Some(p) => CameraConfig::load(p)?,
-        None => CameraConfig::default(),
-    };
+    let mut cfg = CameraConfig::load_or_default(cli.camera.as_deref())?;
     if let Some(u) = &cli.master_uri {
         cfg.ros.master_uri = u.clone();
     }
@@ -412,17 +406,14 @@ fn main() -> ExitCode {
         timeout_s,
     }) = cli.command.take()
     {
-        let cfg = match &cli.camera {
-            Some(p) => CameraConfig::load(p),
-            None => Ok(CameraConfig::default()),
-        }
-        .map(|mut c| {
-            if let Some(u) = &cli.master_uri {
-                c.ros.master_uri = u.clone();
-            }
-            c
-        })
-        .and_then(|c| c.validate().map(|()| c));
+        let cfg = CameraConfig::load_or_default(cli.camera.as_deref())
+            .map(|mut c| {
+                if let Some(u) = &cli.master_uri {
+                    c.ros.master_uri = u.clone();
+                }
+                c
+            })
+            .and_then(|c| c.validate().map(|()| c));
         return match cfg.and_then(|c| calibrate(&c, frames, &x_hint, timeout_s)) {
             Ok(toml) => {
                 print!("{toml}");
@@ -435,20 +426,5 @@ fn main() -> ExitCode {
         };
     }
     let report = cli.report.clone();
-    match run(cli) {
-        Ok(v) => {
-            println!("{v}");
-            if let Some(p) = report
-                && let Err(e) = std::fs::write(&p, format!("{v}\n"))
-            {
-                eprintln!("herb-camera: cannot write {}: {e}", p.display());
-                return ExitCode::from(2);
-            }
-            ExitCode::SUCCESS
-        }
-        Err(e) => {
-            eprintln!("herb-camera: error: {e}");
-            ExitCode::from(2)
-        }
-    }
+    herb_adapter::finish("herb-camera", run(cli), report.as_deref())
 }

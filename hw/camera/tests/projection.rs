@@ -33,24 +33,6 @@ fn pose() -> Isometry3<f64> {
     )
 }
 
-/// The truth: the box floor with a 6 x 4 cm block 5 cm high and a 5 x 5 cm block 10 cm high.
-fn truth(spec: &GridSpec) -> Vec<f32> {
-    let mut t = vec![0.0f32; spec.len()];
-    for row in 0..spec.ny {
-        for col in 0..spec.nx {
-            let (x, y) = spec.cell_centre(col, row);
-            let i = row * spec.nx + col;
-            if (x + 0.08).abs() < 0.03 && (y - 0.03).abs() < 0.02 {
-                t[i] = 0.05;
-            }
-            if (x - 0.07).abs() < 0.025 && (y + 0.04).abs() < 0.025 {
-                t[i] = 0.10;
-            }
-        }
-    }
-    t
-}
-
 /// Height of the scene's surface under (x, y): the truth in the interior, the rim over the
 /// walls, the table outside.
 fn surface(spec: &GridSpec, t: &[f32], x: f64, y: f64) -> f64 {
@@ -117,31 +99,7 @@ fn check(depth: &Depth<'_>, spec: &GridSpec, t: &[f32], what: &str) {
         filled * 10 < spec.len(),
         "{what}: most cells seen: {stats:?}"
     );
-    let (mut flat, mut worst) = (0, 0.0f32);
-    let r = 3usize;
-    for row in 0..spec.ny {
-        for col in 0..spec.nx {
-            let i = row * spec.nx + col;
-            // Conservative everywhere: never below the truth (beyond the depth quantisation).
-            assert!(
-                hm[i] >= t[i] - 0.002,
-                "{what}: cell ({col}, {row}) {} below the truth {}",
-                hm[i],
-                t[i]
-            );
-            // Seen cells away from the blocks' edges: the truth within 2 mm.
-            let flat_here = row >= r
-                && col >= r
-                && row + r < spec.ny
-                && col + r < spec.nx
-                && (row - r..=row + r)
-                    .all(|rr| (col - r..=col + r).all(|cc| t[rr * spec.nx + cc] == t[i]));
-            if flat_here && p.seen()[i] {
-                flat += 1;
-                worst = worst.max((hm[i] - t[i]).abs());
-            }
-        }
-    }
+    let (flat, worst) = herb_testkit::compare_to_truth(spec, t, &hm, |i| p.seen()[i], 0.002);
     assert!(worst <= 0.002, "{what}: a seen flat cell off by {worst} m");
     assert!(
         flat * 10 > spec.len() * 8,
@@ -153,7 +111,7 @@ fn check(depth: &Depth<'_>, spec: &GridSpec, t: &[f32], what: &str) {
 #[test]
 fn a_rendered_scene_projects_back_to_its_heightmap() {
     let spec = GridSpec::for_box(ObsLayout::CELL_M).unwrap();
-    let t = truth(&spec);
+    let t = herb_testkit::two_blocks(&spec);
     let d = render(&spec, &t);
     let metres: Vec<u8> = d.iter().flat_map(|&x| (x as f32).to_le_bytes()).collect();
     let mm: Vec<u8> = d

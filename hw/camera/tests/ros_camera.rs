@@ -11,24 +11,6 @@ use herb_testkit::ros::{Camera, RosWorld, ros_available};
 use herb_testkit::{config, last_json, lines, tmp};
 use std::time::{Duration, Instant};
 
-/// The truth: a 6 x 4 cm block 5 cm high and a 5 x 5 cm block 10 cm high on the floor.
-fn truth(spec: &GridSpec) -> Vec<f32> {
-    let mut t = vec![0.0f32; spec.len()];
-    for row in 0..spec.ny {
-        for col in 0..spec.nx {
-            let (x, y) = spec.cell_centre(col, row);
-            let i = row * spec.nx + col;
-            if (x + 0.08).abs() < 0.03 && (y - 0.03).abs() < 0.02 {
-                t[i] = 0.05;
-            }
-            if (x - 0.07).abs() < 0.025 && (y + 0.04).abs() < 0.025 {
-                t[i] = 0.10;
-            }
-        }
-    }
-    t
-}
-
 /// Heightmaps as published, matched to the truth within 2 mm on the cells the camera saw away
 /// from the blocks' edges, never below it anywhere; bad images (wrong encoding, a size other
 /// than the camera info's, data short of the rows) and images before any camera info are
@@ -42,7 +24,7 @@ fn depth_images_become_heightmaps_that_match_the_truth() {
     let prefix = format!("cam{}", std::process::id());
     let cfg = config(&dir, &prefix, "blbf");
     let spec = GridSpec::for_box(ObsLayout::CELL_M).unwrap();
-    let t = truth(&spec);
+    let t = herb_testkit::two_blocks(&spec);
     let ros = RosWorld::new(&dir, None);
     let _master = ros.master("1");
     let Camera {
@@ -82,38 +64,8 @@ fn depth_images_become_heightmaps_that_match_the_truth() {
     }
     let seen = std::fs::read(&seen_file).unwrap();
     assert_eq!(seen.len(), spec.len());
-    let (mut flat, mut worst, r) = (0usize, 0.0f32, 3usize);
-    let mut off = Vec::new();
-    for row in 0..spec.ny {
-        for col in 0..spec.nx {
-            let i = row * spec.nx + col;
-            assert!(
-                hm[i] >= t[i] - 0.002,
-                "cell ({col}, {row}) {} below the truth {}",
-                hm[i],
-                t[i]
-            );
-            let flat_here = row >= r
-                && col >= r
-                && row + r < spec.ny
-                && col + r < spec.nx
-                && (row - r..=row + r)
-                    .all(|rr| (col - r..=col + r).all(|cc| t[rr * spec.nx + cc] == t[i]));
-            if flat_here && seen[i] == 1 {
-                flat += 1;
-                if (hm[i] - t[i]).abs() > 0.002 {
-                    off.push((col, row, t[i], hm[i]));
-                }
-                worst = worst.max((hm[i] - t[i]).abs());
-            }
-        }
-    }
-    assert!(
-        worst <= 0.002,
-        "{} of {flat} seen flat cells off by more than 2 mm, up to {worst} m (col, row, truth, seen): {:?}",
-        off.len(),
-        &off[..off.len().min(20)]
-    );
+    let (flat, worst) = herb_testkit::compare_to_truth(&spec, &t, &hm, |i| seen[i] == 1, 0.002);
+    assert!(worst <= 0.002, "a seen flat cell is {worst} m off");
     assert!(flat * 10 > spec.len() * 8, "only {flat} seen flat cells");
 
     let rx = lines(&mut cam);

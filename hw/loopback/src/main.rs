@@ -237,10 +237,7 @@ fn publish_frame(camera: &CameraPort, seq: u64, r: &Released) {
 }
 
 fn run(cli: Cli) -> Result<serde_json::Value, String> {
-    let mut cfg = match &cli.config {
-        Some(p) => LoopbackConfig::load(p)?,
-        None => LoopbackConfig::default(),
-    };
+    let mut cfg = LoopbackConfig::load_or_default(cli.config.as_deref())?;
     if let Some(p) = &cli.prefix {
         cfg.ipc_prefix = p.clone();
     }
@@ -444,20 +441,5 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let report = cli.report.clone();
-    match run(cli) {
-        Ok(v) => {
-            println!("{v}");
-            if let Some(p) = report
-                && let Err(e) = std::fs::write(&p, format!("{v}\n"))
-            {
-                eprintln!("herb-loopback: cannot write {}: {e}", p.display());
-                return ExitCode::from(2);
-            }
-            ExitCode::SUCCESS
-        }
-        Err(e) => {
-            eprintln!("herb-loopback: error: {e}");
-            ExitCode::from(2)
-        }
-    }
+    herb_adapter::finish("herb-loopback", run(cli), report.as_deref())
 }

@@ -19,3 +19,62 @@ pub use roslibrust::RosMessageType;
 
 pub mod node;
 pub mod time;
+
+/// Checks a master URI from a configuration (`key` names it in the error): `http://host:port`.
+pub fn check_master_uri(key: &str, uri: &str) -> Result<(), String> {
+    let rest = uri.strip_prefix("http://").unwrap_or("");
+    match rest.rsplit_once(':') {
+        Some((host, port)) if !host.is_empty() && port.parse::<u16>().is_ok_and(|p| p > 0) => {
+            Ok(())
+        }
+        _ => Err(format!("{key} = {uri:?}: expected http://host:port")),
+    }
+}
+
+/// Checks a global ROS name from a configuration (a topic or a node; `key` names it in the
+/// error): `/` first, then letters, digits, `_` and `/`.
+pub fn check_name(key: &str, name: &str) -> Result<(), String> {
+    let rest = name.strip_prefix('/').unwrap_or("");
+    if !rest.is_empty()
+        && rest.starts_with(|c: char| c.is_ascii_alphabetic())
+        && rest
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '/')
+    {
+        Ok(())
+    } else {
+        Err(format!(
+            "{key} = {name:?}: expected an absolute ROS name (/ then letters, digits, _ and /)"
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn master_uris_and_names_are_checked() {
+        assert!(check_master_uri("k", "http://127.0.0.1:11311").is_ok());
+        assert!(check_master_uri("k", "http://robot.local:11311").is_ok());
+        for bad in [
+            "localhost:11311",
+            "http://:11311",
+            "http://host",
+            "http://host:0",
+            "http://h:x",
+        ] {
+            let e = check_master_uri("ros.master_uri", bad).unwrap_err();
+            assert!(e.contains("ros.master_uri"), "{bad}: {e}");
+        }
+        assert!(check_name("k", "/robot/joint_states").is_ok());
+        for bad in ["robot/state", "/", "/a b", "/9lives", ""] {
+            assert!(
+                check_name("topics.x", bad)
+                    .unwrap_err()
+                    .contains("topics.x"),
+                "{bad}"
+            );
+        }
+    }
+}

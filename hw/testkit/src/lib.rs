@@ -246,6 +246,60 @@ pub fn wait_for_log(log: &Path, what: &str, limit: Duration) {
     }
 }
 
+/// A test scene: the box floor with a 6 x 4 cm block 5 cm high and a 5 x 5 cm block 10 cm high.
+pub fn two_blocks(spec: &herb_sim::GridSpec) -> Vec<f32> {
+    let mut t = vec![0.0f32; spec.len()];
+    for row in 0..spec.ny {
+        for col in 0..spec.nx {
+            let (x, y) = spec.cell_centre(col, row);
+            let i = row * spec.nx + col;
+            if (x + 0.08).abs() < 0.03 && (y - 0.03).abs() < 0.02 {
+                t[i] = 0.05;
+            }
+            if (x - 0.07).abs() < 0.025 && (y + 0.04).abs() < 0.025 {
+                t[i] = 0.10;
+            }
+        }
+    }
+    t
+}
+
+/// A heightmap `hm` against its `truth` (grid `spec`): panics if any cell is lower than the
+/// truth by more than `tol` (a camera must never see a hole that is not there); returns how
+/// many cells that `seen` holds for lie away from the truth's edges (the truth flat within 3
+/// cells) and the largest absolute error among them.
+pub fn compare_to_truth(
+    spec: &herb_sim::GridSpec,
+    truth: &[f32],
+    hm: &[f32],
+    seen: impl Fn(usize) -> bool,
+    tol: f32,
+) -> (usize, f32) {
+    let (mut flat, mut worst, r) = (0usize, 0.0f32, 3usize);
+    for row in 0..spec.ny {
+        for col in 0..spec.nx {
+            let i = row * spec.nx + col;
+            assert!(
+                hm[i] >= truth[i] - tol,
+                "cell ({col}, {row}) {} below the truth {}",
+                hm[i],
+                truth[i]
+            );
+            let flat_here = row >= r
+                && col >= r
+                && row + r < spec.ny
+                && col + r < spec.nx
+                && (row - r..=row + r)
+                    .all(|rr| (col - r..=col + r).all(|cc| truth[rr * spec.nx + cc] == truth[i]));
+            if flat_here && seen(i) {
+                flat += 1;
+                worst = worst.max((hm[i] - truth[i]).abs());
+            }
+        }
+    }
+    (flat, worst)
+}
+
 /// A temporary folder for test `name` of this process.
 pub fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("herb-e2e-{}-{name}", std::process::id()));
