@@ -32,7 +32,11 @@ fn depth_images_become_heightmaps_that_match_the_truth() {
         adapter: mut cam,
         seen: seen_file,
         report,
-    } = Camera::start(&ros, &cfg, &spec, &t, 5, 0.3);
+    } = Camera::start(&ros, &cfg, &spec, &t, 5, 1.5);
+    // Camera info only after 1.5 s of images: herb-camera's subscriptions are connected well
+    // before then, so it sees images without camera info (refused) whatever the load. Then
+    // every fifth image is bad: a size, short data and an encoding case all fall in the 30
+    // frames waited for below.
     let services = Services::new(&prefix).unwrap();
     let bus = Bus::open("camera-test", &services).unwrap();
     let sub = bus
@@ -41,7 +45,7 @@ fn depth_images_become_heightmaps_that_match_the_truth() {
     // Rendering takes the fake a few seconds; then frames come at 10 Hz.
     let (mut frames, t0) = (0, Instant::now());
     let mut hm = Vec::new();
-    while frames < 20 {
+    while frames < 30 {
         if let Some(st) = fake.0.try_wait().unwrap() {
             panic!(
                 "the fake camera exited ({st}): {}",
@@ -80,7 +84,7 @@ fn depth_images_become_heightmaps_that_match_the_truth() {
         "{flat} seen flat cells within {worst:.4} m\nherb-camera: {summary}\nfake camera: {f}"
     );
     let c = &summary["counters"];
-    assert!(c["published"].as_u64().unwrap() >= 20, "{summary}");
+    assert!(c["published"].as_u64().unwrap() >= 30, "{summary}");
     assert!(c["images_rejected"].as_u64().unwrap() >= 3, "{summary}");
     let log = std::fs::read_to_string(dir.join("herb-camera.log")).unwrap();
     for why in [
