@@ -38,6 +38,41 @@ pub fn finish(
     }
 }
 
+/// The result of an adapter whose hardware side (a ROS thread, a world thread) ended with
+/// `side`: the `summary`, or the side's error with the summary printed first (so the figures of
+/// a run that failed are not lost).
+pub fn summary_or_error(
+    summary: serde_json::Value,
+    side: Result<(), String>,
+) -> Result<serde_json::Value, String> {
+    match side {
+        Ok(()) => Ok(summary),
+        Err(e) => {
+            println!("{summary}");
+            Err(e)
+        }
+    }
+}
+
+/// A latency histogram (ns, 1 ns to 100 s, 3 significant digits).
+pub type Latency = hdrhistogram::Histogram<u64>;
+
+/// An empty [`Latency`].
+pub fn latency() -> Latency {
+    Latency::new_with_bounds(1, 100_000_000_000, 3).expect("valid bounds")
+}
+
+/// p50, p99 and max of `h` in milliseconds, with the count.
+pub fn latency_json(h: &Latency) -> serde_json::Value {
+    let ms = |ns: u64| ns as f64 * 1e-6;
+    serde_json::json!({
+        "n": h.len(),
+        "p50": ms(h.value_at_quantile(0.5)),
+        "p99": ms(h.value_at_quantile(0.99)),
+        "max": ms(h.max()),
+    })
+}
+
 /// What came in on one command service.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Counters {

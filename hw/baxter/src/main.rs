@@ -175,13 +175,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         "command_to_ros_ms": command_latency,
         "ros_error": ros_result.as_ref().err(),
     }});
-    match ros_result {
-        Ok(()) => Ok(summary),
-        Err(e) => {
-            println!("{summary}");
-            Err(e)
-        }
-    }
+    herb_adapter::summary_or_error(summary, ros_result)
 }
 
 fn main() -> ExitCode {

@@ -51,24 +51,7 @@ pub struct RosCounters {
     pub master_lost: u64,
 }
 
-/// A latency histogram (ns, 1 ns to 100 s, 3 significant digits).
-pub type Latency = hdrhistogram::Histogram<u64>;
-
-/// An empty [`Latency`].
-pub fn latency() -> Latency {
-    Latency::new_with_bounds(1, 100_000_000_000, 3).expect("valid bounds")
-}
-
-/// p50, p99 and max of `h` in milliseconds, with the count.
-pub fn latency_json(h: &Latency) -> serde_json::Value {
-    let ms = |ns: u64| ns as f64 * 1e-6;
-    serde_json::json!({
-        "n": h.len(),
-        "p50": ms(h.value_at_quantile(0.5)),
-        "p99": ms(h.value_at_quantile(0.99)),
-        "max": ms(h.max()),
-    })
-}
+pub use herb_adapter::{Latency, latency, latency_json};
 
 /// What the two threads share (a short lock on each side, no allocation).
 #[derive(Debug)]

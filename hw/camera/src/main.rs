@@ -345,8 +345,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
     );
     let mut seq = 0u64;
     // Image arrival to heightmap published (projection, median, hand-over, shared-memory write).
-    let mut latency = hdrhistogram::Histogram::<u64>::new_with_bounds(1, 10_000_000_000, 3)
-        .map_err(|e| e.to_string())?;
+    let mut latency = herb_adapter::latency();
     while !stop.load(Ordering::Relaxed) {
         let Ok(f) = rx.recv_timeout(Duration::from_millis(100)) else {
             continue;
@@ -381,21 +380,10 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
     let summary = serde_json::json!({ "camera_final": {
         "counters": c,
         "cells_per_frame": spec.len(),
-        "image_to_heightmap_ms": {
-            "n": latency.len(),
-            "p50": latency.value_at_quantile(0.5) as f64 * 1e-6,
-            "p99": latency.value_at_quantile(0.99) as f64 * 1e-6,
-            "max": latency.max() as f64 * 1e-6,
-        },
+        "image_to_heightmap_ms": herb_adapter::latency_json(&latency),
         "ros_error": ros_result.as_ref().err(),
     }});
-    match ros_result {
-        Ok(()) => Ok(summary),
-        Err(e) => {
-            println!("{summary}");
-            Err(e)
-        }
-    }
+    herb_adapter::summary_or_error(summary, ros_result)
 }
 
 fn main() -> ExitCode {
