@@ -116,6 +116,12 @@ struct RawRecord {
     place_translation: [f32; 3],
 }
 
+/// The participant number of a session folder name (`p12_s3` -> 12), `None` if the name is
+/// not of that form. The BC rows of Table I hold participants out by its parity.
+pub fn participant(session: &str) -> Option<u32> {
+    session.strip_prefix('p')?.split('_').next()?.parse().ok()
+}
+
 /// Session folder names under `<root>/sessions`, in natural order (p2 before p10).
 pub fn list_sessions(root: &Path) -> Result<Vec<String>> {
     let dir = root.join("sessions");
@@ -256,6 +262,14 @@ pub fn load_all(root: &Path, catalog: &Catalog) -> Result<(Vec<Session>, Vec<Sim
 #[cfg(test)]
 mod tests {
     use super::natural_key;
+
+    #[test]
+    fn participant_numbers() {
+        assert_eq!(super::participant("p12_s3"), Some(12));
+        assert_eq!(super::participant("p1_s1"), Some(1));
+        assert_eq!(super::participant("q1_s1"), None);
+        assert_eq!(super::participant("p_s1"), None);
+    }
 
     #[test]
     fn natural_order() {

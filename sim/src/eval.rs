@@ -7,11 +7,13 @@
 //! - **stability**: share of all placements made with S = 1 (tilt <= 10 degrees).
 
 use crate::boxed::{Episode, HumanPlacement};
+use crate::catalog::Catalog;
 use crate::catalog::SharedCatalog;
 use crate::env::{PackingEnv, RewardMode, StepResult};
 use crate::error::{Result, SimError};
-use crate::world::WorldConfig;
-use rapier3d::math::Rotation;
+use crate::heightmap::Heightmap;
+use crate::world::{SuccessVolume, WorldConfig, bounds_of, compactness_of};
+use rapier3d::math::{Pose, Rotation, Vector};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -25,6 +27,9 @@ pub enum Method {
     HumanPose,
     /// The human order with uniform random actions (seeded per episode).
     Random,
+    /// No physics: the humans' recorded poses (first placements) checked against the success
+    /// volume, as the paper scores its human row ([`recorded_episode`]).
+    HumanRecorded,
 }
 
 impl Method {
@@ -34,6 +39,7 @@ impl Method {
             Self::Human => "human",
             Self::HumanPose => "human-pose",
             Self::Random => "random",
+            Self::HumanRecorded => "human-recorded",
         }
     }
 }
@@ -188,7 +194,116 @@ pub fn method_step<'a>(
             let a = env.sample_action();
             env.step(a)
         }
+        (Method::HumanRecorded, _) => Err(SimError::Config(
+            "human-recorded is a check of the recorded poses, not a placement in the world".into(),
+        )),
     }
+}
+
+/// The humans' own packs, scored as the paper scores its human row: each object of `ep` at its
+/// recorded pose (the first placement of each instance, in B) checked against the success
+/// volume widened by `tolerance_m` ([`SuccessVolume`], the world's own check), with no physics.
+/// Objects packed: those before the first object outside (the same rule as the world's
+/// episodes); success: every object inside. Stability: recorded tilts within
+/// `stability_tilt_deg`; C after each object from the recorded poses. The recorded pose is the
+/// object's pose when it was let go: an object later pushed by the human is not seen. An
+/// episode with a missing or non-finite recorded pose is an error naming the object.
+pub fn recorded_episode(
+    catalog: &Catalog,
+    ep: &Episode,
+    tolerance_m: f32,
+    stability_tilt_deg: f32,
+) -> Result<EpisodeResult> {
+    if ep.human.len() != ep.objects.len() {
+        return Err(SimError::Session {
+            session: ep.name.clone(),
+            message: format!(
+                "{} recorded poses for {} objects",
+                ep.human.len(),
+                ep.objects.len()
+            ),
+        });
+    }
+    let volume_ok = SuccessVolume::new(tolerance_m);
+    let mut r = EpisodeResult::new(&ep.name, ep.objects.len());
+    let (mut lo, mut hi) = (Vector::splat(f32::MAX), Vector::splat(f32::MIN));
+    let mut volume = 0.0f32;
+    let mut verts = Vec::new();
+    for (i, (&ty, h)) in ep.objects.iter().zip(&ep.human).enumerate() {
+        let pose = recorded_pose(catalog, ep, i)?;
+        let shape = catalog.shape(ty);
+        verts.clear();
+        verts.extend(shape.vertices.iter().map(|&v| pose.transform_point(v)));
+        let (blo, bhi) = bounds_of(&verts);
+        lo = lo.min(blo);
+        hi = hi.max(bhi);
+        volume += shape.volume;
+        r.placements += 1;
+        r.stable += (h.tilt_rad <= stability_tilt_deg.to_radians()) as usize;
+        r.compactness_per_step.push(compactness_of(volume, lo, hi));
+        if r.failure.is_none()
+            && let Some((bound, by_m)) = volume_ok.violation(blo, bhi)
+        {
+            r.failure = Some(Failure {
+                bound,
+                by_m,
+                earlier_object: false,
+            });
+        }
+        if r.failure.is_none() {
+            r.packed += 1;
+        }
+    }
+    r.success = r.failure.is_none();
+    Ok(r)
+}
+
+/// The heightmap of the humans' own scene just before object `next` of `ep` is placed: objects
+/// `0..next` at their recorded poses, rendered as the world renders its objects, without
+/// physics. What the BC rows of Table I learn from. `hm` is cleared first; a missing or
+/// non-finite recorded pose is an error naming the object.
+pub fn recorded_heightmap(
+    catalog: &Catalog,
+    ep: &Episode,
+    next: usize,
+    hm: &mut Heightmap,
+) -> Result<()> {
+    hm.clear();
+    let mut verts = Vec::new();
+    for i in 0..next {
+        let pose = recorded_pose(catalog, ep, i)?;
+        let shape = catalog.shape(ep.objects[i]);
+        verts.clear();
+        verts.extend(shape.vertices.iter().map(|&v| pose.transform_point(v)));
+        hm.raise_to_hull(&mut verts, &shape.triangles);
+    }
+    Ok(())
+}
+
+/// The recorded pose of object `i` of `ep` in B, checked: an error names the episode and the
+/// object when it is missing or not finite.
+pub fn recorded_pose(catalog: &Catalog, ep: &Episode, i: usize) -> Result<Pose> {
+    let bad = |message: String| SimError::Session {
+        session: ep.name.clone(),
+        message,
+    };
+    let (Some(&ty), Some(h)) = (ep.objects.get(i), ep.human.get(i)) else {
+        return Err(bad(format!(
+            "no recorded pose for object {} ({} recorded poses for {} objects)",
+            i + 1,
+            ep.human.len(),
+            ep.objects.len()
+        )));
+    };
+    let pose = Pose::from_parts(Vector::new(h.x, h.y, h.z), h.rotation);
+    if !(pose.is_finite() && h.tilt_rad.is_finite()) {
+        return Err(bad(format!(
+            "object {} ({}): recorded pose is not finite",
+            i + 1,
+            catalog.spec(ty).id
+        )));
+    }
+    Ok(pose)
 }
 
 /// Runs one episode with `method` in `env`.
@@ -198,6 +313,15 @@ pub fn run_episode(
     method: Method,
     seed: u64,
 ) -> Result<EpisodeResult> {
+    if method == Method::HumanRecorded {
+        let cfg = env.world().config();
+        return recorded_episode(
+            env.world().catalog(),
+            ep,
+            cfg.inside_tolerance_m,
+            cfg.stability_tilt_deg,
+        );
+    }
     env.reset(&ep.objects, seed)?;
     let mut r = EpisodeResult::new(&ep.name, ep.objects.len());
     for i in 0..ep.objects.len() {

@@ -90,6 +90,17 @@ pub fn tilt_of(rotation: Rotation) -> f32 {
     (rotation * Vector::Z).z.clamp(-1.0, 1.0).acos()
 }
 
+/// How far an object released in orientation `release` has tipped once it is in orientation
+/// `settled`: the angle (rad) between B z and the object axis that pointed up at release. For a
+/// release turned about z only this is [`tilt_of`]`(settled)`, computed exactly so.
+pub fn tilt_from(release: Rotation, settled: Rotation) -> f32 {
+    if release.x == 0.0 && release.y == 0.0 {
+        return tilt_of(settled);
+    }
+    let up = release.inverse() * Vector::Z;
+    (settled * up).z.clamp(-1.0, 1.0).acos()
+}
+
 /// Wraps an angle to (-pi, pi].
 pub fn wrap_angle(a: f32) -> f32 {
     let tau = std::f32::consts::TAU;

@@ -162,6 +162,27 @@ impl Heightmap {
         self.data.fill(0.0);
     }
 
+    /// Raises every cell to the top of a convex hull whose vertices are in B (`vertices`,
+    /// converted in place to grid coordinates: pass a scratch copy): how the world renders
+    /// each object.
+    pub fn raise_to_hull(&mut self, vertices: &mut [Vector], triangles: &[[u32; 3]]) {
+        let spec = self.spec;
+        let win = Window {
+            col0: 0,
+            row0: 0,
+            w: spec.nx,
+            h: spec.ny,
+        };
+        raster_hull(
+            &spec,
+            &mut self.data,
+            win,
+            vertices,
+            triangles,
+            DepthTest::Max,
+        );
+    }
+
     /// Value of cell (col, row), or [`OUTSIDE_HEIGHT`] outside the grid.
     #[inline]
     pub fn get(&self, col: isize, row: isize) -> f32 {

@@ -6,8 +6,11 @@
 //!   the box interior `|x| <= BOX_HALF_X`, `|y| <= BOX_HALF_Y`, `z >= 0`, extended upwards to
 //!   `SUCCESS_TOP_Z` (rim + 13 cm), all widened by `inside_tolerance_m` for contact
 //!   penetration. An earlier object knocked out fails the placement too.
-//! - **tilt**: angle between the placed object's up axis (canonical +z) and B z: how far it
-//!   tipped from the intended upright orientation (a turn about z is not tilt).
+//! - **tilt**: angle between B z and the placed object's axis that pointed up when it was
+//!   released: how far it tipped from the intended orientation (a turn about z is not tilt).
+//!   For the upright placements of the policies this is the angle of the canonical +z from
+//!   vertical; for an orientation laid on its side (PackIt SO(3)) or tilted (the humans'
+//!   recorded orientations), the tipping from that orientation.
 //! - **S** (stability): 1 if tilt <= `stability_tilt_deg` (10 degrees), else 0.
 //! - **C** (compactness, after Huang et al. 2023): `C = sum of the hull volumes of the placed
 //!   objects / volume of the minimal box encapsulating them`, where that box is the
@@ -17,9 +20,9 @@
 use crate::catalog::{SharedCatalog, TypeIdx};
 use crate::error::{Result, SimError};
 use crate::frames::{
-    BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, BOX_WALL_THICKNESS, SUCCESS_TOP_Z, tilt_of,
+    BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, BOX_WALL_THICKNESS, SUCCESS_TOP_Z, tilt_from,
 };
-use crate::heightmap::{DepthTest, GridSpec, Heightmap, Window, raster_hull};
+use crate::heightmap::{GridSpec, Heightmap};
 use crate::observation::ObsLayout;
 use crate::zestimate::{ZScratch, estimate_z_rotated};
 use rapier3d::math::{Pose, Rotation, Vector};
@@ -114,7 +117,8 @@ pub struct PlacementOutcome {
     pub first_outside: Option<usize>,
     /// Which bound that object crosses most and by how much (m), e.g. `("floor", 0.004)`.
     pub violation: Option<(&'static str, f32)>,
-    /// Tilt of the placed object from upright after settling (rad).
+    /// Tilt of the placed object after settling from its release orientation (rad; module
+    /// docs).
     pub tilt_rad: f32,
     /// S: tilt within the stability threshold.
     pub stable: bool,
@@ -365,7 +369,7 @@ impl PackingWorld {
     }
 
     /// As [`PackingWorld::place`] with any orientation of the canonical frame (tilt is then
-    /// measured from upright all the same).
+    /// measured from that orientation, module docs).
     pub fn place_rotated(
         &mut self,
         ty: TypeIdx,
@@ -424,7 +428,7 @@ impl PackingWorld {
         let (settle_steps, settled) = self.settle();
         let scan = self.scan(true);
         let rot = *self.phys.bodies[handle].rotation();
-        let tilt = tilt_of(rot);
+        let tilt = tilt_from(pose.rotation, rot);
         Ok(PlacementOutcome {
             inside: scan.first_outside.is_none(),
             first_outside: scan.first_outside,
@@ -479,18 +483,7 @@ impl PackingWorld {
         if render {
             self.heightmap.clear();
         }
-        let tol = self.cfg.inside_tolerance_m;
-        let (lo_ok, hi_ok) = (
-            Vector::new(-BOX_HALF_X - tol, -BOX_HALF_Y - tol, -tol),
-            Vector::new(BOX_HALF_X + tol, BOX_HALF_Y + tol, SUCCESS_TOP_Z + tol),
-        );
-        let spec = *self.heightmap.spec();
-        let win = Window {
-            col0: 0,
-            row0: 0,
-            w: spec.nx,
-            h: spec.ny,
-        };
+        let volume_ok = SuccessVolume::new(self.cfg.inside_tolerance_m);
         let mut first_outside = None;
         let mut violation = None;
         let (mut lo, mut hi) = (Vector::splat(f32::MAX), Vector::splat(f32::MIN));
@@ -501,47 +494,25 @@ impl PackingWorld {
             self.verts.clear();
             self.verts
                 .extend(shape.vertices.iter().map(|&v| pose.transform_point(v)));
-            let (blo, bhi) = self.verts.iter().fold(
-                (Vector::splat(f32::MAX), Vector::splat(f32::MIN)),
-                |(a, b), &v| (a.min(v), b.max(v)),
-            );
-            if first_outside.is_none() && (blo.cmplt(lo_ok).any() || bhi.cmpgt(hi_ok).any()) {
+            let (blo, bhi) = bounds_of(&self.verts);
+            if first_outside.is_none()
+                && let Some(v) = volume_ok.violation(blo, bhi)
+            {
                 first_outside = Some(i);
-                let over = [
-                    ("-x wall", lo_ok.x - blo.x),
-                    ("+x wall", bhi.x - hi_ok.x),
-                    ("-y wall", lo_ok.y - blo.y),
-                    ("+y wall", bhi.y - hi_ok.y),
-                    ("floor", lo_ok.z - blo.z),
-                    ("top", bhi.z - hi_ok.z),
-                ];
-                violation = over.into_iter().max_by(|a, b| a.1.total_cmp(&b.1));
+                violation = Some(v);
             }
             lo = lo.min(blo);
             hi = hi.max(bhi);
             volume += shape.volume;
             if render {
-                raster_hull(
-                    &spec,
-                    self.heightmap.data_mut(),
-                    win,
-                    &mut self.verts,
-                    &shape.triangles,
-                    DepthTest::Max,
-                );
+                self.heightmap
+                    .raise_to_hull(&mut self.verts, &shape.triangles);
             }
         }
-        let ext = (hi - lo).max(Vector::ZERO);
-        let bbox = ext.x * ext.y * ext.z;
-        let compactness = if self.placed.is_empty() || bbox <= 0.0 {
-            0.0
-        } else {
-            (volume / bbox).min(1.0)
-        };
         Scan {
             first_outside,
             violation,
-            compactness,
+            compactness: compactness_of(volume, lo, hi),
         }
     }
 
@@ -574,6 +545,63 @@ impl PackingWorld {
     /// The collider set and body set, for queries in tests and tools (ray casting).
     pub fn physics(&self) -> &PhysicsWorld {
         &self.phys
+    }
+}
+
+/// The success volume (module docs): the box interior extended upwards to `SUCCESS_TOP_Z`,
+/// widened by a tolerance. The one check of "inside" for the world's placements and for the
+/// humans' recorded poses ([`crate::eval`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SuccessVolume {
+    lo: Vector,
+    hi: Vector,
+}
+
+impl SuccessVolume {
+    /// The volume widened by `tolerance_m` on every side.
+    pub fn new(tolerance_m: f32) -> Self {
+        let tol = tolerance_m;
+        Self {
+            lo: Vector::new(-BOX_HALF_X - tol, -BOX_HALF_Y - tol, -tol),
+            hi: Vector::new(BOX_HALF_X + tol, BOX_HALF_Y + tol, SUCCESS_TOP_Z + tol),
+        }
+    }
+
+    /// For an object whose vertices span `lo..hi`: `None` if it is inside, else the bound it
+    /// crosses most and by how much (m), e.g. `("floor", 0.004)`.
+    pub fn violation(&self, lo: Vector, hi: Vector) -> Option<(&'static str, f32)> {
+        if !(lo.cmplt(self.lo).any() || hi.cmpgt(self.hi).any()) {
+            return None;
+        }
+        let over = [
+            ("-x wall", self.lo.x - lo.x),
+            ("+x wall", hi.x - self.hi.x),
+            ("-y wall", self.lo.y - lo.y),
+            ("+y wall", hi.y - self.hi.y),
+            ("floor", self.lo.z - lo.z),
+            ("top", hi.z - self.hi.z),
+        ];
+        over.into_iter().max_by(|a, b| a.1.total_cmp(&b.1))
+    }
+}
+
+/// The axis-aligned bounds of `points` (`(MAX, MIN)` for none).
+pub fn bounds_of(points: &[Vector]) -> (Vector, Vector) {
+    points.iter().fold(
+        (Vector::splat(f32::MAX), Vector::splat(f32::MIN)),
+        |(a, b), &v| (a.min(v), b.max(v)),
+    )
+}
+
+/// C (module docs) of objects of total hull volume `volume` whose vertices span `lo..hi`; 0
+/// when nothing spans a volume.
+pub fn compactness_of(volume: f32, lo: Vector, hi: Vector) -> f32 {
+    let ext = (hi - lo).max(Vector::ZERO);
+    let bbox = ext.x * ext.y * ext.z;
+    if volume <= 0.0 || bbox <= 0.0 || !bbox.is_finite() {
+        0.0
+    } else {
+        (volume / bbox).min(1.0)
     }
 }
 

@@ -245,3 +245,79 @@ fn a_cloned_world_steps_bit_identically_to_the_original() {
     assert_eq!(w.state_bits(), before);
     assert_ne!(twin.state_bits(), before);
 }
+
+/// A FIXTURE episode of recorded human poses (primitive shapes): upright at `(x, y, z)`.
+fn recorded(ids: &[&str], poses: &[(f32, f32, f32)]) -> herb_sim::boxed::Episode {
+    let c = common::primitives();
+    herb_sim::boxed::Episode {
+        name: "fixture".into(),
+        objects: ids.iter().map(|i| c.by_id(i).unwrap()).collect(),
+        human: poses
+            .iter()
+            .map(|&(x, y, z)| herb_sim::boxed::HumanPlacement {
+                x,
+                y,
+                z,
+                theta: 0.0,
+                tilt_rad: 0.0,
+                rotation: rapier3d::math::Rotation::IDENTITY,
+            })
+            .collect(),
+    }
+}
+
+#[test]
+fn recorded_poses_are_checked_against_the_success_volume_without_physics() {
+    use herb_sim::eval::recorded_episode;
+    let c = common::primitives();
+    let tol = herb_sim::world::INSIDE_TOLERANCE_M;
+    // The tuna can (3.4 cm tall, origin at its centre) on the floor, then on a pile.
+    let ok = recorded(&["007", "007"], &[(0.0, 0.0, 0.017), (0.1, 0.0, 0.1)]);
+    let r = recorded_episode(&c, &ok, tol, 10.0).unwrap();
+    assert!(r.success && r.packed == 2 && r.failure.is_none(), "{r:?}");
+    assert_eq!(r.compactness_per_step.len(), 2);
+    // The second object 2 cm through the +x wall, the third fine: packed counts the objects
+    // before the first one outside.
+    let hx = herb_sim::frames::BOX_HALF_X;
+    let bad = recorded(
+        &["007", "007", "007"],
+        &[
+            (0.0, 0.0, 0.017),
+            (hx - 0.043 + 0.02, 0.0, 0.017),
+            (0.0, 0.05, 0.017),
+        ],
+    );
+    let r = recorded_episode(&c, &bad, tol, 10.0).unwrap();
+    assert!(!r.success);
+    assert_eq!(r.packed, 1);
+    let f = r.failure.unwrap();
+    assert_eq!(f.bound, "+x wall");
+    assert!((f.by_m - (0.02 - tol)).abs() < 0.002, "{f:?}");
+    // Above the 13 cm margin over the rim.
+    let high = recorded(
+        &["007"],
+        &[(0.0, 0.0, herb_sim::frames::SUCCESS_TOP_Z + 0.01)],
+    );
+    let r = recorded_episode(&c, &high, tol, 10.0).unwrap();
+    assert_eq!(r.failure.unwrap().bound, "top");
+    assert_eq!(r.packed, 0);
+}
+
+#[test]
+fn a_missing_or_non_finite_recorded_pose_is_an_error_naming_it() {
+    use herb_sim::eval::recorded_episode;
+    let c = common::primitives();
+    let mut ep = recorded(&["007", "005"], &[(0.0, 0.0, 0.017), (f32::NAN, 0.0, 0.05)]);
+    let e = recorded_episode(&c, &ep, 0.01, 10.0)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("fixture") && e.contains("object 2") && e.contains("not finite"),
+        "{e}"
+    );
+    ep.human.pop();
+    let e = recorded_episode(&c, &ep, 0.01, 10.0)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("1 recorded poses for 2 objects"), "{e}");
+}

@@ -5,6 +5,7 @@ mod common;
 use herb_sim::catalog::Primitive;
 use herb_sim::frames::BOX_HALF_X;
 use herb_sim::{SharedCatalog, TypeIdx};
+use rapier3d::math::Rotation;
 
 fn floor_drop_all(c: &SharedCatalog, label: &str) {
     for t in c.types() {
@@ -342,4 +343,19 @@ fn replays_slide_footprints_just_over_a_wall_back_inside() {
     assert_eq!(w.slide_inside(t, far, 0.0, rot, 0.015), (far, 0.0));
     // Inside already: unchanged.
     assert_eq!(w.slide_inside(t, 0.01, -0.02, rot, 0.015), (0.01, -0.02));
+}
+
+#[test]
+fn a_box_released_on_its_side_is_stable_where_it_was_put() {
+    let c = common::primitives();
+    let mut w = common::world(&c);
+    let cracker = c.by_id("003").unwrap();
+    // Laid on its long side, as PackIt SO(3) places it: tilt counts from that orientation.
+    let side = Rotation::from_rotation_x(std::f32::consts::FRAC_PI_2);
+    let o = w.place_rotated(cracker, 0.0, 0.0, side).unwrap();
+    assert!(o.inside);
+    assert!(o.stable, "tilt {} deg", o.tilt_rad.to_degrees());
+    assert!(o.tilt_rad.to_degrees() < 2.0);
+    let up = w.pose_of(&w.placed()[0]).rotation * rapier3d::math::Vector::Z;
+    assert!(up.z.abs() < 0.05, "its canonical z lies flat: {up:?}");
 }

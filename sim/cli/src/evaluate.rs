@@ -2,7 +2,7 @@
 //! by a decision-core policy through herbd's one decision path (`herb_decide::Decider`), timing
 //! every decision.
 
-use herb_decide::{DecideError, Decider, Policy, Result};
+use herb_decide::{DecideError, Decider, PackitSo3, Policy, Result};
 use herb_sim::boxed::Episode;
 use herb_sim::eval::EpisodeResult;
 use herb_sim::{PackingEnv, TypeIdx};
@@ -47,6 +47,36 @@ pub fn run_policy_episode<P: Policy + ?Sized>(
     Ok(r)
 }
 
+/// Runs one episode of PackIt SO(3): `order` placed by `packit` in full orientations, each
+/// decision (alignment, search and z estimate on the world's heightmap) timed. An object that
+/// fits between the walls in no orientation ends the episode as "no feasible placement".
+pub fn run_packit_so3_episode(
+    env: &mut PackingEnv,
+    ep: &Episode,
+    order: &[TypeIdx],
+    packit: &mut PackitSo3,
+    seed: u64,
+) -> Result<EpisodeResult> {
+    env.reset(order, seed)?;
+    let clearance = env.world().config().clearance_m;
+    let mut r = EpisodeResult::new(&ep.name, order.len());
+    for &object in order {
+        let shape = env.world().catalog().shape(object);
+        let t0 = Instant::now();
+        let decided = packit.decide(env.world().heightmap(), shape, clearance);
+        r.decision_ns.push(t0.elapsed().as_nanos() as u64);
+        let Some(pose) = decided else {
+            r.record_no_feasible_placement();
+            break;
+        };
+        let res = env.step_pose(pose)?;
+        if r.record(&res) {
+            break;
+        }
+    }
+    Ok(r)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -80,5 +110,37 @@ mod tests {
         assert!(r.placements >= 1);
         assert_eq!(r.decision_ns.len(), r.placements);
         assert!(r.decision_ns.iter().all(|&n| n > 0));
+    }
+
+    /// PackIt SO(3) lays the objects in the box in their preferred orientations: the cracker
+    /// box (7 x 16 x 21 cm upright) goes on its largest face, and every object of a small
+    /// episode (primitive shapes, a FIXTURE episode) ends inside.
+    #[test]
+    fn packit_so3_lays_objects_flat_and_packs_a_small_episode() {
+        let c = Arc::new(Catalog::builtin(&MeshSource::None("test".into())).unwrap());
+        let ids = ["003", "004", "005", "007", "013"];
+        let objects: Vec<_> = ids.iter().map(|i| c.by_id(i).unwrap()).collect();
+        let ep = Episode {
+            name: "fixture".into(),
+            objects: objects.clone(),
+            human: vec![],
+        };
+        let mut env =
+            PackingEnv::new(c.clone(), WorldConfig::default(), RewardMode::Simple).unwrap();
+        let mut p = PackitSo3::new();
+        let r = run_packit_so3_episode(&mut env, &ep, &objects, &mut p, 0).unwrap();
+        assert!(r.success, "{r:?}");
+        assert_eq!(r.decision_ns.len(), ids.len());
+        let cracker = &env.world().placed()[0];
+        let pose = env.world().pose_of(cracker);
+        let e = c.shape(cracker.ty).extents();
+        let smallest = e.x.min(e.y).min(e.z);
+        let (lo, hi) = c.shape(cracker.ty).rotated_bounds(pose.rotation);
+        assert!(
+            (hi.z - lo.z - smallest).abs() < 0.01,
+            "height {} against its smallest side {smallest}",
+            hi.z - lo.z
+        );
+        assert!(hi.x - lo.x >= hi.y - lo.y, "longest side along x");
     }
 }

@@ -17,8 +17,8 @@ use std::time::Instant;
 mod evaluate;
 mod plot;
 
-use evaluate::run_policy_episode;
-use herb_decide::{Blbf, Decider, Method, Order, Policy, PolicySpec, SequenceModel};
+use evaluate::{run_packit_so3_episode, run_policy_episode};
+use herb_decide::{Blbf, Decider, Method, Order, PackitSo3, Policy, PolicySpec, SequenceModel};
 
 /// The replays `herb-sim pack` shows.
 const REPLAYS: [Method; 3] = [Method::Human, Method::HumanPose, Method::Random];
@@ -96,6 +96,10 @@ struct EvalArgs {
     /// file stem).
     #[arg(long)]
     policy: Vec<PathBuf>,
+    /// The folder of the behaviour-cloning models for bc-mse and bc-mdn
+    /// (`bc-<kind>-heldout-{even,odd}.onnx`, written by `models/bc.py`).
+    #[arg(long, default_value = "models")]
+    bc_models: PathBuf,
     /// The sequence model for Beam-3.
     #[arg(long, default_value = "models/sequence.json")]
     sequence_model: PathBuf,
@@ -349,16 +353,41 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
             ),
             (_, None) => m.name().to_string(),
         };
+        // The tables' label: the humans' rows say what they are (replay or recorded poses).
+        let shown = match policy {
+            Some(_) => name.clone(),
+            None => m.label().to_string(),
+        };
         let (label, seq_name, results) = match (m.replay(), m.order(a.sequence)) {
             (Some(sm), _) => (
-                name.clone(),
+                shown.clone(),
                 "human",
                 eval::run_all(&catalog, &cfg, &episodes, sm, a.seed, a.jobs)?,
             ),
             (None, mode) => {
                 let mode = mode.expect("every method without a replay has an order");
-                let results = match m.lattice_rule(&catalog, a.lookahead_k, lookahead_reward, None)
-                {
+                let rule = m.lattice_rule(&catalog, a.lookahead_k, lookahead_reward, None);
+                let results = match rule {
+                    _ if m.bc_models(&a.bc_models).is_some() => run_bc_method(
+                        &catalog,
+                        &cfg,
+                        &episodes,
+                        m,
+                        &a.bc_models,
+                        mode,
+                        model.as_ref(),
+                        a.seed,
+                        a.jobs,
+                    )?,
+                    _ if m == Method::PackitSo3 => run_packit_so3_method(
+                        &catalog,
+                        &cfg,
+                        &episodes,
+                        mode,
+                        model.as_ref(),
+                        a.seed,
+                        a.jobs,
+                    )?,
                     Some(rule) => run_lattice_method(
                         &catalog,
                         &cfg,
@@ -384,7 +413,7 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
                 // The table names the teacher's k; the CSV keeps the method's name.
                 let shown = match m {
                     Method::Lookahead => format!("lookahead (teacher, k = {})", a.lookahead_k),
-                    _ => name.clone(),
+                    _ => shown,
                 };
                 (format!("{shown} ({})", mode.name()), mode.name(), results)
             }
@@ -406,7 +435,10 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
         csv_text.push_str(&csv_rows(&name, seq_name, &results));
         rows.push(eval::summarize(&label, &results));
         all_results.push((label.clone(), results));
-        if let (Some(ep_name), Some(sm)) = (&a.png_episode, m.replay()) {
+        if let (Some(ep_name), Some(sm)) = (
+            &a.png_episode,
+            m.replay().filter(|_| m != Method::HumanRecorded),
+        ) {
             let ep = episodes
                 .iter()
                 .find(|e| &e.name == ep_name)
@@ -440,6 +472,30 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
             r.method,
             causes.join(", ")
         ));
+    }
+    if !bad.is_empty() {
+        table.push_str(&format!(
+            "- sessions skipped at load (every row): {}: {}\n",
+            bad.len(),
+            bad.iter()
+                .map(|e| e.to_string())
+                .collect::<Vec<_>>()
+                .join("; ")
+        ));
+    }
+    for (label, results) in &all_results {
+        let errors: Vec<&str> = results
+            .iter()
+            .filter_map(|r| r.as_ref().err())
+            .map(String::as_str)
+            .collect();
+        if !errors.is_empty() {
+            table.push_str(&format!(
+                "- {label}: {} episodes skipped: {}\n",
+                errors.len(),
+                errors.join("; ")
+            ));
+        }
     }
     println!("{table}");
     write_file(&a.out, &table)?;
@@ -557,6 +613,72 @@ fn run_policy_method(
                 .order(env.world().catalog(), model, &ep.objects, s)
                 .map_err(|e| e.to_string())?;
             run_policy_episode(env, ep, &order, &mut decider, s).map_err(|e| e.to_string())
+        })
+    };
+    Ok(eval::run_all_with(catalog, cfg, episodes, jobs, make)?)
+}
+
+/// Runs a behaviour-cloning method over `episodes`: each episode is placed by the model trained
+/// without its participant (`Method::bc_models`: even participants by the `heldout-even` model,
+/// odd ones by the other), one pair of policies per worker thread.
+#[allow(clippy::too_many_arguments)]
+fn run_bc_method(
+    catalog: &SharedCatalog,
+    cfg: &WorldConfig,
+    episodes: &[Episode],
+    m: Method,
+    dir: &Path,
+    mode: Order,
+    model: Option<&SequenceModel>,
+    seed: u64,
+    jobs: usize,
+) -> AnyResult<Vec<Result<eval::EpisodeResult, String>>> {
+    let files = m.bc_models(dir).ok_or("not a behaviour-cloning method")?;
+    // Load once up front: a missing or bad model is one clear error, not one per episode.
+    for f in &files {
+        herb_decide::load_policy(&PolicySpec::Onnx(f.clone()), catalog)
+            .map_err(|e| format!("{}: {e} (train with models/bc.py)", m.name()))?;
+    }
+    let make = || -> Result<_, String> {
+        let mut deciders = Vec::new();
+        for f in &files {
+            let p = herb_decide::load_policy(&PolicySpec::Onnx(f.clone()), catalog.as_ref())
+                .map_err(|e| e.to_string())?;
+            deciders.push(Decider::new(p, catalog.clone(), cfg.clearance_m));
+        }
+        Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
+            let s = seed.wrapping_add(i as u64);
+            let p = boxed::participant(&ep.name).ok_or_else(|| {
+                format!("no participant number in the session name {:?}", ep.name)
+            })?;
+            let order = mode
+                .order(env.world().catalog(), model, &ep.objects, s)
+                .map_err(|e| e.to_string())?;
+            let decider = &mut deciders[(p % 2) as usize];
+            run_policy_episode(env, ep, &order, decider, s).map_err(|e| e.to_string())
+        })
+    };
+    Ok(eval::run_all_with(catalog, cfg, episodes, jobs, make)?)
+}
+
+/// Runs PackIt SO(3) over `episodes`, one heuristic per worker thread.
+fn run_packit_so3_method(
+    catalog: &SharedCatalog,
+    cfg: &WorldConfig,
+    episodes: &[Episode],
+    mode: Order,
+    model: Option<&SequenceModel>,
+    seed: u64,
+    jobs: usize,
+) -> AnyResult<Vec<Result<eval::EpisodeResult, String>>> {
+    let make = || -> Result<_, String> {
+        let mut packit = PackitSo3::new();
+        Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
+            let s = seed.wrapping_add(i as u64);
+            let order = mode
+                .order(env.world().catalog(), model, &ep.objects, s)
+                .map_err(|e| e.to_string())?;
+            run_packit_so3_episode(env, ep, &order, &mut packit, s).map_err(|e| e.to_string())
         })
     };
     Ok(eval::run_all_with(catalog, cfg, episodes, jobs, make)?)

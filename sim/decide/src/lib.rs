@@ -23,7 +23,7 @@ pub use error::{DecideError, Result};
 pub use method::Method;
 pub use onnx::OnnxPolicy;
 pub use order::Order;
-pub use policy::{Blbf, DecisionInput, Policy};
+pub use policy::{Blbf, DecisionInput, PackitSo3, Policy};
 pub use sequence::{SequenceModel, beam3};
 
 /// Which placement policy to run: the BLBF heuristic or an ONNX network. Written as `blbf` or

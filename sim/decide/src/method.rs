@@ -22,6 +22,17 @@ pub enum Method {
     HumanPose,
     /// Human order, uniform random actions.
     Random,
+    /// The humans' recorded poses checked against the success volume, without physics.
+    HumanRecorded,
+    /// The PackIt heuristic with its rotation search over the 24 axis-aligned orientations
+    /// ([`crate::PackitSo3`]), largest first (default order).
+    PackitSo3,
+    /// Behaviour cloning with a squared-error loss (`models/bc.py`), human order, each
+    /// participant scored by the model trained without them.
+    BcMse,
+    /// Behaviour cloning with a mixture density network (`models/bc.py`), human order, each
+    /// participant scored by the model trained without them.
+    BcMdn,
     /// The BLBF rule restricted to the placement lattice (largest first by default).
     LatticeBlbf,
     /// The lookahead teacher: the best of k lattice candidates by the return of a lattice-BLBF
@@ -36,12 +47,16 @@ pub enum Method {
 
 impl Method {
     /// Every method, in the order of the tables.
-    pub const ALL: [Method; 9] = [
+    pub const ALL: [Method; 13] = [
         Self::Herb,
         Self::Blbf,
         Self::Human,
         Self::HumanPose,
         Self::Random,
+        Self::HumanRecorded,
+        Self::PackitSo3,
+        Self::BcMse,
+        Self::BcMdn,
         Self::LatticeBlbf,
         Self::Lookahead,
         Self::LatticeReserve,
@@ -56,10 +71,28 @@ impl Method {
             Self::Human => "human",
             Self::HumanPose => "human-pose",
             Self::Random => "random",
+            Self::HumanRecorded => "human-recorded",
+            Self::PackitSo3 => "packit-so3",
+            Self::BcMse => "bc-mse",
+            Self::BcMdn => "bc-mdn",
             Self::LatticeBlbf => "lattice-blbf",
             Self::Lookahead => "lookahead",
             Self::LatticeReserve => "lattice-reserve",
             Self::GeoLookahead => "geo-lookahead",
+        }
+    }
+
+    /// The label of this method's rows in the tables: the name, except for the humans' rows,
+    /// which say whether they are physics replays or the recorded poses.
+    pub fn label(&self) -> &'static str {
+        match self {
+            Self::Human => "human replay (planar)",
+            Self::HumanPose => "human replay (full pose)",
+            Self::HumanRecorded => "human (recorded poses)",
+            Self::PackitSo3 => "packit SO(3)",
+            Self::BcMse => "BC-MSE (participants held out)",
+            Self::BcMdn => "BC-MDN (participants held out)",
+            _ => self.name(),
         }
     }
 
@@ -69,6 +102,7 @@ impl Method {
             Self::Human => Some(Replay::Human),
             Self::HumanPose => Some(Replay::HumanPose),
             Self::Random => Some(Replay::Random),
+            Self::HumanRecorded => Some(Replay::HumanRecorded),
             _ => None,
         }
     }
@@ -81,9 +115,22 @@ impl Method {
         }
         Some(match (chosen, self) {
             (Some(o), _) => o,
-            (None, Self::Blbf | Self::LatticeBlbf) => Order::Largest,
+            (None, Self::Blbf | Self::LatticeBlbf | Self::PackitSo3) => Order::Largest,
+            (None, Self::BcMse | Self::BcMdn) => Order::Human,
             (None, _) => Order::Beam3,
         })
+    }
+
+    /// The two ONNX files of a behaviour-cloning method in `dir`: the model that scores the even
+    /// participants (trained on the odd ones) and the one that scores the odd participants
+    /// (`models/bc.py` writes them); `None` for the other methods.
+    pub fn bc_models(&self, dir: &std::path::Path) -> Option<[std::path::PathBuf; 2]> {
+        let kind = match self {
+            Self::BcMse => "mse",
+            Self::BcMdn => "mdn",
+            _ => return None,
+        };
+        Some(["even", "odd"].map(|p| dir.join(format!("bc-{kind}-heldout-{p}.onnx"))))
     }
 
     /// True for the lattice rules ([`Self::lattice_rule`]).

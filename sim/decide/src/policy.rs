@@ -7,11 +7,11 @@
 //! out-of-range action is a [`DecideError::Rejected`] naming the policy, never passed on.
 
 use crate::error::{DecideError, Result};
-use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y};
+use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y, SUCCESS_TOP_Z};
 use herb_sim::observation::placement_to_action;
-use herb_sim::zestimate::{ZScratch, bottom_footprint, rest_height};
+use herb_sim::zestimate::{ZScratch, bottom_footprint, estimate_z_rotated, rest_height};
 use herb_sim::{Catalog, GridSpec, Heightmap, ObjectShape, ObsLayout, TypeIdx};
-use rapier3d::math::Rotation;
+use rapier3d::math::{Mat3, Pose, Rotation, Vector};
 
 /// What a policy decides from.
 #[derive(Debug, Clone, Copy)]
@@ -123,6 +123,21 @@ impl Blbf {
     /// The best placement `(x, y, theta)` and its top height, or `None` if no position fits
     /// between the walls.
     pub fn best(&mut self, hm: &Heightmap, shape: &ObjectShape) -> Option<(f32, f32, f32, f32)> {
+        const YAWS: [f32; 2] = [0.0, std::f32::consts::FRAC_PI_2];
+        let rots = YAWS.map(Rotation::from_rotation_z);
+        self.search(hm, shape, &rots)
+            .map(|(x, y, i, top)| (x, y, YAWS[i], top))
+    }
+
+    /// The search of [`Blbf`] over any `orientations` of the canonical frame: `(x, y, index of
+    /// the orientation, top)` of the lowest top, then the smallest x, then the smallest y,
+    /// earlier orientations winning ties; `None` if no position fits between the walls.
+    pub fn search(
+        &mut self,
+        hm: &Heightmap,
+        shape: &ObjectShape,
+        orientations: &[Rotation],
+    ) -> Option<(f32, f32, usize, f32)> {
         let cell = Self::search_cell(hm.spec());
         let spec = GridSpec::for_box(cell).ok()?;
         let coarse = match &mut self.coarse {
@@ -130,9 +145,8 @@ impl Blbf {
             slot => slot.insert(Heightmap::new(spec)),
         };
         hm.max_pool_into(coarse);
-        let mut best: Option<(f32, f32, f32, f32)> = None;
-        for theta in [0.0f32, std::f32::consts::FRAC_PI_2] {
-            let rot = Rotation::from_rotation_z(theta);
+        let mut best: Option<(f32, f32, usize, f32)> = None;
+        for (i, &rot) in orientations.iter().enumerate() {
             let (x0, y0) = spec.cell_centre(0, 0);
             bottom_footprint(&spec, shape, x0, y0, rot, &mut self.scratch);
             // Footprint extents around the origin (for the walls).
@@ -159,12 +173,113 @@ impl Blbf {
                         Some((bx, by, _, btop)) => (top, x, y) < (btop, bx, by),
                     };
                     if better {
-                        best = Some((x, y, theta, top));
+                        best = Some((x, y, i, top));
                     }
                 }
             }
         }
         best
+    }
+}
+
+/// The PackIt heuristic with its rotation search (after princeton-vl/PackIt,
+/// `packing/packing_heuristic.py`, `rot_best_pos` then `mov_best`), our "PackIt SO(3)" row.
+///
+/// The object may be laid in any of the 24 orientations that align its canonical bounding box
+/// with the box's axes. They are tried in PackIt's order of preference ([`Self::orientations`]):
+/// smallest side up, longest side along the box's long side (x), then the other assignments of
+/// sides to axes, each in its four half-turns. The first orientation with a position inside
+/// the walls whose top stays under the success volume's top wins, placed where [`Blbf`]'s
+/// search puts it in that orientation (lowest top, then deep-bottom-left-back); if none stays
+/// under that top, the orientation with the lowest top. Release height from the shared z
+/// estimate at full resolution. The decision, as timed in Table I, includes the alignment
+/// (sides measured, orientations ranked) and the z estimate.
+#[derive(Debug, Default)]
+pub struct PackitSo3 {
+    blbf: Blbf,
+    zs: Option<ZScratch>,
+}
+
+impl PackitSo3 {
+    /// The heuristic.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The 24 axis-aligned orientations of `shape` in PackIt's order of preference: the
+    /// canonical sides sorted shortest to longest (s, m, l) are assigned to the box's axes
+    /// (z, y, x) as (s, m, l), (s, l, m), (m, s, l), (l, s, m), (m, l, s), (l, m, s), ranked as
+    /// PackIt's `cmp_func` ranks them (the shortest side up first, then the middle one along
+    /// y); each assignment in its four half-turns (none, about z, about x, about y).
+    pub fn orientations(shape: &ObjectShape) -> [Rotation; 24] {
+        let e = shape.extents();
+        let mut axes = [0usize, 1, 2];
+        axes.sort_by(|&a, &b| e[a].total_cmp(&e[b]).then(a.cmp(&b)));
+        let [s, m, l] = axes;
+        // (object axis along B z, along B y, along B x)
+        let classes = [
+            (s, m, l),
+            (s, l, m),
+            (m, s, l),
+            (l, s, m),
+            (m, l, s),
+            (l, m, s),
+        ];
+        let half_turns = [
+            Rotation::IDENTITY,
+            Rotation::from_rotation_z(std::f32::consts::PI),
+            Rotation::from_rotation_x(std::f32::consts::PI),
+            Rotation::from_rotation_y(std::f32::consts::PI),
+        ];
+        let mut out = [Rotation::IDENTITY; 24];
+        for (k, &(up, side, long)) in classes.iter().enumerate() {
+            // Columns: where each object axis goes in B.
+            let mut cols = [Vector::ZERO; 3];
+            cols[long] = Vector::X;
+            cols[side] = Vector::Y;
+            cols[up] = Vector::Z;
+            let mut mat = Mat3::from_cols(cols[0], cols[1], cols[2]);
+            if mat.determinant() < 0.0 {
+                cols[side] = -Vector::Y;
+                mat = Mat3::from_cols(cols[0], cols[1], cols[2]);
+            }
+            let base = Rotation::from_mat3(&mat).normalize();
+            for (j, &h) in half_turns.iter().enumerate() {
+                out[4 * k + j] = (h * base).normalize();
+            }
+        }
+        out
+    }
+
+    /// The release pose of `shape` on `hm` (canonical origin at the estimated resting height
+    /// plus `clearance_m`), or `None` when no orientation fits between the walls.
+    pub fn decide(
+        &mut self,
+        hm: &Heightmap,
+        shape: &ObjectShape,
+        clearance_m: f32,
+    ) -> Option<Pose> {
+        let mut fallback: Option<(f32, f32, Rotation, f32)> = None;
+        let mut chosen = None;
+        for rot in Self::orientations(shape) {
+            let Some((x, y, _, top)) = self.blbf.search(hm, shape, &[rot]) else {
+                continue;
+            };
+            if top <= SUCCESS_TOP_Z {
+                chosen = Some((x, y, rot));
+                break;
+            }
+            if fallback.is_none_or(|f| top < f.3) {
+                fallback = Some((x, y, rot, top));
+            }
+        }
+        let (x, y, rot) = chosen.or(fallback.map(|(x, y, r, _)| (x, y, r)))?;
+        let zs = self.zs.get_or_insert_with(|| {
+            let e = shape.extents();
+            ZScratch::with_capacity(shape.vertices.len(), e.length(), hm.spec().cell)
+        });
+        let z = estimate_z_rotated(hm, shape, x, y, rot, zs) + clearance_m;
+        Some(Pose::from_parts(Vector::new(x, y, z), rot))
     }
 }
 

@@ -22,8 +22,9 @@ fn every_method_and_order_parses_back_from_its_name() {
 fn replays_keep_the_human_order_and_the_others_default_as_documented() {
     for m in Method::ALL {
         let expected = match m {
-            Method::Human | Method::HumanPose | Method::Random => None,
-            Method::Blbf | Method::LatticeBlbf => Some(Order::Largest),
+            Method::Human | Method::HumanPose | Method::Random | Method::HumanRecorded => None,
+            Method::Blbf | Method::LatticeBlbf | Method::PackitSo3 => Some(Order::Largest),
+            Method::BcMse | Method::BcMdn => Some(Order::Human),
             _ => Some(Order::Beam3),
         };
         assert_eq!(m.order(None), expected, "{m}");

@@ -1,5 +1,6 @@
 //! Parity of tract with PyTorch on exported actors, of both policy contracts: every shipped
-//! policy (`models/policy-*.onnx`) and the export fixtures `models/fixtures/sac-smoke.onnx` (an
+//! policy (`models/policy-*.onnx`), the behaviour-cloning models of Table I (`models/bc-*.onnx`)
+//! and the export fixtures `models/fixtures/sac-smoke.onnx` (an
 //! actor of the observation contract after one minute of CPU training by
 //! `models/continuous/train.py`) and `models/fixtures/candidates-smoke.onnx` (a candidate
 //! policy after a minute of `models/train.py`): tests of the export paths, not policies. Each
@@ -88,7 +89,7 @@ fn tract_matches_pytorch_on_exported_actors() {
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| {
             let n = p.file_name().unwrap().to_string_lossy();
-            n.starts_with("policy-") && n.ends_with(".onnx")
+            (n.starts_with("policy-") || n.starts_with("bc-")) && n.ends_with(".onnx")
         })
         .collect();
     files.push(models.join("fixtures/sac-smoke.onnx"));

@@ -17,14 +17,15 @@ import numpy as np
 
 from ._native import (BOX_HALF_X, BOX_HALF_Y, CANDIDATE_LEN, CONTEXT_LEN, HEIGHT_SCALE_M, INPUT_NAME,
                       MAX_CANDIDATES, MODEL_INPUT_SHAPE, MODEL_OUTPUT_SHAPE, OBS_CELL_M, OBS_CHANNELS, OBS_LEN,
-                      OBS_SIZE, OUTPUT_NAME, VecEnv, half_turn_candidates, half_turn_context)
+                      OBS_SIZE, OUTPUT_NAME, VecEnv, half_turn_candidates, half_turn_context,
+                      human_demonstrations)
 
 # The contract constants (observation layout, model I/O, box) come from the Rust side, never
 # restated in Python.
 __all__ = ["PackingEnv", "HerbVectorEnv", "VecEnv", "OBS_LEN", "OBS_SIZE", "OBS_CHANNELS", "OBS_CELL_M",
            "HEIGHT_SCALE_M", "MODEL_INPUT_SHAPE", "MODEL_OUTPUT_SHAPE", "BOX_HALF_X", "BOX_HALF_Y", "INPUT_NAME",
            "OUTPUT_NAME", "CONTEXT_LEN", "CANDIDATE_LEN", "MAX_CANDIDATES", "half_turn_candidates",
-           "half_turn_context"]
+           "half_turn_context", "human_demonstrations"]
 
 OBS_SHAPE = VecEnv.observation_shape()
 
