@@ -86,18 +86,24 @@ mod tests {
     use std::path::Path;
     use std::sync::Arc;
 
+    /// A FIXTURE episode of five objects with primitive shapes.
+    fn fixture_episode() -> (herb_sim::SharedCatalog, Episode) {
+        let c = Arc::new(Catalog::builtin(&MeshSource::None("test".into())).unwrap());
+        let objects = ["003", "004", "005", "007", "013"].map(|i| c.by_id(i).unwrap());
+        let ep = Episode {
+            name: "fixture".into(),
+            objects: objects.to_vec(),
+            human: vec![],
+        };
+        (c, ep)
+    }
+
     /// The Table I path with an ONNX policy: a FIXTURE network packs an episode in the world,
     /// and every decision is timed.
     #[test]
     fn a_fixture_network_packs_an_episode_through_the_harness() {
-        let c = Arc::new(Catalog::builtin(&MeshSource::None("test".into())).unwrap());
-        let ids = ["003", "004", "005", "007", "013"];
-        let objects: Vec<_> = ids.iter().map(|i| c.by_id(i).unwrap()).collect();
-        let ep = Episode {
-            name: "fixture".into(),
-            objects: objects.clone(),
-            human: vec![],
-        };
+        let (c, ep) = fixture_episode();
+        let objects = ep.objects.clone();
         let order = Order::Largest.order(&c, None, &objects, 0).unwrap();
         let mut env =
             PackingEnv::new(c.clone(), WorldConfig::default(), RewardMode::Simple).unwrap();
@@ -117,20 +123,14 @@ mod tests {
     /// episode (primitive shapes, a FIXTURE episode) ends inside.
     #[test]
     fn packit_so3_lays_objects_flat_and_packs_a_small_episode() {
-        let c = Arc::new(Catalog::builtin(&MeshSource::None("test".into())).unwrap());
-        let ids = ["003", "004", "005", "007", "013"];
-        let objects: Vec<_> = ids.iter().map(|i| c.by_id(i).unwrap()).collect();
-        let ep = Episode {
-            name: "fixture".into(),
-            objects: objects.clone(),
-            human: vec![],
-        };
+        let (c, ep) = fixture_episode();
+        let objects = ep.objects.clone();
         let mut env =
             PackingEnv::new(c.clone(), WorldConfig::default(), RewardMode::Simple).unwrap();
         let mut p = PackitSo3::new();
         let r = run_packit_so3_episode(&mut env, &ep, &objects, &mut p, 0).unwrap();
         assert!(r.success, "{r:?}");
-        assert_eq!(r.decision_ns.len(), ids.len());
+        assert_eq!(r.decision_ns.len(), objects.len());
         let cracker = &env.world().placed()[0];
         let pose = env.world().pose_of(cracker);
         let e = c.shape(cracker.ty).extents();

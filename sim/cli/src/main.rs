@@ -72,7 +72,7 @@ struct DataArgs {
 #[derive(Subcommand)]
 enum Cmd {
     /// Run methods over all BoxED episodes and write the Table I metrics (Markdown, CSV, plots).
-    Eval(EvalArgs),
+    Eval(Box<EvalArgs>),
     /// Pack one BoxED episode, print each placement, and write a picture of the final pack.
     Pack(PackArgs),
     /// Count the human object-type transitions of all BoxED episodes and write the sequence
@@ -221,7 +221,7 @@ fn run(cli: Cli) -> AnyResult<()> {
         Cmd::Sequence(a) => sequence_cmd(&cli.data, a),
         Cmd::Catalog(a) => catalog_cmd(&cli.data, a),
         Cmd::Pack(a) => pack_cmd(&cli.data, a),
-        Cmd::Eval(a) => eval_cmd(&cli.data, a),
+        Cmd::Eval(a) => eval_cmd(&cli.data, *a),
     }
 }
 
@@ -573,6 +573,22 @@ fn csv_rows(name: &str, seq_name: &str, results: &[Result<eval::EpisodeResult, S
     text
 }
 
+/// Episode `i`'s seed (`seed + i`) and its objects in the order `mode` gives them.
+fn episode_order(
+    env: &PackingEnv,
+    ep: &Episode,
+    i: usize,
+    mode: Order,
+    model: Option<&SequenceModel>,
+    seed: u64,
+) -> Result<(u64, Vec<herb_sim::TypeIdx>), String> {
+    let s = seed.wrapping_add(i as u64);
+    let order = mode
+        .order(env.world().catalog(), model, &ep.objects, s)
+        .map_err(|e| e.to_string())?;
+    Ok((s, order))
+}
+
 /// Runs a decision-core policy over `episodes`, one policy per worker thread.
 #[allow(clippy::too_many_arguments)]
 fn run_policy_method(
@@ -608,10 +624,7 @@ fn run_policy_method(
         };
         let mut decider = Decider::new(policy, env_catalog.clone(), cfg.clearance_m);
         Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
-            let s = seed.wrapping_add(i as u64);
-            let order = mode
-                .order(env.world().catalog(), model, &ep.objects, s)
-                .map_err(|e| e.to_string())?;
+            let (s, order) = episode_order(env, ep, i, mode, model, seed)?;
             run_policy_episode(env, ep, &order, &mut decider, s).map_err(|e| e.to_string())
         })
     };
@@ -674,10 +687,7 @@ fn run_packit_so3_method(
     let make = || -> Result<_, String> {
         let mut packit = PackitSo3::new();
         Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
-            let s = seed.wrapping_add(i as u64);
-            let order = mode
-                .order(env.world().catalog(), model, &ep.objects, s)
-                .map_err(|e| e.to_string())?;
+            let (s, order) = episode_order(env, ep, i, mode, model, seed)?;
             run_packit_so3_episode(env, ep, &order, &mut packit, s).map_err(|e| e.to_string())
         })
     };
@@ -699,10 +709,7 @@ fn run_lattice_method(
     let make = || -> Result<_, String> {
         let mut rule = rule.clone();
         Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
-            let s = seed.wrapping_add(i as u64);
-            let order = mode
-                .order(env.world().catalog(), model, &ep.objects, s)
-                .map_err(|e| e.to_string())?;
+            let (s, order) = episode_order(env, ep, i, mode, model, seed)?;
             run_lattice_episode(env, &ep.name, &order, &mut rule, s).map_err(|e| e.to_string())
         })
     };

@@ -898,7 +898,7 @@ fn human_demonstrations<'py>(
     pool: usize,
 ) -> PyResult<Bound<'py, PyDict>> {
     let side = ObsLayout::SIZE;
-    if pool == 0 || side % pool != 0 {
+    if pool == 0 || !side.is_multiple_of(pool) {
         return Err(value_err(format!("pool {pool}: must divide {side}")));
     }
     let root = paths::boxed_root(boxed.as_deref().map(Path::new))
