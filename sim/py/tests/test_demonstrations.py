@@ -14,7 +14,8 @@ import herb_sim
 
 
 def boxed_root():
-    root = os.environ.get("HERB_BOXED") or str(pathlib.Path(__file__).resolve().parents[3] / "shared" / "boxed")
+    # The checkout is parents[3]; the data sits beside it (../shared/boxed from the workspace root).
+    root = os.environ.get("HERB_BOXED") or str(pathlib.Path(__file__).resolve().parents[4] / "shared" / "boxed")
     if not pathlib.Path(root, "sessions").is_dir():
         if os.environ.get("CI") == "true":
             pytest.fail(f"BoxED data missing at {root} (CI=true: tests that need it must run)")
