@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
-# The test command (README, CI): the Rust tests of the whole workspace, then the Python
-# bindings' tests (pytest), with maturin, numpy, gymnasium and pytest in a virtualenv
-# (.venv, or $HERB_VENV).
+# The test command (README, CI): the systemd units' check, the Rust tests of the whole
+# workspace, then the Python bindings' tests (pytest), with maturin, numpy, gymnasium and
+# pytest in a virtualenv (.venv, or $HERB_VENV).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
+# The systemd units' sandbox (exposure) and the sysusers.d/tmpfiles.d files, offline.
+scripts/check-units.sh
 cargo test --workspace
 VENV=${HERB_VENV:-$ROOT/.venv}
 [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"

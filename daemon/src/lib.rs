@@ -8,6 +8,7 @@ pub mod config;
 pub mod controller;
 pub mod digest;
 pub mod job;
+pub mod notify;
 pub mod plan;
 pub mod planner;
 pub mod record;

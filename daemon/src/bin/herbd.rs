@@ -4,6 +4,7 @@
 use clap::Parser;
 use herb_daemon::config::{Config, ConfigFile};
 use herb_daemon::controller::{Controller, LoopStats, Ports, Shared};
+use herb_daemon::notify::{Notice, Notifier};
 use herb_daemon::{planner, record};
 use herb_ipc::bus::{Bus, daemon_node_name, live_nodes_named};
 use herb_ipc::{Fault, JobState, Services, Status, StatusEvent};
@@ -170,6 +171,7 @@ fn run(cli: Cli) -> Result<(), String> {
     let meshes = paths::mesh_source(None, root.as_deref());
     let catalog = Arc::new(Catalog::builtin(&meshes).map_err(|e| format!("catalog: {e}"))?);
     let shared = Arc::new(Shared::default());
+    let notifier = Arc::new(Notifier::new());
     {
         let s = shared.clone();
         ctrlc::set_handler(move || s.stop.store(true, Ordering::Relaxed))
@@ -221,6 +223,7 @@ fn run(cli: Cli) -> Result<(), String> {
     let done = Arc::new(std::sync::atomic::AtomicBool::new(false));
     let reporter = {
         let (shared, done, services) = (shared.clone(), done.clone(), services.clone());
+        let notifier = notifier.clone();
         let run_for = cli.run_for;
         std::thread::Builder::new()
             .name("herbd-report".into())
@@ -249,7 +252,11 @@ fn run(cli: Cli) -> Result<(), String> {
                     let c = shared.cycles.load(Ordering::Relaxed);
                     if c > last_cycles {
                         last_cycles = c;
-                        let _ = sd_notify::notify(false, &[sd_notify::NotifyState::Watchdog]);
+                        notifier.send(Notice::Watchdog);
+                    }
+                    if shared.stop.load(Ordering::Relaxed) {
+                        // The loop brakes and ends; systemd hears of the stop now.
+                        notifier.send(Notice::Stopping);
                     }
                     if run_for.is_some_and(|t| t0.elapsed().as_secs_f64() >= t) {
                         shared.stop.store(true, Ordering::Relaxed);
@@ -264,7 +271,7 @@ fn run(cli: Cli) -> Result<(), String> {
     for w in herb_robot::rt::apply(&cfg.rt) {
         eprintln!("herbd: warning: {w}");
     }
-    let _ = sd_notify::notify(false, &[sd_notify::NotifyState::Ready]);
+    notifier.send(Notice::Ready);
     let last = controller.run();
     done.store(true, Ordering::Relaxed);
     let mut total = reporter.join().map_err(|_| "reporter thread panicked")?;
@@ -283,13 +290,16 @@ fn run(cli: Cli) -> Result<(), String> {
             Err(_) => eprintln!("herbd: the run-log writer panicked"),
         }
     }
+    notifier.send(Notice::Stopping);
+    for (notice, n) in notifier.failures() {
+        eprintln!("herbd: warning: {n} sd_notify {notice} notifications failed");
+    }
     let report = serde_json::json!({ "herbd_final": summary(&total) });
     println!("{report}");
     if let Some(p) = &cli.stats_json {
         std::fs::write(p, format!("{report}\n"))
             .map_err(|e| format!("cannot write {}: {e}", p.display()))?;
     }
-    let _ = sd_notify::notify(false, &[sd_notify::NotifyState::Stopping]);
     Ok(())
 }
 

@@ -1,0 +1,58 @@
+#!/usr/bin/env bash
+# Lays out HERB on the robot PC (systemd/README.md): binaries and models under /opt/herb, the
+# configuration under /etc/herb (existing files are kept), the units, sysusers.d and tmpfiles.d
+# under /usr/local/lib, then creates the user and /tmp/iceoryx2 and reloads systemd.
+#
+#   cargo build --release --bins && sudo systemd/install.sh
+#   systemd/install.sh --dest /tmp/stage     # stage into a folder (packaging, tests): no
+#                                            # user, tmpfiles or systemctl step
+#
+# Options: --dest DIR (a staging root, default /), --bin DIR (the built binaries, default
+# target/release), --boxed DIR (the BoxED meshes to copy, default: none; primitives without).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+DEST=/
+BIN=target/release
+BOXED=
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --dest) DEST=${2:?--dest needs a folder}; shift 2 ;;
+    --bin) BIN=${2:?--bin needs a folder}; shift 2 ;;
+    --boxed) BOXED=${2:?--boxed needs a folder}; shift 2 ;;
+    -h|--help) sed -n '2,12p' "$0"; exit 0 ;;
+    *) echo "install.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
+  esac
+done
+D=${DEST%/}
+BINS=(herbd herbctl herb-loopback herb-baxter herb-camera)
+for b in "${BINS[@]}"; do
+  [ -x "$BIN/$b" ] || { echo "install.sh: $BIN/$b is missing: build it first (cargo build --release --bins)" >&2; exit 1; }
+done
+install -d "$D/opt/herb/bin" "$D/opt/herb/models" "$D/etc/herb" \
+  "$D/usr/local/lib/systemd/system" "$D/usr/local/lib/sysusers.d" "$D/usr/local/lib/tmpfiles.d"
+for b in "${BINS[@]}"; do install -m 0755 "$BIN/$b" "$D/opt/herb/bin/$b"; done
+install -m 0644 models/sequence.json models/objects.toml "$D/opt/herb/models/"
+for m in models/policy-*.onnx; do install -m 0644 "$m" "$D/opt/herb/models/"; done
+install -m 0644 README.md "$D/opt/herb/README.md"
+for c in herbd.toml baxter.toml camera.toml; do
+  if [ -e "$D/etc/herb/$c" ]; then
+    echo "install.sh: keeping the existing /etc/herb/$c (the shipped one is systemd/$c)"
+  else
+    install -m 0644 "systemd/$c" "$D/etc/herb/$c"
+  fi
+done
+for u in systemd/*.service; do install -m 0644 "$u" "$D/usr/local/lib/systemd/system/"; done
+install -m 0644 systemd/sysusers.d/herb.conf "$D/usr/local/lib/sysusers.d/herb.conf"
+install -m 0644 systemd/tmpfiles.d/herb.conf "$D/usr/local/lib/tmpfiles.d/herb.conf"
+if [ -n "$BOXED" ]; then
+  install -d "$D/opt/herb/boxed"
+  cp -r "$BOXED/meshes" "$D/opt/herb/boxed/"
+fi
+if [ "$D" = "" ]; then
+  systemd-sysusers /usr/local/lib/sysusers.d/herb.conf
+  systemd-tmpfiles --create /usr/local/lib/tmpfiles.d/herb.conf
+  systemctl daemon-reload
+  echo "installed; next: sudo systemctl enable --now herb-loopback herbd   (or herb-baxter herb-camera herbd on a real cell)"
+else
+  echo "staged into $DEST"
+fi
