@@ -11,7 +11,7 @@ use crate::config::Config;
 pub use crate::plan::{MAX_SEGMENTS, MotionPlan, Request, Response, Segment};
 use herb_decide::DecideError;
 use herb_decide::sequence::{SequenceModel, beam3};
-use herb_decide::{Decider, HeightmapView};
+use herb_decide::{Decider, HeightmapView, Policy};
 use herb_ipc::bus::{Bus, Sub};
 use herb_ipc::{Fault, GripperAction, HeightmapFrame, MAX_JOB_OBJECTS, Services};
 use herb_robot::cell::{CellConfig, lift_to, plan_waypoints};
@@ -148,14 +148,21 @@ impl Worker {
 impl PlannerCore {
     /// Loads the sequence model and the policy named by `cfg` for `catalog`.
     pub fn new(cfg: &Config, catalog: SharedCatalog) -> Result<Self, String> {
+        let policy =
+            herb_decide::load_policy(&cfg.models.policy, &catalog).map_err(|e| e.to_string())?;
+        Self::with_policy(cfg, catalog, policy)
+    }
+
+    /// As [`PlannerCore::new`] with `policy` instead of the one `cfg` names (the planner's
+    /// property tests drive it with arbitrary policy outputs).
+    pub fn with_policy(
+        cfg: &Config,
+        catalog: SharedCatalog,
+        policy: Box<dyn Policy>,
+    ) -> Result<Self, String> {
         let sequence =
             SequenceModel::load(&cfg.models.sequence, &catalog).map_err(|e| e.to_string())?;
-        let decider = Decider::load(
-            &cfg.models.policy,
-            catalog.clone(),
-            cfg.models.clearance_m as f32,
-        )
-        .map_err(|e| e.to_string())?;
+        let decider = Decider::new(policy, catalog.clone(), cfg.models.clearance_m as f32);
         let limits = cfg.limits;
         Ok(Self {
             decider,

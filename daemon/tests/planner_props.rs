@@ -1,0 +1,190 @@
+//! The planner driven by arbitrary policy outputs (proptest): a policy that returns any three
+//! numbers (NaN, infinities, out of range, or plausible), decided on an empty box and planned
+//! as herbd plans it (`PlannerCore`: decision, IK, Ruckig). Whatever the output, either the
+//! plan is refused with a fault or every setpoint it holds is inside the configured joint
+//! limits with finite speeds and accelerations; an action outside `[-1, 1]^3` or not finite is
+//! always refused as a decision fault, never placed. The same for a held object's placement
+//! replanned from any pose (`place_only`).
+//!
+//! Budget: `PROPTEST_CASES` cases (a quarter of proptest's default 256 in CI, each case plans
+//! a whole pick and place); `scripts/fuzz.sh` runs more.
+
+use herb_daemon::config::Config;
+use herb_daemon::plan::{MotionPlan, Request, Response};
+use herb_daemon::planner::PlannerCore;
+use herb_decide::{DecisionInput, Policy};
+use herb_ipc::{Fault, HeightmapFrame, MAX_JOB_OBJECTS};
+use herb_robot::kinematics::LEFT_TOP_DOWN_NOMINAL;
+use herb_sim::observation::ObsLayout;
+use herb_sim::paths::MeshSource;
+use herb_sim::{Catalog, GridSpec};
+use proptest::prelude::*;
+use std::path::Path;
+use std::sync::Arc;
+
+/// A policy that answers with a fixed action, whatever it is shown (a test fixture).
+struct Scripted([f32; 3]);
+
+impl Policy for Scripted {
+    fn name(&self) -> &str {
+        "scripted (fixture)"
+    }
+    fn begin_episode(&mut self, _seed: u64) {}
+    fn decide(&mut self, _input: &DecisionInput) -> herb_decide::Result<[f32; 3]> {
+        Ok(self.0)
+    }
+    fn needs_observation(&self) -> bool {
+        false
+    }
+}
+
+fn config() -> Config {
+    let mut cfg = Config::default();
+    cfg.models.sequence = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/sequence.json");
+    cfg
+}
+
+/// An empty box's heightmap, as the camera publishes it.
+fn empty_frame() -> Box<HeightmapFrame> {
+    let spec = GridSpec::for_box(ObsLayout::CELL_M).unwrap();
+    Box::new(HeightmapFrame {
+        header: herb_ipc::Header::at(1, 2),
+        nx: spec.nx as u32,
+        ny: spec.ny as u32,
+        cell_m: ObsLayout::CELL_M,
+        objects: 0,
+        data: [0.0; herb_ipc::HEIGHTMAP_MAX_CELLS],
+    })
+}
+
+/// Any f32: every bit pattern (NaN, infinities, subnormals), or a plausible action value.
+fn any_f32() -> impl Strategy<Value = f32> {
+    prop_oneof![
+        any::<u32>().prop_map(f32::from_bits),
+        -1.0f32..=1.0,
+        Just(f32::NAN),
+        Just(f32::INFINITY),
+        Just(-1.0000001f32),
+    ]
+}
+
+/// Plans object `object` with `core` and checks the outcome (module docs); true if planned.
+fn check_plan(
+    core: &mut PlannerCore,
+    cfg: &Config,
+    object: u16,
+    place_only: Option<[f32; 4]>,
+    frame: &HeightmapFrame,
+) -> Result<bool, TestCaseError> {
+    let buf = Box::new(MotionPlan::with_capacity(cfg.trajectory_samples()));
+    let r = Request::Plan {
+        index: 0,
+        object,
+        after_stamp_ns: 0,
+        from: LEFT_TOP_DOWN_NOMINAL,
+        place_only: place_only.is_some(),
+        pose: place_only.unwrap_or_default(),
+        buf,
+    };
+    match core.handle(r, Some(frame)) {
+        Response::Planned(plan) => {
+            let (lo, hi) = (cfg.limits.lower, cfg.limits.upper);
+            for i in 0..plan.setpoints.len() {
+                let s = plan.setpoints.get(i).unwrap();
+                for j in 0..lo.len() {
+                    prop_assert!(
+                        s.position[j] >= lo[j] - 1e-9 && s.position[j] <= hi[j] + 1e-9,
+                        "sample {i} joint {j} at {} outside [{}, {}]",
+                        s.position[j],
+                        lo[j],
+                        hi[j]
+                    );
+                    prop_assert!(s.velocity[j].is_finite() && s.acceleration[j].is_finite());
+                }
+            }
+            prop_assert!(plan.pose.iter().all(|v| v.is_finite()));
+            Ok(true)
+        }
+        Response::Failed { .. } => Ok(false),
+        _ => Err(TestCaseError::fail("unexpected response to a plan request")),
+    }
+}
+
+fn order(core: &mut PlannerCore, object: u16) {
+    let mut objects = [0u16; MAX_JOB_OBJECTS];
+    objects[0] = object;
+    core.handle(
+        Request::Order {
+            job_id: 1,
+            objects,
+            count: 1,
+        },
+        None,
+    );
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(
+        (ProptestConfig::default().cases / 4).max(1)
+    ))]
+
+    #[test]
+    fn any_policy_output_is_planned_within_the_limits_or_refused(
+        action in [any_f32(), any_f32(), any_f32()],
+        object in 0u16..24,
+    ) {
+        let cfg = config();
+        let catalog = Arc::new(Catalog::builtin(&MeshSource::None("fixture".into())).unwrap());
+        let mut core = PlannerCore::with_policy(&cfg, catalog, Box::new(Scripted(action))).unwrap();
+        order(&mut core, object);
+        let frame = empty_frame();
+        let valid = action.iter().all(|a| a.is_finite() && (-1.0..=1.0).contains(a));
+        let buf = Box::new(MotionPlan::with_capacity(cfg.trajectory_samples()));
+        let r = Request::Plan {
+            index: 0,
+            object,
+            after_stamp_ns: 0,
+            from: LEFT_TOP_DOWN_NOMINAL,
+            place_only: false,
+            pose: [0.0; 4],
+            buf,
+        };
+        match core.handle(r, Some(&frame)) {
+            Response::Failed { fault, .. } if !valid => prop_assert_eq!(fault, Fault::Decision),
+            Response::Planned(_) if !valid => {
+                return Err(TestCaseError::fail(format!("action {action:?} was planned")));
+            }
+            _ => {}
+        }
+        check_plan(&mut core, &cfg, object, None, &frame)?;
+    }
+
+    #[test]
+    fn any_held_placement_is_planned_within_the_limits_or_refused(
+        pose in [any_f32(), any_f32(), any_f32(), any_f32()],
+        object in 0u16..24,
+    ) {
+        let cfg = config();
+        let catalog = Arc::new(Catalog::builtin(&MeshSource::None("fixture".into())).unwrap());
+        let mut core = PlannerCore::with_policy(&cfg, catalog, Box::new(Scripted([0.0; 3]))).unwrap();
+        order(&mut core, object);
+        check_plan(&mut core, &cfg, object, Some(pose), &empty_frame())?;
+    }
+}
+
+/// The properties above are not vacuous: a plausible action is planned, and its plan is
+/// checked sample by sample like any other.
+#[test]
+fn a_plausible_action_is_planned_and_checked() {
+    let cfg = config();
+    let catalog = Arc::new(Catalog::builtin(&MeshSource::None("fixture".into())).unwrap());
+    for object in [0u16, 1, 11] {
+        let mut core =
+            PlannerCore::with_policy(&cfg, catalog.clone(), Box::new(Scripted([0.2, -0.3, 0.5])))
+                .unwrap();
+        order(&mut core, object);
+        let planned = check_plan(&mut core, &cfg, object, None, &empty_frame())
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(planned, "object {object}: a plausible action was refused");
+    }
+}
