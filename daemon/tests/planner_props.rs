@@ -68,14 +68,15 @@ fn any_f32() -> impl Strategy<Value = f32> {
     ]
 }
 
-/// Plans object `object` with `core` and checks the outcome (module docs); true if planned.
+/// Plans object `object` with `core` and checks the outcome (module docs): `None` when planned
+/// (every setpoint checked), the fault when refused.
 fn check_plan(
     core: &mut PlannerCore,
     cfg: &Config,
     object: u16,
     place_only: Option<[f32; 4]>,
     frame: &HeightmapFrame,
-) -> Result<bool, TestCaseError> {
+) -> Result<Option<Fault>, TestCaseError> {
     let buf = Box::new(MotionPlan::with_capacity(cfg.trajectory_samples()));
     let r = Request::Plan {
         index: 0,
@@ -103,9 +104,9 @@ fn check_plan(
                 }
             }
             prop_assert!(plan.pose.iter().all(|v| v.is_finite()));
-            Ok(true)
+            Ok(None)
         }
-        Response::Failed { .. } => Ok(false),
+        Response::Failed { fault, .. } => Ok(Some(fault)),
         _ => Err(TestCaseError::fail("unexpected response to a plan request")),
     }
 }
@@ -137,26 +138,11 @@ proptest! {
         let catalog = Arc::new(Catalog::builtin(&MeshSource::None("fixture".into())).unwrap());
         let mut core = PlannerCore::with_policy(&cfg, catalog, Box::new(Scripted(action))).unwrap();
         order(&mut core, object);
-        let frame = empty_frame();
         let valid = action.iter().all(|a| a.is_finite() && (-1.0..=1.0).contains(a));
-        let buf = Box::new(MotionPlan::with_capacity(cfg.trajectory_samples()));
-        let r = Request::Plan {
-            index: 0,
-            object,
-            after_stamp_ns: 0,
-            from: LEFT_TOP_DOWN_NOMINAL,
-            place_only: false,
-            pose: [0.0; 4],
-            buf,
-        };
-        match core.handle(r, Some(&frame)) {
-            Response::Failed { fault, .. } if !valid => prop_assert_eq!(fault, Fault::Decision),
-            Response::Planned(_) if !valid => {
-                return Err(TestCaseError::fail(format!("action {action:?} was planned")));
-            }
-            _ => {}
+        let outcome = check_plan(&mut core, &cfg, object, None, &empty_frame())?;
+        if !valid {
+            prop_assert_eq!(outcome, Some(Fault::Decision), "action {:?}", action);
         }
-        check_plan(&mut core, &cfg, object, None, &frame)?;
     }
 
     #[test]
@@ -183,8 +169,11 @@ fn a_plausible_action_is_planned_and_checked() {
             PlannerCore::with_policy(&cfg, catalog.clone(), Box::new(Scripted([0.2, -0.3, 0.5])))
                 .unwrap();
         order(&mut core, object);
-        let planned = check_plan(&mut core, &cfg, object, None, &empty_frame())
+        let outcome = check_plan(&mut core, &cfg, object, None, &empty_frame())
             .unwrap_or_else(|e| panic!("{e}"));
-        assert!(planned, "object {object}: a plausible action was refused");
+        assert_eq!(
+            outcome, None,
+            "object {object}: a plausible action was refused"
+        );
     }
 }

@@ -9,7 +9,7 @@
 
 use herb_testkit::{Proc, config, spawn_env, tmp};
 use std::os::unix::net::UnixDatagram;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 /// `herbd` (built when this package is tested alone).
@@ -54,6 +54,19 @@ fn wait_for(sock: &UnixDatagram, what: &str, limit: Duration) -> Vec<String> {
     panic!("no {what} within {limit:?}; received {seen:?}");
 }
 
+/// A herbd under its own prefix, configured in test folder `dir` (named `name`), told to
+/// notify `socket`; its stderr goes to `herbd.log` in `dir`.
+fn start_herbd(dir: &Path, name: &str, socket: &Path) -> Proc {
+    let prefix = format!("herb_{}_{}", name.replace('-', "_"), std::process::id());
+    let cfg = config(dir, &prefix, "blbf");
+    spawn_env(
+        &herbd(),
+        &["--config", cfg.to_str().unwrap()],
+        &[("NOTIFY_SOCKET", socket.to_str().unwrap())],
+        &dir.join("herbd.log"),
+    )
+}
+
 fn count(msgs: &[(Instant, String)], what: &str) -> usize {
     msgs.iter().filter(|(_, m)| m == what).count()
 }
@@ -61,17 +74,10 @@ fn count(msgs: &[(Instant, String)], what: &str) -> usize {
 #[test]
 fn herbd_speaks_the_notify_protocol_and_the_watchdog_follows_the_loop() {
     let dir = tmp("notify");
-    let prefix = format!("herb_notify_{}", std::process::id());
-    let cfg = config(&dir, &prefix, "blbf");
     let sock_path = dir.join("notify.sock");
     let _ = std::fs::remove_file(&sock_path);
     let sock = UnixDatagram::bind(&sock_path).unwrap();
-    let mut d: Proc = spawn_env(
-        &herbd(),
-        &["--config", cfg.to_str().unwrap()],
-        &[("NOTIFY_SOCKET", sock_path.to_str().unwrap())],
-        &dir.join("herbd.log"),
-    );
+    let mut d = start_herbd(&dir, "notify", &sock_path);
     wait_for(&sock, "READY=1", Duration::from_secs(60));
 
     // Running: the reporter pings every 20 ms while the loop's cycle counter advances.
@@ -108,19 +114,12 @@ fn herbd_speaks_the_notify_protocol_and_the_watchdog_follows_the_loop() {
 
 #[test]
 fn a_failing_notify_socket_is_logged_once_and_herbd_runs_on() {
-    let dir = tmp("notify-dead");
-    let prefix = format!("herb_notify_dead_{}", std::process::id());
-    let cfg = config(&dir, &prefix, "blbf");
     // A socket path nobody listens on: every notification fails.
+    let dir = tmp("notify-dead");
     let dead = dir.join("nobody.sock");
     let _ = std::fs::remove_file(&dead);
+    let mut d = start_herbd(&dir, "notify-dead", &dead);
     let log_path = dir.join("herbd.log");
-    let mut d: Proc = spawn_env(
-        &herbd(),
-        &["--config", cfg.to_str().unwrap()],
-        &[("NOTIFY_SOCKET", dead.to_str().unwrap())],
-        &log_path,
-    );
     // Long enough for READY and dozens of watchdog pings to fail.
     let t0 = Instant::now();
     while t0.elapsed() < Duration::from_secs(60) {
