@@ -8,15 +8,12 @@
 
 use herb_sim::boxed::{Episode, HumanPlacement, human_placement, load_all};
 use herb_sim::catalog::Catalog;
-use herb_sim::eval::{mean_std, recorded_episode};
+use herb_sim::eval::{mean_std, recorded_episode, recorded_pose};
 use herb_sim::paths::{boxed_root, mesh_source};
-use herb_sim::world::{SuccessVolume, bounds_of};
-use rapier3d::math::{Pose, Vector};
+use herb_sim::world::{SuccessVolume, WorldConfig, bounds_of};
+use rapier3d::math::Vector;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-
-/// The tolerance of the world's inside check (`WorldConfig::inside_tolerance_m`).
-const TOL_M: f32 = 0.01;
 
 /// One variant's score: success % and mean objects packed.
 fn score(results: &[(bool, usize)]) -> (f64, f64) {
@@ -30,10 +27,10 @@ fn check(
     catalog: &Catalog,
     ep: &Episode,
     inside: &dyn Fn(usize, Vector, Vector) -> bool,
-) -> (bool, usize) {
+) -> herb_sim::Result<(bool, usize)> {
     let mut packed = 0;
-    for (i, (&ty, h)) in ep.objects.iter().zip(&ep.human).enumerate() {
-        let pose = Pose::from_parts(Vector::new(h.x, h.y, h.z), h.rotation);
+    for (i, &ty) in ep.objects.iter().enumerate() {
+        let pose = recorded_pose(catalog, ep, i)?;
         let verts: Vec<Vector> = catalog
             .shape(ty)
             .vertices
@@ -42,11 +39,11 @@ fn check(
             .collect();
         let (lo, hi) = bounds_of(&verts);
         if !inside(i, lo, hi) {
-            return (false, packed);
+            return Ok((false, packed));
         }
         packed += 1;
     }
-    (true, packed)
+    Ok((true, packed))
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -87,65 +84,72 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         })
         .collect();
 
+    // The world's own tolerance and stability threshold, as the Table I row uses them.
+    let world = WorldConfig::default();
+    let tol_m = world.inside_tolerance_m;
     let vol = |tol: f32| SuccessVolume::new(tol);
-    let row = |name: &str, eps: &[Episode], f: &dyn Fn(&Episode, usize, Vector, Vector) -> bool| {
-        let r: Vec<(bool, usize)> = eps
+    let row = |name: &str,
+               eps: &[Episode],
+               f: &dyn Fn(&Episode, usize, Vector, Vector) -> bool|
+     -> herb_sim::Result<()> {
+        let r = eps
             .iter()
             .map(|ep| check(&catalog, ep, &|i, lo, hi| f(ep, i, lo, hi)))
-            .collect();
+            .collect::<herb_sim::Result<Vec<(bool, usize)>>>()?;
         let (s, p) = score(&r);
         println!("| {name} | {s:.2} | {p:.2} |");
+        Ok(())
     };
     println!("| variant | success % | objects packed |");
     println!("| --- | ---: | ---: |");
     println!("| paper | 84.41 | 15.22 |");
-    for tol in [0.0, TOL_M, 0.02, 0.03, 0.05] {
+    for tol in [0.0, tol_m, 0.02, 0.03, 0.05] {
         row(
             &format!("hull bounds, tolerance {:.0} cm", tol * 100.0),
             &first,
             &|_, _, lo, hi| vol(tol).violation(lo, hi).is_none(),
-        );
+        )?;
     }
     row(
         "hull bounds, 1 cm, egg carton always inside",
         &first,
-        &|ep, i, lo, hi| ep.objects[i] == egg || vol(TOL_M).violation(lo, hi).is_none(),
-    );
+        &|ep, i, lo, hi| ep.objects[i] == egg || vol(tol_m).violation(lo, hi).is_none(),
+    )?;
     row(
         "hull bounds, 1 cm, walls only (no top margin)",
         &first,
         &|_, _, lo, hi| {
             let mut hi = hi;
             hi.z = hi.z.min(0.0);
-            vol(TOL_M).violation(lo, hi).is_none()
+            vol(tol_m).violation(lo, hi).is_none()
         },
-    );
+    )?;
     row(
         "hull bounds, 1 cm, top margin only (no walls)",
         &first,
-        &|_, _, lo, hi| match vol(TOL_M).violation(lo, hi) {
+        &|_, _, lo, hi| match vol(tol_m).violation(lo, hi) {
             Some((b, _)) => b != "top",
             None => true,
         },
-    );
+    )?;
     row(
         "centre of the hull bounds inside, 1 cm",
         &first,
         &|_, _, lo, hi| {
             let c = (lo + hi) * 0.5;
-            vol(TOL_M).violation(c, c).is_none()
+            vol(tol_m).violation(c, c).is_none()
         },
-    );
+    )?;
     row(
         "last recorded pose (after re-grasps), hull bounds, 1 cm",
         &last,
-        &|_, _, lo, hi| vol(TOL_M).violation(lo, hi).is_none(),
-    );
+        &|_, _, lo, hi| vol(tol_m).violation(lo, hi).is_none(),
+    )?;
 
     println!("\nfailing objects of the row as scored (first placements, 1 cm):");
     let mut by_type: BTreeMap<String, (usize, Vec<f32>)> = BTreeMap::new();
     for ep in &first {
-        let r = recorded_episode(&catalog, ep, TOL_M, 10.0)?;
+        let r = recorded_episode(&catalog, ep, tol_m, world.stability_tilt_deg)?;
         if let Some(f) = r.failure {
             let spec = catalog.spec(ep.objects[r.packed]);
             let e = by_type
