@@ -66,8 +66,10 @@ fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
 
-fn catalog() -> Catalog {
-    Catalog::builtin(&MeshSource::None("fuzz: primitives".into())).unwrap()
+/// The catalog (primitives), built once for every case.
+fn catalog() -> &'static Catalog {
+    static CATALOG: std::sync::OnceLock<Catalog> = std::sync::OnceLock::new();
+    CATALOG.get_or_init(|| Catalog::builtin(&MeshSource::None("fuzz: primitives".into())).unwrap())
 }
 
 proptest! {
@@ -88,7 +90,7 @@ proptest! {
 
     #[test]
     fn sequence_model(b in mutated(shipped("models/sequence.json"))) {
-        let _ = SequenceModel::from_json(&text(&b), "fuzzed sequence.json", &catalog());
+        let _ = SequenceModel::from_json(&text(&b), "fuzzed sequence.json", catalog());
     }
 }
 
@@ -107,7 +109,7 @@ proptest! {
     ) {
         let path = std::env::temp_dir().join(format!("herb-fuzz-{}-{tag}.onnx", std::process::id()));
         std::fs::write(&path, &b).unwrap();
-        let r = load_policy(&PolicySpec::Onnx(path.clone()), &catalog());
+        let r = load_policy(&PolicySpec::Onnx(path.clone()), catalog());
         let _ = std::fs::remove_file(&path);
         if let Err(e) = r {
             // The error names the file.

@@ -38,6 +38,14 @@ impl Policy for Scripted {
     }
 }
 
+/// The catalog (primitives), built once for every case.
+fn catalog() -> Arc<Catalog> {
+    static CATALOG: std::sync::OnceLock<Arc<Catalog>> = std::sync::OnceLock::new();
+    CATALOG
+        .get_or_init(|| Arc::new(Catalog::builtin(&MeshSource::None("fixture".into())).unwrap()))
+        .clone()
+}
+
 fn config() -> Config {
     let mut cfg = Config::default();
     cfg.models.sequence = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/sequence.json");
@@ -135,7 +143,7 @@ proptest! {
         object in 0u16..24,
     ) {
         let cfg = config();
-        let catalog = Arc::new(Catalog::builtin(&MeshSource::None("fixture".into())).unwrap());
+        let catalog = catalog();
         let mut core = PlannerCore::with_policy(&cfg, catalog, Box::new(Scripted(action))).unwrap();
         order(&mut core, object);
         let valid = action.iter().all(|a| a.is_finite() && (-1.0..=1.0).contains(a));
@@ -151,7 +159,7 @@ proptest! {
         object in 0u16..24,
     ) {
         let cfg = config();
-        let catalog = Arc::new(Catalog::builtin(&MeshSource::None("fixture".into())).unwrap());
+        let catalog = catalog();
         let mut core = PlannerCore::with_policy(&cfg, catalog, Box::new(Scripted([0.0; 3]))).unwrap();
         order(&mut core, object);
         check_plan(&mut core, &cfg, object, Some(pose), &empty_frame())?;
@@ -163,7 +171,7 @@ proptest! {
 #[test]
 fn a_plausible_action_is_planned_and_checked() {
     let cfg = config();
-    let catalog = Arc::new(Catalog::builtin(&MeshSource::None("fixture".into())).unwrap());
+    let catalog = catalog();
     for object in [0u16, 1, 11] {
         let mut core =
             PlannerCore::with_policy(&cfg, catalog.clone(), Box::new(Scripted([0.2, -0.3, 0.5])))
