@@ -114,6 +114,43 @@ pub struct Config {
     pub limits: JointLimits,
     /// Run logs (`herbctl replay`, `herbctl explain`).
     pub record: RecordConfig,
+    /// The job journal (a job survives a daemon crash).
+    pub journal: JournalConfig,
+}
+
+/// What a restarted herbd does with an unfinished job found in its journal.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OnRestart {
+    /// Take it up from the measured robot state.
+    #[default]
+    Resume,
+    /// End it, failed with the fault `Restarted`, and start idle.
+    Abandon,
+}
+
+/// The job journal ([`crate::journal`]).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct JournalConfig {
+    /// Folder of the journal file; absent: `$STATE_DIRECTORY` (systemd's `StateDirectory=`),
+    /// and no journal when that is not set either.
+    pub dir: Option<PathBuf>,
+    /// What to do with an unfinished job at start.
+    pub on_restart: OnRestart,
+}
+
+impl JournalConfig {
+    /// The journal's folder: `dir`, else the first folder of `state_directory` (the value of
+    /// `$STATE_DIRECTORY`, a colon-separated list).
+    pub fn folder(&self, state_directory: Option<&str>) -> Option<PathBuf> {
+        self.dir.clone().or_else(|| {
+            state_directory
+                .and_then(|s| s.split(':').next())
+                .filter(|s| !s.is_empty())
+                .map(PathBuf::from)
+        })
+    }
 }
 
 /// Run logs: off unless `dir` is set (or `herbd --record DIR`).
@@ -149,6 +186,7 @@ impl Default for Config {
             cell: CellConfig::default(),
             limits: JointLimits::baxter_left(),
             record: RecordConfig::default(),
+            journal: JournalConfig::default(),
         }
     }
 }
@@ -297,6 +335,18 @@ mod tests {
         c = Config::default();
         c.ipc_prefix = "/x".into();
         assert!(c.validate().is_err());
+        let c = Config::from_toml("[journal]\non_restart = \"abandon\"\n", "x").unwrap();
+        assert_eq!(c.journal.on_restart, OnRestart::Abandon);
+        assert_eq!(
+            c.journal.folder(Some("/var/lib/herb:/x")),
+            Some("/var/lib/herb".into())
+        );
+        assert_eq!(c.journal.folder(None), None);
+        let e = Config::from_toml("[journal]\non_restart = \"retry\"\n", "x").unwrap_err();
+        assert!(
+            e.contains("on_restart") || e.contains("unknown variant"),
+            "{e}"
+        );
         let e = Config::from_toml("[models]\npolicy = \"\"\n", "x").unwrap_err();
         assert!(e.contains("policy: empty"), "{e}");
         let c = Config::from_toml("[models]\npolicy = \"m/p.onnx\"\n", "x").unwrap();

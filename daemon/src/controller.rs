@@ -13,6 +13,7 @@
 
 use crate::config::Config;
 use crate::job::{Effects, Job, JobParams};
+use crate::journal::JournalRecord;
 use crate::plan::{MotionPlan, Request, Response};
 use crate::planner::PlannerLink;
 use crate::record::{FRAME_META, LoopRec, OutDigest, Recorder, RespRec};
@@ -292,6 +293,10 @@ pub struct Controller {
     /// none is outstanding).
     sent: u64,
     received: u64,
+    /// The job journal's writer ring, if journaling ([`crate::journal`]).
+    journal: Option<rtrb::Producer<JournalRecord>>,
+    /// The last record handed to the writer.
+    journaled: JournalRecord,
 }
 
 /// The reporter's ends of the statistics rings.
@@ -337,6 +342,8 @@ impl Controller {
             recorder: None,
             sent: 0,
             received: 0,
+            journal: None,
+            journaled: JournalRecord::NONE,
         };
         (c, StatsLink { rx: r_rx, tx: r_tx })
     }
@@ -346,6 +353,19 @@ impl Controller {
     pub fn with_recorder(mut self, r: Recorder) -> Self {
         self.recorder = Some(r);
         self
+    }
+
+    /// Hands every change of the job's journal record to `writer` ([`crate::journal::spawn`]).
+    pub fn with_journal(mut self, writer: rtrb::Producer<JournalRecord>) -> Self {
+        self.journal = Some(writer);
+        self
+    }
+
+    /// Takes up an unfinished job from the journal before the loop runs, to resume it or, with
+    /// `resume` false, to end it ([`Job::recover`]).
+    pub fn recover(&mut self, r: &JournalRecord, resume: bool) {
+        self.job.recover(r, resume);
+        self.journaled = *r;
     }
 
     /// Runs until a stop is requested and the arm stands still; returns the statistics of
@@ -499,6 +519,13 @@ impl Controller {
             stop,
             digest: fx.digest.finish(),
         });
+        if let Some(tx) = &mut self.journal {
+            // A full ring (the writer is behind) is retried next cycle.
+            let r = job.journal();
+            if r != self.journaled && tx.push(r).is_ok() {
+                self.journaled = r;
+            }
+        }
         finished
     }
 }

@@ -32,8 +32,19 @@
 //! A second job while one runs is rejected (`Busy`), not queued: a client resubmits.
 //! No joint command leaves the configured limits: every sample is checked before it is
 //! published, and one outside is replaced by holding the last command (counted).
+//!
+//! # Restart
+//!
+//! [`Job::journal`] describes the running job for the job journal ([`crate::journal`]); a
+//! daemon that restarts takes the unfinished job up again with [`Job::recover`]: it reports
+//! the fault [`Fault::Restarted`], gives the planner the job's order, commands nothing until
+//! every input has been fresh for `resume_after_s`, then resumes from the measured state. An
+//! object in the gripper is placed where it was decided; an object not in the gripper is
+//! picked; one the journal says was held, now out of the gripper with the arm standing at its
+//! release configuration, was released there before the crash: it is counted placed.
 
 use crate::config::{Timeouts, secs_to_ns};
+use crate::journal::{JournalRecord, ObjectPhase, Placement};
 use crate::plan::{MotionPlan, Request, Response};
 use herb_ipc::{
     CancelJobRequest, Fault, GRIPPER_REPEAT_NS, GripperAction, GripperState, HEARTBEAT_PERIOD_NS,
@@ -147,6 +158,11 @@ enum Phase {
     Faulted {
         healthy_since: Option<u64>,
     },
+    /// A job taken up from the journal after a restart: `asked` once the planner has its
+    /// order; then it waits, faulted, for fresh inputs.
+    Recovering {
+        asked: bool,
+    },
     /// A cancelled job's retreat: `asked` once the planner has the request.
     Retreating {
         asked: bool,
@@ -176,12 +192,22 @@ pub struct Job {
     // the job
     phase: Phase,
     job_id: u64,
+    /// The job's objects as submitted.
+    objects: [u16; MAX_JOB_OBJECTS],
+    /// `order` holds this job's packing order.
+    ordered: bool,
     order: [u16; MAX_JOB_OBJECTS],
     count: usize,
     index: usize,
     done: usize,
     release_stamp: u64,
     holding: bool,
+    /// The current object's decided placement and release configuration.
+    placement: Option<Placement>,
+    /// The job was taken up from the journal and has not resumed yet.
+    recovered: bool,
+    /// The job taken up from the journal is to be ended, not resumed.
+    abandoning: bool,
     fault: Fault,
     /// A client cancelled the job: brake, retreat, report `JobCancelled`.
     cancelling: bool,
@@ -254,6 +280,21 @@ pub struct JobSnapshot {
     pub stopping: bool,
 }
 
+/// A recovered job's arm stands at an object's release configuration when every joint is
+/// within this of it (rad).
+pub const RELEASE_Q_TOL_RAD: f64 = 0.02;
+
+/// The configuration at which `plan` opens the gripper (the end of its releasing segment).
+fn release_q(plan: &MotionPlan) -> Option<[f64; DOF]> {
+    let seg = plan
+        .segments()
+        .iter()
+        .find(|s| s.then == Some(GripperAction::Open))?;
+    plan.setpoints
+        .get(seg.end.checked_sub(1)?)
+        .map(|s| s.position)
+}
+
 /// A state is not from the future when stamped at most [`MAX_FUTURE_STAMP_NS`] past the
 /// cycle's start, or not past the clock when it was received (the loop may have been preempted
 /// since the cycle began).
@@ -280,12 +321,17 @@ impl Job {
             rejected: 0,
             phase: Phase::Idle,
             job_id: 0,
+            objects: [0; MAX_JOB_OBJECTS],
+            ordered: false,
             order: [0; MAX_JOB_OBJECTS],
             count: 0,
             index: 0,
             done: 0,
             release_stamp: 0,
             holding: false,
+            placement: None,
+            recovered: false,
+            abandoning: false,
             fault: Fault::None,
             cancelling: false,
             active: Some(a),
@@ -426,6 +472,10 @@ impl Job {
         let mut objects = [0u16; MAX_JOB_OBJECTS];
         objects[..n].copy_from_slice(r.objects());
         self.job_id = r.job_id;
+        self.objects = objects;
+        self.ordered = false;
+        self.placement = None;
+        self.recovered = false;
         self.count = n;
         self.index = 0;
         self.done = 0;
@@ -440,6 +490,7 @@ impl Job {
             job_id: r.job_id,
             objects,
             count: n,
+            ordered: false,
         });
         self.phase = Phase::Ordering;
         self.emit(fx, StatusEvent::Accepted, NO_OBJECT, [0.0; 4], 0);
@@ -455,13 +506,21 @@ impl Job {
             } if job_id == self.job_id => {
                 self.order = order;
                 self.count = count;
-                if self.phase == Phase::Ordering {
-                    self.phase = Phase::WaitHeightmap { since: now };
+                self.ordered = true;
+                match self.phase {
+                    Phase::Ordering => self.phase = Phase::WaitHeightmap { since: now },
+                    Phase::Recovering { .. } => {
+                        self.phase = Phase::Faulted {
+                            healthy_since: None,
+                        }
+                    }
+                    _ => {}
                 }
             }
             Response::Ordered { .. } => {}
             Response::OrderFailed { job_id }
-                if job_id == self.job_id && self.phase == Phase::Ordering =>
+                if job_id == self.job_id
+                    && matches!(self.phase, Phase::Ordering | Phase::Recovering { .. }) =>
             {
                 self.fault = Fault::Decision;
                 self.finish(fx, StatusEvent::JobFailed);
@@ -483,6 +542,11 @@ impl Job {
                     }
                     let (ty, pose, dns) = (plan.object as u32, plan.pose, plan.decision_ns);
                     let decided = plan.decided;
+                    self.placement = release_q(&plan).map(|release_q| Placement {
+                        index: plan.index as u16,
+                        pose,
+                        release_q,
+                    });
                     self.active = Some(plan);
                     self.phase = Phase::Streaming { seg: 0, cursor: 0 };
                     // A replan of a decided placement (after a resume while holding the
@@ -615,6 +679,9 @@ impl Job {
         self.done = s.done as usize;
         self.release_stamp = s.release_stamp;
         self.holding = s.holding;
+        self.ordered = false;
+        self.placement = None;
+        self.recovered = false;
         self.fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
         self.cancelling = false;
         self.cmd = Setpoint {
@@ -652,6 +719,67 @@ impl Job {
         self.limit_holds
     }
 
+    /// The running job as the journal keeps it ([`JournalRecord::NONE`] between jobs and
+    /// while a cancelled job retreats: a cancelled job is not taken up again). Allocates
+    /// nothing; the loop compares it with the last one it handed to the writer.
+    pub fn journal(&self) -> JournalRecord {
+        if self.job_id == 0 || self.cancelling {
+            return JournalRecord::NONE;
+        }
+        let phase = match self.phase {
+            Phase::Idle | Phase::Retreating { .. } => return JournalRecord::NONE,
+            Phase::Ordering => ObjectPhase::Ordering,
+            Phase::WaitHeightmap { .. } | Phase::Planning { .. } => ObjectPhase::Deciding,
+            Phase::Streaming { .. } | Phase::Gripper { .. } if self.holding => {
+                ObjectPhase::Carrying
+            }
+            Phase::Streaming { .. } | Phase::Gripper { .. } => ObjectPhase::Moving,
+            Phase::Braking { .. } | Phase::Faulted { .. } | Phase::Recovering { .. } => {
+                ObjectPhase::Halted
+            }
+        };
+        JournalRecord {
+            job_id: self.job_id,
+            count: self.count as u16,
+            objects: self.objects,
+            ordered: self.ordered,
+            order: if self.ordered {
+                self.order
+            } else {
+                [0; MAX_JOB_OBJECTS]
+            },
+            index: self.index as u16,
+            done: self.done as u16,
+            holding: self.holding,
+            phase,
+            placement: self.placement.filter(|p| p.index as usize == self.index),
+        }
+    }
+
+    /// Takes up the unfinished job `r` from the journal (an idle machine at start, before the
+    /// first cycle): the next ticks report [`Fault::Restarted`] and hand the planner the job's
+    /// order, then the job waits, faulted and commanding nothing, until its inputs are fresh,
+    /// and resumes from the measured state (see the module's "Restart"). With `resume` false,
+    /// the first tick reports the fault and ends the job, failed, instead.
+    pub fn recover(&mut self, r: &JournalRecord, resume: bool) {
+        self.abandoning = !resume;
+        self.job_id = r.job_id;
+        self.count = (r.count as usize).min(MAX_JOB_OBJECTS);
+        self.objects = r.objects;
+        self.ordered = r.ordered;
+        self.order = r.order;
+        self.index = (r.index as usize).min(self.count);
+        self.done = (r.done as usize).min(self.index);
+        self.holding = r.holding;
+        self.placement = r.placement;
+        self.recovered = true;
+        self.release_stamp = 0;
+        self.fault = Fault::Restarted;
+        self.cancelling = false;
+        self.commanding = false;
+        self.phase = Phase::Recovering { asked: false };
+    }
+
     fn inputs_fresh(&self, now: u64) -> bool {
         self.js.is_some() && self.gs.is_some() && self.stale_input(now).is_none()
     }
@@ -670,7 +798,10 @@ impl Job {
 
     fn check_health(&mut self, now: u64, fx: &mut impl Effects) {
         match self.phase {
-            Phase::Idle | Phase::Braking { .. } | Phase::Faulted { .. } => {}
+            Phase::Idle
+            | Phase::Braking { .. }
+            | Phase::Faulted { .. }
+            | Phase::Recovering { .. } => {}
             _ => {
                 if let Some(f) = self.stale_input(now) {
                     self.raise(fx, f);
@@ -739,7 +870,7 @@ impl Job {
     }
 
     fn current_type(&self) -> u32 {
-        if self.index < self.count {
+        if self.ordered && self.index < self.count {
             self.order[self.index] as u32
         } else {
             NO_OBJECT
@@ -772,7 +903,7 @@ impl Job {
         };
         // Only a place-only plan reuses the placement (a run log's replay from a snapshot
         // does not know the last job's).
-        let pose = match (&self.active, place_only) {
+        let pose = match (self.placement, place_only) {
             (Some(p), true) => p.pose,
             _ => [0.0; 4],
         };
@@ -813,7 +944,29 @@ impl Job {
                 active_cursor,
             } => self.brake_step(fx, cursor, seg, active_cursor),
             Phase::Retreating { asked: false } => self.retreat(fx),
-            Phase::Retreating { asked: true } => {}
+            Phase::Retreating { asked: true } | Phase::Recovering { asked: true } => {}
+            Phase::Recovering { asked: false } if self.abandoning => {
+                self.abandoning = false;
+                self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+                self.finish(fx, StatusEvent::JobFailed);
+            }
+            Phase::Recovering { asked: false } => {
+                let (objects, ordered) = if self.ordered {
+                    (self.order, true)
+                } else {
+                    (self.objects, false)
+                };
+                let order = Request::Order {
+                    job_id: self.job_id,
+                    objects,
+                    count: self.count,
+                    ordered,
+                };
+                if fx.plan(order).is_ok() {
+                    self.phase = Phase::Recovering { asked: true };
+                    self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+                }
+            }
             Phase::Faulted { healthy_since } => {
                 if self.cancelling {
                     // Cancelled where it stopped (its inputs may be gone: no retreat).
@@ -868,6 +1021,7 @@ impl Job {
                     self.done += 1;
                     self.emit(fx, StatusEvent::Placed, ty, pose, dns);
                     self.index += 1;
+                    self.placement = None;
                 }
             }
             self.next_segment(fx, now, seg + 1);
@@ -942,8 +1096,16 @@ impl Job {
         if let Some(j) = self.js {
             self.cmd = Setpoint::at_rest(j.position);
         }
+        // A recovered job commands nothing before this.
+        self.commanding = true;
         let held = self.gs.is_some_and(|g| g.holding == 1);
         self.emit(fx, StatusEvent::Resumed, self.current_type(), [0.0; 4], 0);
+        if self.recovered {
+            self.recovered = false;
+            if !self.take_up_measured_state(fx, held, now) {
+                return;
+            }
+        }
         if self.index >= self.count {
             self.finish(fx, StatusEvent::JobDone);
             return;
@@ -958,6 +1120,11 @@ impl Job {
         } else {
             GripperAction::Open
         };
+        self.grip_object = if self.holding {
+            self.current_type()
+        } else {
+            NO_OBJECT
+        };
         if self.holding {
             self.request_plan(fx, true, now);
         } else {
@@ -965,6 +1132,43 @@ impl Job {
             self.release_stamp = self.release_stamp.max(now);
             self.phase = Phase::WaitHeightmap { since: now };
         }
+    }
+
+    /// A recovered job's first resume: what the journal said, checked against the measured
+    /// gripper (`held`) and arm. False when the job cannot go on (it has been ended).
+    fn take_up_measured_state(&mut self, fx: &mut impl Effects, held: bool, now: u64) -> bool {
+        let placement = self.placement.filter(|p| p.index as usize == self.index);
+        let at_release = |p: &Placement| {
+            self.js.is_some_and(|j| {
+                j.position
+                    .iter()
+                    .zip(&p.release_q)
+                    .all(|(q, r)| (q - r).abs() <= RELEASE_Q_TOL_RAD)
+            })
+        };
+        match placement {
+            // Released at its placement before the journal heard of it: placed.
+            Some(p) if self.holding && !held && at_release(&p) => {
+                self.holding = false;
+                self.release_stamp = now;
+                self.done += 1;
+                self.emit(fx, StatusEvent::Placed, self.current_type(), p.pose, 0);
+                self.index += 1;
+                self.placement = None;
+            }
+            // In the gripper (perhaps closed just before the crash): placed where decided.
+            Some(_) if held => self.holding = true,
+            // In the gripper with no placement decided: nothing safe to do with it.
+            None if held => {
+                self.fault = Fault::Restarted;
+                self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+                self.finish(fx, StatusEvent::JobFailed);
+                return false;
+            }
+            // Not in the gripper: picked (again, as ObjectLost says, if the journal had it held).
+            _ => {}
+        }
+        true
     }
 
     fn next_segment(&mut self, fx: &mut impl Effects, now: u64, seg: usize) {

@@ -67,10 +67,19 @@ impl Notifier {
     fn failed(&self, notice: Notice, e: &std::io::Error) {
         let n = self.failed[notice as usize].fetch_add(1, Ordering::Relaxed);
         if n == 0 {
-            eprintln!(
-                "herbd: warning: sd_notify {} to {:?} failed: {e} (further failures of this notice are counted, not logged)",
-                notice.text(),
-                std::env::var_os("NOTIFY_SOCKET").unwrap_or_default()
+            crate::logfmt::log(
+                "notify_failed",
+                &[
+                    ("notice", &notice.text()),
+                    (
+                        "socket",
+                        &std::env::var_os("NOTIFY_SOCKET")
+                            .unwrap_or_default()
+                            .to_string_lossy(),
+                    ),
+                    ("error", &e),
+                    ("further", &"counted, not logged"),
+                ],
             );
         }
     }

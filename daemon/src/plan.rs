@@ -109,7 +109,8 @@ impl MotionPlan {
 /// What the loop asks.
 #[derive(Debug)]
 pub enum Request {
-    /// Order a job's objects (Beam-3).
+    /// Order a job's objects (Beam-3), or, with `ordered`, take them as the job's order
+    /// (a job recovered from the journal keeps the order it was started with).
     Order {
         /// Job id.
         job_id: u64,
@@ -117,6 +118,8 @@ pub enum Request {
         objects: [u16; MAX_JOB_OBJECTS],
         /// Used.
         count: usize,
+        /// The objects are already in packing order: no search.
+        ordered: bool,
     },
     /// Decide and plan object `index` from rest at `from`, on a heightmap stamped after
     /// `after_stamp_ns`. With `place_only`, the object is already held: reuse `pose` and plan

@@ -176,10 +176,15 @@ impl PlannerCore {
         })
     }
 
-    /// Orders a job's objects (Beam-3) and keeps the order for the decisions' lookahead.
-    fn order(&mut self, objects: &[u16]) -> Option<Vec<TypeIdx>> {
+    /// Orders a job's objects (Beam-3; kept as given when `ordered`, a recovered job's) and
+    /// keeps the order for the decisions' lookahead.
+    fn order(&mut self, objects: &[u16], ordered: bool) -> Option<Vec<TypeIdx>> {
         let v: Vec<TypeIdx> = objects.iter().map(|&o| TypeIdx(o)).collect();
-        let order = beam3(&self.sequence, &v).ok()?;
+        let order = if ordered {
+            v
+        } else {
+            beam3(&self.sequence, &v).ok()?
+        };
         self.job_order.clear();
         self.job_order.extend_from_slice(&order);
         Some(order)
@@ -329,7 +334,8 @@ impl PlannerCore {
                 job_id,
                 objects,
                 count,
-            } => match self.order(&objects[..count]) {
+                ordered,
+            } => match self.order(&objects[..count], ordered) {
                 Some(v) => {
                     let mut order = [0u16; MAX_JOB_OBJECTS];
                     for (o, t) in order.iter_mut().zip(&v) {
@@ -435,7 +441,7 @@ pub fn spawn(
                     let resp = w.handle(r);
                     if resp_tx.push(resp).is_err() {
                         // The loop reads every cycle and has at most two requests out.
-                        eprintln!("herbd: planner response ring full (a bug)");
+                        crate::logfmt::log("bug", &[("what", &"planner response ring full")]);
                     }
                 }
                 std::thread::park_timeout(IDLE_PARK);

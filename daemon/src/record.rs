@@ -166,10 +166,15 @@ impl OutDigest {
                 job_id,
                 objects,
                 count,
+                ordered,
             } => {
                 h.u64(6).u64(*job_id);
                 for o in &objects[..*count] {
                     h.u64(*o as u64);
+                }
+                // Logs written before recovered jobs existed hash the same.
+                if *ordered {
+                    h.u64(1);
                 }
             }
             Request::Plan {

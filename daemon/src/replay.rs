@@ -123,7 +123,12 @@ impl Effects for ReplayFx {
     fn plan(&mut self, r: Request) -> Result<(), Request> {
         self.digest.request(&r);
         self.said.push(match &r {
-            Request::Order { job_id, count, .. } => format!("order job {job_id} ({count})"),
+            Request::Order {
+                job_id,
+                count,
+                ordered,
+                ..
+            } => format!("order job {job_id} ({count}, already ordered: {ordered})"),
             Request::Plan {
                 index, place_only, ..
             } => format!("plan object {index} (place only: {place_only})"),

@@ -127,6 +127,7 @@ fn order(core: &mut PlannerCore, object: u16) {
             job_id: 1,
             objects,
             count: 1,
+            ordered: false,
         },
         None,
     );

@@ -495,6 +495,10 @@ pub enum Fault {
     /// The placement lattice held no feasible placement for the next object (the box is
     /// full for it): the job ends, failed, with this reason.
     NoFeasiblePlacement = 10,
+    /// herbd restarted (crashed or was killed) with this job unfinished and found it in its
+    /// job journal: the job resumes from the measured robot state, or is abandoned when
+    /// configured so (`journal.on_restart = "abandon"`).
+    Restarted = 11,
 }
 
 impl Fault {
@@ -513,6 +517,7 @@ impl Fault {
             Stop,
             ObjectLost,
             NoFeasiblePlacement,
+            Restarted,
         ]
         .get(c as usize)
         .copied()
@@ -866,18 +871,66 @@ pub struct SimOutcome {
     pub commands: u64,
     /// Joint commands rejected (out of limits, malformed).
     pub commands_rejected: u64,
+    /// Every object in the box after this release, in placement order (the first
+    /// `min(objects, MAX_JOB_OBJECTS)`): where it ended and whether it is inside.
+    pub placed: [SimObject; MAX_JOB_OBJECTS],
 }
 payload!(SimOutcome);
 
+/// Names of the success volume's bounds, by [`SimObject::bound`] code (0: inside).
+pub const SIM_BOUNDS: [&str; 7] = [
+    "inside", "-x wall", "+x wall", "-y wall", "+y wall", "floor", "top",
+];
+
+/// One object in the simulated box (part of [`SimOutcome`]). Frame B, metres, radians.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::SimObject")]
+pub struct SimObject {
+    /// Catalog type.
+    pub object_type: u32,
+    /// 0 when inside the success volume; else the bound it crosses most ([`SIM_BOUNDS`]).
+    pub bound: u32,
+    /// By how much it crosses that bound (m; 0 when inside).
+    pub over_m: f32,
+    /// Heading of its canonical x axis about z (rad).
+    pub yaw_rad: f32,
+    /// Lowest corner of its bounds (m).
+    pub lo: [f32; 3],
+    /// Highest corner of its bounds (m).
+    pub hi: [f32; 3],
+}
+
+impl SimObject {
+    /// The bound's name, `inside` when it is.
+    pub fn bound_name(&self) -> &'static str {
+        SIM_BOUNDS.get(self.bound as usize).copied().unwrap_or("?")
+    }
+}
+
 impl SimOutcome {
-    /// Header, flags and finite numbers.
+    /// Header, flags and finite numbers, every listed object's bound code known.
     pub fn validate(&self) -> Result<(), Invalid> {
         self.header.validate()?;
         flag("all_inside", self.all_inside)?;
         flag("stable", self.stable)?;
         finite_all("tilt_rad", &[self.tilt_rad])?;
         finite_all("compactness", &[self.compactness])?;
-        finite_all("release", &self.release)
+        finite_all("release", &self.release)?;
+        for o in self.objects_listed() {
+            if o.bound as usize >= SIM_BOUNDS.len() {
+                return Err(Invalid::new("placed.bound", Reason::UnknownCode));
+            }
+            finite_all("placed.over_m", &[o.over_m, o.yaw_rad])?;
+            finite_all("placed.lo", &o.lo)?;
+            finite_all("placed.hi", &o.hi)?;
+        }
+        Ok(())
+    }
+
+    /// The objects listed in [`Self::placed`].
+    pub fn objects_listed(&self) -> &[SimObject] {
+        &self.placed[..(self.objects as usize).min(MAX_JOB_OBJECTS)]
     }
 }
 

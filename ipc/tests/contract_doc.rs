@@ -172,7 +172,15 @@ fn layouts() -> String {
         release: "m, m, m, rad: release pose in the box frame",
         max_limit_excess_rad: "rad, largest joint-limit excess among received commands",
         commands: "joint commands received",
-        commands_rejected: "joint commands rejected");
+        commands_rejected: "joint commands rejected",
+        placed: "every object in the box after the release, in placement order (the first `min(objects, 64)`)");
+    layout!(s, SimObject,
+        object_type: "catalog type index",
+        bound: "0 inside the success volume, else the bound crossed most (`SimBound` code)",
+        over_m: "m by which it crosses that bound (0 inside)",
+        yaw_rad: "rad, heading of its canonical x axis about z",
+        lo: "m, lowest corner of its bounds in the box frame",
+        hi: "m, highest corner of its bounds in the box frame");
     s
 }
 
@@ -207,6 +215,9 @@ fn codes() -> String {
     }
     for c in 0..64 {
         add("Fault", Fault::from_code(c).map(|v| format!("{v:?}")), c);
+    }
+    for (c, name) in SIM_BOUNDS.iter().enumerate() {
+        add("SimBound", Some(name.to_string()), c as u32);
     }
     for c in 0..64 {
         add(

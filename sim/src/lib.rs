@@ -27,6 +27,8 @@ pub mod lattice;
 pub mod mesh;
 pub mod observation;
 pub mod paths;
+#[cfg(feature = "picture")]
+pub mod picture;
 pub mod reserve;
 pub mod teacher;
 pub mod world;
@@ -38,4 +40,4 @@ pub use env::{PackingEnv, RewardMode, StepInfo, StepResult};
 pub use error::{Result, SimError};
 pub use heightmap::{GridSpec, Heightmap};
 pub use observation::ObsLayout;
-pub use world::{PackingWorld, PlacementOutcome, WorldConfig};
+pub use world::{ObjectReport, PackingWorld, PlacementOutcome, WorldConfig};

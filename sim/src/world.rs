@@ -132,6 +132,24 @@ pub struct PlacementOutcome {
     pub settled: bool,
 }
 
+/// Where one placed object ended, as the success check sees it ([`PackingWorld::report`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObjectReport {
+    /// Its type.
+    pub ty: TypeIdx,
+    /// Position of its canonical origin in B (m).
+    pub origin: [f32; 3],
+    /// Heading of its canonical x axis about z (rad).
+    pub yaw: f32,
+    /// Lowest corner of its vertices' bounds in B (m).
+    pub lo: [f32; 3],
+    /// Highest corner of its vertices' bounds in B (m).
+    pub hi: [f32; 3],
+    /// `None` when inside the success volume; else the bound it crosses most and by how much
+    /// (m), as [`SuccessVolume::violation`].
+    pub violation: Option<(&'static str, f32)>,
+}
+
 /// One object in the world.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlacedObject {
@@ -477,9 +495,22 @@ impl PackingWorld {
         })
     }
 
+    /// Every placed object, in placement order: where it is and whether it is inside the
+    /// success volume (the same check as a placement's outcome).
+    pub fn report(&mut self) -> Vec<ObjectReport> {
+        let mut out = Vec::with_capacity(self.placed.len());
+        self.scan_into(false, Some(&mut out));
+        out
+    }
+
     /// One pass over all placed bodies: inside check, compactness, and (optionally) the
     /// heightmap render.
     fn scan(&mut self, render: bool) -> Scan {
+        self.scan_into(render, None)
+    }
+
+    /// [`Self::scan`], also describing each object into `report` when given.
+    fn scan_into(&mut self, render: bool, mut report: Option<&mut Vec<ObjectReport>>) -> Scan {
         if render {
             self.heightmap.clear();
         }
@@ -495,11 +526,23 @@ impl PackingWorld {
             self.verts
                 .extend(shape.vertices.iter().map(|&v| pose.transform_point(v)));
             let (blo, bhi) = bounds_of(&self.verts);
+            let crossed = volume_ok.violation(blo, bhi);
             if first_outside.is_none()
-                && let Some(v) = volume_ok.violation(blo, bhi)
+                && let Some(v) = crossed
             {
                 first_outside = Some(i);
                 violation = Some(v);
+            }
+            if let Some(r) = report.as_deref_mut() {
+                let x = pose.rotation * Vector::X;
+                r.push(ObjectReport {
+                    ty: p.ty,
+                    origin: pose.translation.to_array(),
+                    yaw: x.y.atan2(x.x),
+                    lo: blo.to_array(),
+                    hi: bhi.to_array(),
+                    violation: crossed,
+                });
             }
             lo = lo.min(blo);
             hi = hi.max(bhi);

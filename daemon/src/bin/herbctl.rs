@@ -9,6 +9,7 @@ use herb_ipc::{
     CancelJobRequest, Fault, Header, HeightmapFrame, JobState, PackJobRequest, RejectReason,
     Services, SimOutcome, SimReset, Status, StatusEvent, monotonic_ns,
 };
+use herb_sim::picture::{PictureObject, write_pack_picture};
 use herb_sim::{Catalog, GridSpec, Heightmap, TypeIdx, boxed, paths};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -90,6 +91,19 @@ enum Cmd {
         /// Explain even if the catalog or a model differs from the run's.
         #[arg(long)]
         force: bool,
+    },
+    /// A live view of herbd: job progress, the last decision, loop statistics, faults, the
+    /// simulated box, recent events. Ctrl-C quits.
+    Watch {
+        /// Seconds between redraws.
+        #[arg(long, default_value_t = 0.25)]
+        period: f64,
+        /// Quit after this many seconds (default: run until Ctrl-C).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Print each view below the previous one instead of redrawing the screen.
+        #[arg(long)]
+        plain: bool,
     },
     /// Print the daemon's next heartbeat.
     Status {
@@ -314,14 +328,70 @@ fn pack(
         }
         std::thread::sleep(Duration::from_millis(20));
     }
-    if let (Some(p), Some(hm)) = (picture, &latest_frame) {
-        if let Some(d) = p.parent() {
-            let _ = std::fs::create_dir_all(d);
+    let s = last.unwrap_or_else(|| unreachable!("a final status was received"));
+    let state = JobState::from_code(s.state).unwrap_or(JobState::Idle);
+    let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
+    let verdict = verdict(
+        ok == Some(true),
+        state,
+        fault,
+        placed,
+        total,
+        last_outcome.as_ref(),
+        catalog,
+    );
+    // Per object: inside or where it left the success volume (simulated cells only).
+    let listed: Vec<(String, herb_ipc::SimObject)> = last_outcome
+        .as_ref()
+        .map(|o| {
+            let earlier = o.objects.saturating_sub(placed) as usize;
+            o.objects_listed()
+                .iter()
+                .enumerate()
+                .map(|(i, so)| {
+                    let who = if i < earlier {
+                        format!("earlier {}", i + 1)
+                    } else {
+                        format!("{}", i - earlier + 1)
+                    };
+                    (who, *so)
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    if !json {
+        for (who, o) in &listed {
+            let where_ = if o.bound == 0 {
+                "inside".to_string()
+            } else {
+                format!(
+                    "OUTSIDE: over the {} by {:.0} mm (x {:+.3}..{:+.3}, y {:+.3}..{:+.3}, z {:.3}..{:.3} m)",
+                    o.bound_name(),
+                    o.over_m * 1000.0,
+                    o.lo[0],
+                    o.hi[0],
+                    o.lo[1],
+                    o.hi[1],
+                    o.lo[2],
+                    o.hi[2]
+                )
+            };
+            println!("  {who:>10}: {:<28} {where_}", name(catalog, o.object_type));
         }
-        herb_sim::image::write_heightmap_png(p, hm, 0.3, 4).map_err(|e| e.to_string())?;
+    }
+    if let (Some(p), Some(hm)) = (picture, &latest_frame) {
+        let objects: Vec<PictureObject> = listed
+            .iter()
+            .map(|(who, o)| PictureObject {
+                label: format!("{who} {}", id_of(catalog, o.object_type)),
+                lo: o.lo,
+                hi: o.hi,
+                outside: (o.bound != 0).then(|| (o.bound_name().to_string(), o.over_m)),
+            })
+            .collect();
+        write_pack_picture(p, &verdict, hm, &objects)?;
         println!("picture of the final pack: {}", p.display());
     }
-    let s = last.unwrap_or_else(|| unreachable!("a final status was received"));
     let mut d = decision_ms.clone();
     let summary = serde_json::json!({
         "job_id": job_id,
@@ -333,6 +403,7 @@ fn pack(
         "decision_ms_p50": pct(&mut d, 0.5),
         "decision_ms_max": pct(&mut d, 1.0),
         "faults": faults,
+        "verdict": verdict,
         "loop_cycles": s.cycles,
         "deadline_misses": s.deadline_misses,
         "rejected_inputs": s.rejected_inputs,
@@ -344,6 +415,13 @@ fn pack(
             "joint_commands": o.commands,
             "joint_commands_rejected": o.commands_rejected,
             "max_limit_excess_rad": o.max_limit_excess_rad,
+            "objects": listed.iter().map(|(who, so)| serde_json::json!({
+                "n": who,
+                "id": id_of(catalog, so.object_type),
+                "inside": so.bound == 0,
+                "bound": so.bound_name(),
+                "over_m": so.over_m,
+            })).collect::<Vec<_>>(),
         })),
     });
     if json {
@@ -360,14 +438,74 @@ fn pack(
         );
         if let Some(o) = last_outcome {
             println!(
-                "simulation: {} objects in the box, all inside: {}, compactness {:.3}",
-                o.objects,
-                o.all_inside == 1,
-                o.compactness
+                "simulation: {} objects in the box, compactness {:.3}",
+                o.objects, o.compactness
             );
         }
+        println!("verdict: {verdict}");
     }
     Ok(ok == Some(true))
+}
+
+/// The job's outcome in one line: SUCCESS only when the job is done and every object ended
+/// inside the success volume; else what went wrong first.
+fn verdict(
+    done: bool,
+    state: JobState,
+    fault: Fault,
+    placed: u32,
+    total: u32,
+    outcome: Option<&SimOutcome>,
+    catalog: &Catalog,
+) -> String {
+    let outside: Vec<String> = outcome
+        .map(|o| {
+            o.objects_listed()
+                .iter()
+                .enumerate()
+                .filter(|(_, so)| so.bound != 0)
+                .map(|(i, so)| {
+                    format!(
+                        "object {} ({}) over the {} by {:.0} mm",
+                        i + 1,
+                        id_of(catalog, so.object_type),
+                        so.bound_name(),
+                        so.over_m * 1000.0
+                    )
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let outside_text = if outside.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "; {} outside the success volume: {}",
+            outside.len(),
+            outside.join(", ")
+        )
+    };
+    match (done, outcome) {
+        (true, Some(_)) if outside.is_empty() => {
+            format!("SUCCESS: {placed}/{total} placed, every object inside the success volume")
+        }
+        (true, Some(_)) => format!("FAILED: {placed}/{total} placed{outside_text}"),
+        (true, None) => format!(
+            "DONE: {placed}/{total} placed (no simulated outcome: inside the box not checked)"
+        ),
+        (false, _) => {
+            format!("FAILED: job {state:?} ({fault:?}) with {placed}/{total} placed{outside_text}")
+        }
+    }
+}
+
+/// The catalog id of type `t` (`-` if none).
+fn id_of(catalog: &Catalog, t: u32) -> String {
+    if (t as usize) < catalog.len() {
+        catalog.spec(TypeIdx(t as u16)).id.clone()
+    } else {
+        "-".into()
+    }
 }
 
 fn status(cli: &Cli, timeout: f64) -> Result<bool, String> {
@@ -397,6 +535,67 @@ fn status(cli: &Cli, timeout: f64) -> Result<bool, String> {
         std::thread::sleep(Duration::from_millis(20));
     }
     Err("no heartbeat from herbd".into())
+}
+
+/// `herbctl watch`: redraws [`herb_daemon::watch::WatchView`] every `period` seconds.
+fn watch(
+    cli: &Cli,
+    catalog: &Catalog,
+    period: f64,
+    duration: Option<f64>,
+    plain: bool,
+) -> Result<bool, String> {
+    use herb_daemon::watch::{WatchView, wall_label};
+    if !(period.is_finite() && (0.02..=60.0).contains(&period)) {
+        return Err(format!("--period {period} outside 0.02..=60 s"));
+    }
+    let (bus, services, status, _frames) = listen(cli)?;
+    let outcomes = bus
+        .subscriber::<SimOutcome>(&services.sim_outcome())
+        .map_err(|e| e.to_string())?;
+    let t0 = Instant::now();
+    let label = |t: u32| {
+        let id = id_of(catalog, t);
+        let n = name(catalog, t);
+        if n == "-" { id } else { n }
+    };
+    let mut view = WatchView::new(&cli.prefix);
+    let mut next_draw = 0.0;
+    loop {
+        let t = t0.elapsed().as_secs_f64();
+        while let Ok(Some(s)) = status.receive() {
+            view.status(
+                s.payload(),
+                t,
+                &wall_label(std::time::SystemTime::now()),
+                &label,
+            );
+        }
+        while let Ok(Some(o)) = outcomes.receive() {
+            view.outcome(o.payload());
+        }
+        let ending = duration.is_some_and(|d| t >= d);
+        if t >= next_draw || ending {
+            next_draw = t + period;
+            let text = view.render(t, &label);
+            if plain {
+                println!(
+                    "--- herbctl watch, {} UTC",
+                    wall_label(std::time::SystemTime::now())
+                );
+                print!("{text}");
+            } else {
+                // Home, clear, draw.
+                print!("\x1b[H\x1b[2J{text}(Ctrl-C quits)\n");
+            }
+            use std::io::Write;
+            let _ = std::io::stdout().flush();
+        }
+        if ending {
+            return Ok(true);
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
 }
 
 /// herbctl's bus under the prefix of `cli`, with subscribers to herbd's status and to the
@@ -725,6 +924,11 @@ fn main() -> ExitCode {
             json,
         } => pack(&cli, &catalog, session, objects, picture, *timeout, *json),
         Cmd::Status { timeout } => status(&cli, *timeout),
+        Cmd::Watch {
+            period,
+            duration,
+            plain,
+        } => watch(&cli, &catalog, *period, *duration, *plain),
         Cmd::Reset { timeout } => reset(&cli, *timeout),
         Cmd::Cancel { job, timeout } => cancel(&cli, *job, *timeout),
         Cmd::Replay { log, force } => {

@@ -2,10 +2,10 @@
 //! `herb_daemon::config` for the configuration.
 
 use clap::Parser;
-use herb_daemon::config::{Config, ConfigFile};
+use herb_daemon::config::{Config, ConfigFile, OnRestart};
 use herb_daemon::controller::{Controller, LoopStats, Ports, Shared};
 use herb_daemon::notify::{Notice, Notifier};
-use herb_daemon::{planner, record};
+use herb_daemon::{journal, logfmt, planner, record};
 use herb_ipc::bus::{Bus, daemon_node_name, live_nodes_named};
 use herb_ipc::{Fault, JobState, Services, Status, StatusEvent};
 use herb_sim::{Catalog, paths};
@@ -114,45 +114,90 @@ fn summary(s: &LoopStats) -> serde_json::Value {
     })
 }
 
+/// The log line of a status event (none for heartbeats), in herbd's key=value form.
 fn describe(s: &Status) -> Option<String> {
     let ev = StatusEvent::from_code(s.event)?;
-    let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
-    let state = JobState::from_code(s.state).unwrap_or(JobState::Idle);
+    let fault = format!("{:?}", Fault::from_code(s.fault).unwrap_or(Fault::None));
+    let state = format!(
+        "{:?}",
+        JobState::from_code(s.state).unwrap_or(JobState::Idle)
+    );
+    let placed = format!("{}/{}", s.objects_done, s.objects_total);
+    let object = format!("{}/{}", s.object_index + 1, s.objects_total);
+    let ms = format!("{:.3}", s.decision_ns as f64 / 1e6);
+    let p = s.pose.map(|v| format!("{v:.4}"));
+    let job: &dyn std::fmt::Display = &s.job_id;
     Some(match ev {
         StatusEvent::Heartbeat => return None,
-        StatusEvent::Accepted => format!("job {}: accepted, {} objects", s.job_id, s.objects_total),
-        StatusEvent::Decided => format!(
-            "job {}: object {} (type {}) at x {:.3} y {:.3} z {:.3} m, yaw {:.2} rad; decided in {:.3} ms",
-            s.job_id,
-            s.object_index,
-            s.object_type,
-            s.pose[0],
-            s.pose[1],
-            s.pose[2],
-            s.pose[3],
-            s.decision_ns as f64 / 1e6
+        StatusEvent::Accepted => {
+            logfmt::line("accepted", &[("job", job), ("objects", &s.objects_total)])
+        }
+        StatusEvent::Decided => logfmt::line(
+            "decided",
+            &[
+                ("job", job),
+                ("object", &object),
+                ("type", &s.object_type),
+                ("x", &p[0]),
+                ("y", &p[1]),
+                ("z", &p[2]),
+                ("yaw", &p[3]),
+                ("decision_ms", &ms),
+            ],
         ),
-        StatusEvent::Placed => format!(
-            "job {}: placed {}/{}",
-            s.job_id, s.objects_done, s.objects_total
+        StatusEvent::Placed => logfmt::line(
+            "placed",
+            &[("job", job), ("object", &object), ("placed", &placed)],
         ),
-        StatusEvent::Fault => format!("job {}: FAULT {fault:?} ({state:?})", s.job_id),
-        StatusEvent::Braked => format!("job {}: braked, holding ({fault:?})", s.job_id),
-        StatusEvent::Resumed => format!("job {}: resumed", s.job_id),
-        StatusEvent::JobDone => format!(
-            "job {}: done, {}/{} placed",
-            s.job_id, s.objects_done, s.objects_total
+        StatusEvent::Fault => logfmt::line(
+            "fault",
+            &[
+                ("job", job),
+                ("fault", &fault),
+                ("state", &state),
+                ("object", &object),
+            ],
         ),
-        StatusEvent::JobFailed => format!(
-            "job {}: FAILED ({fault:?}), {}/{} placed",
-            s.job_id, s.objects_done, s.objects_total
+        StatusEvent::Braked => logfmt::line("braked", &[("job", job), ("fault", &fault)]),
+        StatusEvent::Resumed => logfmt::line("resumed", &[("job", job), ("object", &object)]),
+        StatusEvent::JobDone => logfmt::line("job_done", &[("job", job), ("placed", &placed)]),
+        StatusEvent::JobFailed => logfmt::line(
+            "job_failed",
+            &[("job", job), ("fault", &fault), ("placed", &placed)],
         ),
-        StatusEvent::JobCancelled => format!(
-            "job {}: cancelled, {}/{} placed",
-            s.job_id, s.objects_done, s.objects_total
-        ),
-        StatusEvent::Shutdown => "shutdown".into(),
+        StatusEvent::JobCancelled => {
+            logfmt::line("job_cancelled", &[("job", job), ("placed", &placed)])
+        }
+        StatusEvent::Shutdown => logfmt::line("shutdown", &[("state", &state)]),
     })
+}
+
+/// The statistics of one reporting interval as a log line.
+fn stats_line(s: &LoopStats) -> String {
+    let f = |h: &hdrhistogram::Histogram<u64>, q: f64| format!("{:.1}", us(h, q));
+    let max = |h: &hdrhistogram::Histogram<u64>| {
+        format!(
+            "{:.1}",
+            if h.is_empty() {
+                0.0
+            } else {
+                h.max() as f64 / 1000.0
+            }
+        )
+    };
+    logfmt::line(
+        "stats",
+        &[
+            ("cycles", &s.cycles),
+            ("deadline_misses", &s.misses),
+            ("cycle_p50_us", &f(&s.cycle_ns, 0.5)),
+            ("cycle_p99_us", &f(&s.cycle_ns, 0.99)),
+            ("cycle_max_us", &max(&s.cycle_ns)),
+            ("jitter_p99_us", &f(&s.jitter_ns, 0.99)),
+            ("decisions", &s.decision_ns.len()),
+            ("decision_p99_us", &f(&s.decision_ns, 0.99)),
+        ],
+    )
 }
 
 fn run(cli: Cli) -> Result<(), String> {
@@ -186,7 +231,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 segment_bytes: cfg.record.segment_mb << 20,
                 keep_bytes: cfg.record.keep_mb << 20,
             };
-            eprintln!("herbd: recording the run into {}", dir.display());
+            logfmt::log("recording", &[("dir", &dir.display())]);
             Some(record::start(opts, header)?)
         }
         None => None,
@@ -206,16 +251,71 @@ fn run(cli: Cli) -> Result<(), String> {
     let ports = Ports::open(bus).map_err(|e| e.to_string())?;
     let (controller, mut stats_link) =
         Controller::new(&cfg, ports, link, shared.clone(), catalog.len());
-    let controller = match recorder {
+    let mut controller = match recorder {
         Some(r) => controller.with_recorder(r),
         None => controller,
     };
-    eprintln!(
-        "herbd: {} Hz, prefix {:?}, policy {}, {} objects in the catalog",
-        cfg.loop_.rate_hz,
-        cfg.ipc_prefix,
-        cfg.models.policy,
-        catalog.len()
+    // The job journal: an unfinished job is taken up (or abandoned) before the loop starts; a
+    // journal that cannot be used is reported and set aside, never a reason not to start.
+    let journal_stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let journal_dir = cfg
+        .journal
+        .folder(std::env::var("STATE_DIRECTORY").ok().as_deref());
+    let journal_writer = match &journal_dir {
+        Some(dir) => {
+            match journal::load(dir, catalog.len()) {
+                Ok(None) => {}
+                Ok(Some(r)) => {
+                    let resume = cfg.journal.on_restart == OnRestart::Resume;
+                    logfmt::log(
+                        "job_recovered",
+                        &[
+                            ("job", &r.job_id),
+                            ("action", &if resume { "resume" } else { "abandon" }),
+                            ("journal", &dir.join(journal::FILE).display()),
+                            ("state", &r.describe()),
+                        ],
+                    );
+                    controller.recover(&r, resume);
+                }
+                Err(e) => {
+                    let aside = journal::set_aside(dir)
+                        .map(|p| p.display().to_string())
+                        .unwrap_or_else(|e| format!("(cannot rename: {e})"));
+                    logfmt::log(
+                        "journal_set_aside",
+                        &[
+                            ("error", &e),
+                            ("moved_to", &aside),
+                            ("action", &"start_idle"),
+                        ],
+                    );
+                }
+            }
+            let (tx, writer) = journal::spawn(dir.clone(), journal_stop.clone())?;
+            controller = controller.with_journal(tx);
+            Some(writer)
+        }
+        None => {
+            logfmt::log(
+                "journal_off",
+                &[
+                    ("reason", &"no journal.dir and no $STATE_DIRECTORY"),
+                    ("effect", &"a job does not survive a restart"),
+                ],
+            );
+            None
+        }
+    };
+    logfmt::log(
+        "start",
+        &[
+            ("rate_hz", &cfg.loop_.rate_hz),
+            ("prefix", &cfg.ipc_prefix),
+            ("policy", &cfg.models.policy),
+            ("catalog_types", &catalog.len()),
+            ("pid", &std::process::id()),
+        ],
     );
 
     // Reporter: statistics and events, formatted off the loop; the systemd watchdog is
@@ -238,14 +338,14 @@ fn run(cli: Cli) -> Result<(), String> {
                 while !done.load(Ordering::Relaxed) {
                     while let Ok(mut s) = stats_link.rx.pop() {
                         total.add(&s);
-                        eprintln!("herbd: stats {}", summary(&s));
+                        eprintln!("{}", stats_line(&s));
                         s.reset();
                         let _ = stats_link.tx.push(s);
                     }
                     if let Some(sub) = &sub {
                         while let Ok(Some(m)) = sub.receive() {
                             if let Some(line) = describe(m.payload()) {
-                                eprintln!("herbd: {line}");
+                                eprintln!("{line}");
                             }
                         }
                     }
@@ -269,7 +369,7 @@ fn run(cli: Cli) -> Result<(), String> {
     };
 
     for w in herb_robot::rt::apply(&cfg.rt) {
-        eprintln!("herbd: warning: {w}");
+        logfmt::log("warning", &[("what", &w)]);
     }
     notifier.send(Notice::Ready);
     let last = controller.run();
@@ -278,21 +378,31 @@ fn run(cli: Cli) -> Result<(), String> {
     total.add(&last);
     planner_stop.store(true, Ordering::Relaxed);
     let _ = planner_thread.join();
+    journal_stop.store(true, Ordering::Relaxed);
+    if let Some(w) = journal_writer {
+        match w.join() {
+            Ok(r) => logfmt::log(
+                "journal_closed",
+                &[("writes", &r.writes), ("failures", &r.failures)],
+            ),
+            Err(_) => logfmt::log("journal_closed", &[("error", &"the writer panicked")]),
+        }
+    }
     if let Some((writer, stop)) = writer {
         stop.store(true, Ordering::Relaxed);
         match writer.join() {
             Ok(Ok(files)) => {
                 for f in files {
-                    eprintln!("herbd: run log {}", f.display());
+                    logfmt::log("run_log", &[("file", &f.display())]);
                 }
             }
-            Ok(Err(e)) => eprintln!("herbd: run log: {e}"),
-            Err(_) => eprintln!("herbd: the run-log writer panicked"),
+            Ok(Err(e)) => logfmt::log("run_log_failed", &[("error", &e)]),
+            Err(_) => logfmt::log("run_log_failed", &[("error", &"the writer panicked")]),
         }
     }
     notifier.send(Notice::Stopping);
     for (notice, n) in notifier.failures() {
-        eprintln!("herbd: warning: {n} sd_notify {notice} notifications failed");
+        logfmt::log("notify_failures", &[("notice", &notice), ("failed", &n)]);
     }
     let report = serde_json::json!({ "herbd_final": summary(&total) });
     println!("{report}");
@@ -307,7 +417,7 @@ fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("herbd: error: {e}");
+            logfmt::log("error", &[("error", &e)]);
             ExitCode::from(2)
         }
     }

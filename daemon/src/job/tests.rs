@@ -149,9 +149,13 @@ fn answer(r: Request) -> Response {
             job_id,
             objects,
             count,
+            ordered,
         } => {
+            // A recovered job's order is kept as given.
             let mut order = objects;
-            order[..count].reverse();
+            if !ordered {
+                order[..count].reverse();
+            }
             Response::Ordered {
                 job_id,
                 order,
@@ -629,6 +633,7 @@ fn an_accepted_job_replies_orders_reports_and_holds_the_measured_position() {
         job_id,
         objects,
         count,
+        ..
     } = r.take()
     else {
         panic!("an order")
@@ -1924,4 +1929,202 @@ fn a_whole_job_with_a_fault_and_a_resume_allocates_nothing() {
     assert!(ev.contains(&Braked) && ev.contains(&Resumed), "{ev:?}");
     assert_eq!(ev.last(), Some(&JobDone), "{ev:?}");
     assert_eq!(n, 0, "allocations during the job");
+}
+
+// ---------------------------------------------------------------------------------------
+// Restart: the journal record and a job taken up from it
+// ---------------------------------------------------------------------------------------
+
+fn is_open(o: &Out) -> bool {
+    matches!(
+        o,
+        Out::Gripper {
+            action: GripperAction::Open,
+            ..
+        }
+    )
+}
+
+/// A fresh machine (a restarted daemon) with the arm and gripper where `crashed` left them,
+/// given `rec` from the journal.
+fn restarted(crashed: &Rig, rec: &JournalRecord, resume: bool) -> Rig {
+    let mut r = Rig::new();
+    r.q = crashed.q;
+    r.closed = crashed.closed;
+    r.holding = crashed.holding;
+    r.ticks(3);
+    r.job.recover(rec, resume);
+    r
+}
+
+#[test]
+fn the_journal_record_follows_the_job_and_ends_with_it() {
+    let mut r = Rig::started(&[1, 2]);
+    assert_eq!(r.job.journal().phase, ObjectPhase::Ordering);
+    assert_eq!(r.job.journal().objects(), &[1, 2]);
+    assert_eq!(r.job.journal().order(), None);
+    let mut phases = vec![ObjectPhase::Ordering];
+    let mut last = r.job.journal();
+    while !r.events().contains(&StatusEvent::JobDone) {
+        r.tick();
+        let j = r.job.journal();
+        if j.job_id != 0 && phases.last() != Some(&j.phase) {
+            phases.push(j.phase);
+        }
+        if j.job_id != 0 {
+            assert_eq!(j.order(), Some(&[2u16, 1][..]), "the planner's order");
+            // A placement is journaled only for the current object, with its release.
+            if let Some(p) = j.placement {
+                assert_eq!(p.index, j.index);
+            }
+            if j.phase == ObjectPhase::Carrying {
+                assert!(j.holding && j.placement.is_some(), "{j:?}");
+            }
+        }
+        last = j;
+        assert!(r.now < 20_000 * MS, "no JobDone");
+    }
+    use ObjectPhase::*;
+    assert_eq!(
+        phases,
+        vec![
+            Ordering, Deciding, Moving, Carrying, Moving, Deciding, Moving, Carrying, Moving
+        ]
+    );
+    assert_eq!(last, JournalRecord::NONE);
+}
+
+#[test]
+fn a_recovered_job_holding_its_object_places_it_where_it_was_decided() {
+    let mut a = Rig::started(&[1, 2]);
+    a.until(3000, "close", is_close);
+    a.ticks(50); // carrying
+    let rec = a.job.journal();
+    assert!(rec.holding && rec.phase == ObjectPhase::Carrying, "{rec:?}");
+    let decided = rec.placement.unwrap().pose;
+
+    let mut b = restarted(&a, &rec, true);
+    b.auto = false;
+    let mark = b.fx.out.len();
+    b.tick();
+    // The fault is reported and the planner gets the journal's order, unsearched.
+    assert_eq!(
+        b.last(StatusEvent::Fault).fault,
+        herb_ipc::Fault::Restarted as u32
+    );
+    let Request::Order {
+        objects,
+        count,
+        ordered,
+        ..
+    } = b.take()
+    else {
+        panic!("an order")
+    };
+    assert!(ordered);
+    assert_eq!(&objects[..count], &[2, 1]);
+    b.deliver(answer(Request::Order {
+        job_id: 7,
+        objects,
+        count,
+        ordered,
+    }));
+    b.auto = true;
+    // Nothing is commanded before the inputs have been fresh for the resume window.
+    b.until_event(2000, StatusEvent::Resumed);
+    let resumed =
+        b.fx.out
+            .iter()
+            .position(|o| matches!(o, Out::Status(s) if event(s) == StatusEvent::Resumed))
+            .unwrap();
+    assert!(
+        b.fx.out[mark..resumed]
+            .iter()
+            .all(|o| !matches!(o, Out::Joint(_))),
+        "no joint command before the resume"
+    );
+    assert!(
+        b.fx.out[resumed..].iter().any(is_plan),
+        "the placement is planned at the resume"
+    );
+    b.until_event(5000, StatusEvent::JobDone);
+    use StatusEvent::*;
+    assert_eq!(
+        b.events(),
+        vec![Fault, Resumed, Placed, Decided, Placed, JobDone]
+    );
+    let placed: Vec<Status> = b
+        .statuses()
+        .into_iter()
+        .filter(|s| event(s) == Placed)
+        .collect();
+    assert_eq!(
+        placed[0].pose, decided,
+        "placed where decided before the crash"
+    );
+    assert_eq!(
+        (placed[0].object_type, placed[1].object_type),
+        (2, 1),
+        "each object once, in the order"
+    );
+    assert_eq!(b.last(JobDone).objects_done, 2);
+    assert_eq!(b.job.journal(), JournalRecord::NONE);
+}
+
+#[test]
+fn a_release_the_journal_missed_counts_the_object_placed_once() {
+    let mut a = Rig::started(&[1, 2]);
+    a.until(3000, "close", is_close);
+    a.until(3000, "open", is_open);
+    // The crash comes after the open command, before the gripper's answer reached the journal.
+    let rec = a.job.journal();
+    assert!(rec.holding, "{rec:?}");
+    a.closed = false;
+    a.holding = false;
+    let mut b = restarted(&a, &rec, true);
+    b.until_event(5000, StatusEvent::JobDone);
+    use StatusEvent::*;
+    assert_eq!(
+        b.events(),
+        vec![Fault, Resumed, Placed, Decided, Placed, JobDone]
+    );
+    // One decision: only the second object is picked.
+
+    // Away from the release configuration, the same journal means the object was lost: it is
+    // picked again.
+    let mut c = restarted(&a, &rec, true);
+    c.q[0] += 0.1;
+    c.until_event(5000, StatusEvent::JobDone);
+    assert!(
+        c.statuses()
+            .iter()
+            .any(|s| s.fault == herb_ipc::Fault::ObjectLost as u32)
+    );
+    assert_eq!(
+        c.events()
+            .iter()
+            .filter(|e| **e == StatusEvent::Decided)
+            .count(),
+        2,
+        "both objects decided and picked"
+    );
+}
+
+#[test]
+fn an_abandoned_job_ends_failed_without_moving() {
+    let mut a = Rig::started(&[1, 2]);
+    a.until(3000, "close", is_close);
+    let rec = a.job.journal();
+    let mut b = restarted(&a, &rec, false);
+    let mark = b.fx.out.len();
+    b.ticks(1000);
+    use StatusEvent::*;
+    assert_eq!(b.events(), vec![Fault, JobFailed]);
+    assert_eq!(b.last(JobFailed).fault, herb_ipc::Fault::Restarted as u32);
+    assert!(b.joints_since(mark).is_empty());
+    assert_eq!(b.count(|o| matches!(o, Out::Plan(_))), 0);
+    assert_eq!(b.job.journal(), JournalRecord::NONE);
+    // And the next job runs.
+    assert_eq!(b.submit(8, &[3]), (RejectReason::None, 0));
+    b.until_event(5000, JobDone);
 }

@@ -23,8 +23,8 @@ use clap::Parser;
 use herb_adapter::{ArmPorts, CameraPort, Heightmap};
 use herb_ipc::bus::Bus;
 use herb_ipc::{
-    GripperAction, GripperCommand, GripperState, Header, JointCommand, JointState, NO_OBJECT,
-    Services, SimOutcome, SimReset, monotonic_ns,
+    GripperAction, GripperCommand, GripperState, Header, JointCommand, JointState, MAX_JOB_OBJECTS,
+    NO_OBJECT, SIM_BOUNDS, Services, SimObject, SimOutcome, SimReset, monotonic_ns,
 };
 use herb_loopback::config::{ConfigFile, LoopbackConfig};
 use herb_robot::cell::CellConfig;
@@ -71,6 +71,8 @@ struct Released {
     ny: u32,
     cell_m: f32,
     objects: u32,
+    /// Every object in the box: where it is, whether inside.
+    placed: [SimObject; MAX_JOB_OBJECTS],
     /// The outcome, the released type, the release pose and the releasing job.
     outcome: Option<(herb_sim::PlacementOutcome, u32, [f32; 4], u64)>,
 }
@@ -96,9 +98,24 @@ fn world_thread(
             return;
         }
     };
-    let snapshot = |w: &PackingWorld, outcome| {
+    let snapshot = |w: &mut PackingWorld, outcome| {
+        let mut placed = [SimObject::default(); MAX_JOB_OBJECTS];
+        for (slot, r) in placed.iter_mut().zip(w.report()) {
+            let bound = r.violation.map_or(0, |(name, _)| {
+                SIM_BOUNDS.iter().position(|b| *b == name).unwrap_or(0) as u32
+            });
+            *slot = SimObject {
+                object_type: r.ty.0 as u32,
+                bound,
+                over_m: r.violation.map_or(0.0, |v| v.1),
+                yaw_rad: r.yaw,
+                lo: r.lo,
+                hi: r.hi,
+            };
+        }
         let hm = w.heightmap();
         Released {
+            placed,
             stamp_ns: monotonic_ns(),
             heightmap: hm.data().to_vec(),
             nx: hm.spec().nx as u32,
@@ -108,13 +125,13 @@ fn world_thread(
             outcome,
         }
     };
-    let _ = tx.send(Ok(snapshot(&world, None)));
+    let _ = tx.send(Ok(snapshot(&mut world, None)));
     for msg in rx {
         let (ty, pose, job_id) = match msg {
             ToWorld::Release(ty, pose, job_id) => (ty, pose, job_id),
             ToWorld::Reset => {
                 world.reset();
-                let _ = tx.send(Ok(snapshot(&world, None)));
+                let _ = tx.send(Ok(snapshot(&mut world, None)));
                 continue;
             }
         };
@@ -131,7 +148,7 @@ fn world_thread(
         match world.place_pose(ty, pose) {
             Ok(o) => {
                 let _ = tx.send(Ok(snapshot(
-                    &world,
+                    &mut world,
                     Some((o, ty.0 as u32, release, job_id)),
                 )));
             }
@@ -397,6 +414,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
                             max_limit_excess_rad: sim.max_excess,
                             commands: arm.joint.received,
                             commands_rejected: arm.joint.rejected,
+                            placed: r.placed,
                         };
                         let _ = out_pub.send_copy(m);
                         sim.last_outcome = Some(m);

@@ -600,7 +600,8 @@ fn a_second_daemon_on_a_prefix_in_use_refuses_to_start() {
     let (_lb, first) = start_cell(&dir, &cfg);
     // Up once it has said which policy it runs (its start-up line).
     let t0 = Instant::now();
-    while !std::fs::read_to_string(dir.join("herbd.log")).is_ok_and(|l| l.contains("Hz, prefix")) {
+    while !std::fs::read_to_string(dir.join("herbd.log")).is_ok_and(|l| l.contains("event=start "))
+    {
         assert!(
             t0.elapsed() < Duration::from_secs(30),
             "herbd did not start"
@@ -901,4 +902,148 @@ fn a_job_cancelled_mid_motion_brakes_retreats_and_the_next_job_runs() {
         next.wait_for(Duration::from_secs(150)).success(),
         "the next job runs"
     );
+}
+
+/// herbd killed with SIGKILL while it carries an object (issue 16, item 2). Restarted on the same
+/// state directory, it reports the unfinished job from its journal, waits for fresh inputs,
+/// places the held object where it was decided and completes the job: every object is released
+/// into the box exactly once, and the journal is gone at the end. A corrupt journal is then
+/// reported and set aside, and herbd starts and serves.
+#[test]
+fn a_job_survives_herbd_killed_mid_motion() {
+    use herb_ipc::{Fault, GripperState, Services, SimOutcome, Status, StatusEvent};
+    let (dir, prefix, cfg) = setup("crash");
+    let cfg_s = cfg.to_str().unwrap();
+    let journal = dir.join("state").join(herb_daemon::journal::FILE);
+    let (_lb, mut hd) = start_cell(&dir, &cfg);
+    let services = Services::new(&prefix).unwrap();
+    let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
+    let status = bus.subscriber::<Status>(&services.status()).unwrap();
+    let grip = bus
+        .subscriber::<GripperState>(&services.gripper_state())
+        .unwrap();
+    let outcomes = bus
+        .subscriber::<SimOutcome>(&services.sim_outcome())
+        .unwrap();
+    let mut ctl = pack_objects(&dir, &prefix, "003,005,011", 300, false);
+    let mut events: Vec<Status> = Vec::new();
+    let mut released: Vec<SimOutcome> = Vec::new();
+    let drain = |events: &mut Vec<Status>, released: &mut Vec<SimOutcome>| {
+        while let Ok(Some(s)) = status.receive() {
+            if s.payload().event != StatusEvent::Heartbeat as u32 {
+                events.push(*s.payload());
+            }
+        }
+        while let Ok(Some(o)) = outcomes.receive() {
+            released.push(*o.payload());
+        }
+    };
+    // Object 2 is decided and then grasped: kill herbd while the arm carries it.
+    let t0 = Instant::now();
+    let decided_second = |e: &[Status]| {
+        e.iter()
+            .any(|s| s.event == StatusEvent::Decided as u32 && s.object_index == 1)
+    };
+    loop {
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "object 2 not grasped: {events:?}"
+        );
+        drain(&mut events, &mut released);
+        let mut holding = false;
+        while let Ok(Some(g)) = grip.receive() {
+            holding = g.payload().holding == 1;
+        }
+        if decided_second(&events) && holding {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    std::thread::sleep(Duration::from_millis(400));
+    hd.signal(libc::SIGKILL);
+    hd.wait_for(Duration::from_secs(5));
+    drain(&mut events, &mut released);
+    let job_id = events[0].job_id;
+    let before = std::fs::read_to_string(&journal).expect("the journal of the killed job");
+    assert!(before.contains("\"holding\": true"), "{before}");
+    assert!(ctl.wait_for(Duration::from_secs(10)).code() != Some(0));
+
+    // The restart takes the job up.
+    let mut hd2 = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd2.log"));
+    let t0 = Instant::now();
+    while !events
+        .iter()
+        .any(|s| s.job_id == job_id && s.event == StatusEvent::JobDone as u32)
+    {
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "the job did not complete after the restart: {events:?}"
+        );
+        drain(&mut events, &mut released);
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(1500)); // the last release settles
+    drain(&mut events, &mut released);
+    let log = std::fs::read_to_string(dir.join("herbd2.log")).unwrap();
+    assert!(
+        log.contains(&format!("event=job_recovered job={job_id} action=resume")),
+        "{log}"
+    );
+    let after_restart: Vec<(u32, u32)> = events
+        .iter()
+        .skip_while(|s| s.fault != Fault::Restarted as u32)
+        .map(|s| (s.event, s.object_index))
+        .collect();
+    assert_eq!(
+        after_restart.first(),
+        Some(&(StatusEvent::Fault as u32, 1)),
+        "{events:?}"
+    );
+    assert!(
+        after_restart.contains(&(StatusEvent::Resumed as u32, 1)),
+        "{events:?}"
+    );
+    // Every object released into the box once, by this job.
+    let mine: Vec<&SimOutcome> = released.iter().filter(|o| o.job_id == job_id).collect();
+    let mut types: Vec<u32> = mine.iter().map(|o| o.object_type).collect();
+    types.sort_unstable();
+    let catalog =
+        herb_sim::Catalog::builtin(&herb_sim::paths::MeshSource::None("ids only".into())).unwrap();
+    let mut want: Vec<u32> = ["003", "005", "011"]
+        .iter()
+        .map(|id| catalog.by_id(id).unwrap().0 as u32)
+        .collect();
+    want.sort_unstable();
+    assert_eq!(types, want, "each object released once");
+    assert_eq!(mine.last().unwrap().objects, 3);
+    let done = events
+        .iter()
+        .find(|s| s.event == StatusEvent::JobDone as u32)
+        .unwrap();
+    assert_eq!((done.objects_done, done.objects_total), (3, 3));
+    // The journal ends with the job.
+    let t0 = Instant::now();
+    while journal.exists() {
+        assert!(t0.elapsed() < Duration::from_secs(2), "journal left behind");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+
+    // A corrupt journal: reported, set aside, and herbd serves.
+    hd2.signal(libc::SIGTERM);
+    assert!(hd2.wait_for(Duration::from_secs(10)).success());
+    std::fs::write(&journal, b"{\"format\": \"herb-job-jour").unwrap();
+    let _hd3 = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd3.log"));
+    let mut ctl = pack_objects(&dir, &prefix, "003", 120, false);
+    assert!(ctl.wait_for(Duration::from_secs(120)).success());
+    let log = std::fs::read_to_string(dir.join("herbd3.log")).unwrap();
+    assert!(
+        log.contains("event=journal_set_aside") && log.contains("corrupt or truncated"),
+        "{log}"
+    );
+    let aside: Vec<_> = std::fs::read_dir(dir.join("state"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+        .filter(|n| n.starts_with("job.json.bad-"))
+        .collect();
+    assert_eq!(aside.len(), 1, "{aside:?}");
 }

@@ -107,7 +107,7 @@ fn herbd_speaks_the_notify_protocol_and_the_watchdog_follows_the_loop() {
     let log = std::fs::read_to_string(dir.join("herbd.log")).unwrap_or_default();
     assert!(st.success(), "herbd exited with {st:?}; log:\n{log}");
     assert!(
-        !log.contains("sd_notify"),
+        !log.contains("event=notify_fail"),
         "no notification should have failed; log:\n{log}"
     );
 }
@@ -140,7 +140,7 @@ fn a_failing_notify_socket_is_logged_once_and_herbd_runs_on() {
     assert!(st.success(), "herbd exited with {st:?}; log:\n{log}");
     let first_failures: Vec<&str> = log
         .lines()
-        .filter(|l| l.contains("sd_notify") && l.contains("failed:"))
+        .filter(|l| l.contains("event=notify_failed "))
         .collect();
     // READY=1, WATCHDOG=1 and STOPPING=1 each fail; each is logged once.
     for notice in ["READY=1", "WATCHDOG=1", "STOPPING=1"] {
@@ -153,11 +153,11 @@ fn a_failing_notify_socket_is_logged_once_and_herbd_runs_on() {
     // The final report counts the watchdog's many failures.
     let counted = log
         .lines()
-        .find(|l| l.contains("sd_notify WATCHDOG=1 notifications failed"))
+        .find(|l| l.contains("event=notify_failures notice=\"WATCHDOG=1\""))
         .unwrap_or_else(|| panic!("no failure count at the end; log:\n{log}"));
     let n: u64 = counted
         .split_whitespace()
-        .find_map(|w| w.parse().ok())
+        .find_map(|w| w.strip_prefix("failed=")?.parse().ok())
         .unwrap();
     assert!(n > 10, "watchdog failures counted: {n}");
 }

@@ -57,7 +57,7 @@ pub fn fast_limits() -> JointLimits {
 }
 
 /// A herbd configuration for tests in `dir`: a unique prefix, placement `policy` (`blbf` or an
-/// ONNX path), [`fast_limits`], 1 MB run-log segments.
+/// ONNX path), [`fast_limits`], 1 MB run-log segments, the job journal in `dir/state`.
 pub fn config(dir: &Path, prefix: &str, policy: &str) -> PathBuf {
     #[derive(serde::Serialize)]
     struct Limits {
@@ -78,8 +78,11 @@ policy = "{policy}"
 [record]
 segment_mb = 1
 keep_mb = 256
+[journal]
+dir = "{state}"
 {limits}"#,
-        seq = repo().join("models/sequence.json").display()
+        seq = repo().join("models/sequence.json").display(),
+        state = dir.join("state").display()
     );
     std::fs::write(&p, text).unwrap();
     p

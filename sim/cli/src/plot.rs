@@ -1,7 +1,7 @@
 //! Table I plots: compactness per step and a histogram of objects packed, per method.
 //!
 //! Text needs a TrueType font, read at run time from `$HERB_FONT` or the DejaVu Sans path of
-//! Debian/Ubuntu (`fonts-dejavu-core`).
+//! Debian/Ubuntu (`fonts-dejavu-core`): `herb_sim::picture::register_font`.
 
 use herb_sim::eval::EpisodeResult;
 use plotters::prelude::*;
@@ -9,22 +9,9 @@ use std::path::{Path, PathBuf};
 
 type Results = [(String, Vec<Result<EpisodeResult, String>>)];
 
-const DEFAULT_FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
-
-fn register_font() -> Result<(), String> {
-    let path = std::env::var("HERB_FONT").unwrap_or_else(|_| DEFAULT_FONT.into());
-    let bytes = std::fs::read(&path).map_err(|e| {
-        format!("font {path}: {e} (set HERB_FONT to a .ttf file, or install fonts-dejavu-core)")
-    })?;
-    // plotters keeps the font for the life of the process.
-    let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
-    plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
-        .map_err(|_| format!("font {path}: not a usable TrueType font"))
-}
-
 /// Writes `compactness_per_step.png` and `objects_packed.png` into `dir`.
 pub fn write_plots(dir: &Path, results: &Results) -> Result<Vec<PathBuf>, String> {
-    register_font()?;
+    herb_sim::picture::register_font()?;
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let a = dir.join("compactness_per_step.png");
     compactness_per_step(&a, results).map_err(|e| format!("{}: {e}", a.display()))?;

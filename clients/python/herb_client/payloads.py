@@ -1,0 +1,263 @@
+"""HERB's IPC payloads as ``ctypes`` structures, field for field as ``ipc/CONTRACT.md`` lists them
+(natural alignment, no packing; little-endian x86-64). Each top-level payload carries its
+iceoryx2 type name ``herb::v1::<Name>`` (``type_name()``), which iceoryx2 checks with the size
+and alignment when a service is opened. ``tests/test_layout.py`` compares all of it, and the
+codes below, with the contract's generated tables.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import enum
+
+PROTOCOL_VERSION = 1
+DOF = 7
+HEIGHTMAP_MAX_CELLS = 224 * 224
+MAX_JOB_OBJECTS = 64
+NO_OBJECT = 0xFFFF_FFFF
+
+_u16, _u32, _u64 = ctypes.c_uint16, ctypes.c_uint32, ctypes.c_uint64
+_f32, _f64 = ctypes.c_float, ctypes.c_double
+
+
+class _Payload(ctypes.Structure):
+    """A top-level payload: iceoryx2 registers it under ``herb::v1::<class name>``."""
+
+    @classmethod
+    def type_name(cls) -> str:
+        return f"herb::v1::{cls.__name__}"
+
+
+class Header(ctypes.Structure):
+    _fields_ = [
+        ("version", _u32),
+        ("reserved", _u32),
+        ("seq", _u64),
+        ("stamp_ns", _u64),
+    ]
+
+    @classmethod
+    def type_name(cls) -> str:
+        return "herb::v1::Header"
+
+
+class JointState(_Payload):
+    _fields_ = [("header", Header), ("position", _f64 * DOF), ("velocity", _f64 * DOF)]
+
+
+class JointCommand(_Payload):
+    _fields_ = [
+        ("header", Header),
+        ("position", _f64 * DOF),
+        ("velocity", _f64 * DOF),
+        ("acceleration", _f64 * DOF),
+    ]
+
+
+class GripperCommand(_Payload):
+    _fields_ = [("header", Header), ("job_id", _u64), ("action", _u32), ("object_type", _u32)]
+
+
+class GripperState(_Payload):
+    _fields_ = [
+        ("header", Header),
+        ("closed", _u32),
+        ("holding", _u32),
+        ("object_type", _u32),
+        ("reserved", _u32),
+    ]
+
+
+class HeightmapFrame(_Payload):
+    _fields_ = [
+        ("header", Header),
+        ("nx", _u32),
+        ("ny", _u32),
+        ("cell_m", _f32),
+        ("objects", _u32),
+        ("data", _f32 * HEIGHTMAP_MAX_CELLS),
+    ]
+
+
+class CancelJobRequest(_Payload):
+    _fields_ = [("header", Header), ("job_id", _u64)]
+
+
+class CancelJobReply(_Payload):
+    _fields_ = [("header", Header), ("job_id", _u64), ("accepted", _u32), ("reason", _u32)]
+
+
+class Status(_Payload):
+    _fields_ = [
+        ("header", Header),
+        ("job_id", _u64),
+        ("event", _u32),
+        ("state", _u32),
+        ("fault", _u32),
+        ("objects_total", _u32),
+        ("objects_done", _u32),
+        ("object_index", _u32),
+        ("object_type", _u32),
+        ("reserved", _u32),
+        ("pose", _f32 * 4),
+        ("decision_ns", _u64),
+        ("cycles", _u64),
+        ("deadline_misses", _u64),
+        ("rejected_inputs", _u64),
+        ("max_cycle_ns", _u64),
+    ]
+
+
+class PackJobRequest(_Payload):
+    _fields_ = [
+        ("header", Header),
+        ("job_id", _u64),
+        ("count", _u32),
+        ("reserved", _u32),
+        ("objects", _u16 * MAX_JOB_OBJECTS),
+    ]
+
+
+class PackJobReply(_Payload):
+    _fields_ = [
+        ("header", Header),
+        ("job_id", _u64),
+        ("accepted", _u32),
+        ("reason", _u32),
+        ("detail", _u32),
+        ("reserved", _u32),
+    ]
+
+
+class SimReset(_Payload):
+    _fields_ = [("header", Header)]
+
+
+class SimObject(ctypes.Structure):
+    _fields_ = [
+        ("object_type", _u32),
+        ("bound", _u32),
+        ("over_m", _f32),
+        ("yaw_rad", _f32),
+        ("lo", _f32 * 3),
+        ("hi", _f32 * 3),
+    ]
+
+    @classmethod
+    def type_name(cls) -> str:
+        return "herb::v1::SimObject"
+
+
+class SimOutcome(_Payload):
+    _fields_ = [
+        ("header", Header),
+        ("job_id", _u64),
+        ("objects", _u32),
+        ("object_type", _u32),
+        ("all_inside", _u32),
+        ("stable", _u32),
+        ("tilt_rad", _f32),
+        ("compactness", _f32),
+        ("release", _f32 * 4),
+        ("max_limit_excess_rad", _f64),
+        ("commands", _u64),
+        ("commands_rejected", _u64),
+        ("placed", SimObject * MAX_JOB_OBJECTS),
+    ]
+
+
+#: Every payload of the contract, by name.
+PAYLOADS = {
+    c.__name__: c
+    for c in (
+        Header,
+        JointState,
+        JointCommand,
+        GripperCommand,
+        GripperState,
+        HeightmapFrame,
+        CancelJobRequest,
+        CancelJobReply,
+        Status,
+        PackJobRequest,
+        PackJobReply,
+        SimReset,
+        SimOutcome,
+        SimObject,
+    )
+}
+
+
+class GripperAction(enum.IntEnum):
+    Open = 0
+    Close = 1
+
+
+class JobState(enum.IntEnum):
+    Idle = 0
+    Running = 1
+    Braking = 2
+    Faulted = 3
+    Done = 4
+    Failed = 5
+    Cancelled = 6
+
+
+class StatusEvent(enum.IntEnum):
+    Heartbeat = 0
+    Accepted = 1
+    Decided = 2
+    Placed = 3
+    Fault = 4
+    Braked = 5
+    Resumed = 6
+    JobDone = 7
+    JobFailed = 8
+    Shutdown = 9
+    JobCancelled = 10
+
+
+class Fault(enum.IntEnum):
+    # "None" is a Python keyword: the code-0 member is named NONE (the contract's `None`).
+    NONE = 0
+    JointStateTimeout = 1
+    GripperStateTimeout = 2
+    HeightmapTimeout = 3
+    Gripper = 4
+    Unreachable = 5
+    Decision = 6
+    Motion = 7
+    Stop = 8
+    ObjectLost = 9
+    NoFeasiblePlacement = 10
+    Restarted = 11
+
+
+class RejectReason(enum.IntEnum):
+    NONE = 0
+    Busy = 1
+    Empty = 2
+    TooMany = 3
+    UnknownObject = 4
+    Malformed = 5
+    ShuttingDown = 6
+    NotReady = 7
+    NoSuchJob = 8
+
+
+#: Names of the success volume's bounds by ``SimObject.bound`` code (the contract's `SimBound`).
+SimBound = ("inside", "-x wall", "+x wall", "-y wall", "+y wall", "floor", "top")
+
+#: Every code table of the contract, by enum name.
+CODES = {
+    "GripperAction": GripperAction,
+    "JobState": JobState,
+    "StatusEvent": StatusEvent,
+    "Fault": Fault,
+    "RejectReason": RejectReason,
+}
+
+
+def code_name(member: enum.IntEnum) -> str:
+    """The contract's name of a code (``None`` for the ``NONE`` members)."""
+    return "None" if member.name == "NONE" else member.name

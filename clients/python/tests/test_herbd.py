@@ -1,0 +1,98 @@
+"""The Python client against a real herbd and herb-loopback (issue 16, item 5): a job is
+submitted and followed to its end, a heightmap is read as a numpy view into shared memory (no
+copy, read-only), and a bad job is refused with herbd's reason.
+
+The binaries come from ``$HERB_BIN_DIR`` (default ``target/debug``, which ``cargo test
+--workspace`` builds); each test run uses its own IPC prefix.
+"""
+
+import os
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from herb_client import Herb, JobState, Rejected, RejectReason, StatusEvent, catalog_ids
+from herb_client.payloads import HeightmapFrame
+
+REPO = Path(__file__).resolve().parents[3]
+BIN = Path(os.environ.get("HERB_BIN_DIR", REPO / "target" / "debug"))
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory):
+    for exe in ("herbd", "herb-loopback"):
+        if not (BIN / exe).is_file():
+            pytest.fail(f"{BIN / exe} is missing: build the workspace first (cargo test --workspace)")
+    prefix = f"py{os.getpid()}"
+    logs = tmp_path_factory.mktemp("cell")
+    procs = []
+    for exe in ("herb-loopback", "herbd"):
+        log = open(logs / f"{exe}.log", "w")
+        procs.append(
+            subprocess.Popen(
+                [str(BIN / exe), "--prefix", prefix],
+                cwd=REPO,
+                stdout=subprocess.DEVNULL,
+                stderr=log,
+            )
+        )
+    try:
+        herb = Herb(prefix, timeout_s=60.0)
+        yield herb, logs
+    finally:
+        for proc in reversed(procs):
+            proc.terminate()
+            try:
+                proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+
+
+def test_a_job_is_submitted_and_followed_to_its_end(cell):
+    herb, logs = cell
+    ids = catalog_ids(REPO / "models" / "objects.toml")
+    objects = [ids.index("003"), ids.index("005")]
+    result = herb.pack(objects, timeout_s=300.0)
+    events = [StatusEvent(s.event) for s in result.statuses if s.event != StatusEvent.Heartbeat]
+    assert result.ok, (events, (logs / "herbd.log").read_text())
+    assert events[0] == StatusEvent.Accepted
+    assert events.count(StatusEvent.Decided) == 2
+    assert events.count(StatusEvent.Placed) == 2
+    assert events[-1] == StatusEvent.JobDone
+    assert result.placed == 2 and JobState(result.final.state) == JobState.Done
+    # Heartbeats of the running job carry the loop's counters.
+    beats = [s for s in result.statuses if s.event == StatusEvent.Heartbeat]
+    assert beats and beats[-1].cycles > 0
+    outcomes = [o for o in herb.outcomes() if o.job_id == result.job_id]
+    assert outcomes and outcomes[-1].objects == 2
+
+
+def test_a_heightmap_is_a_read_only_view_into_shared_memory(cell):
+    herb, _ = cell
+    hm = herb.heightmap(timeout_s=10.0)
+    sample_address = hm._sample.payload_ptr
+    assert hm.address == sample_address + HeightmapFrame.data.offset, "no copy"
+    assert not hm.cells.flags.writeable
+    assert hm.cells.dtype == np.float32 and hm.cells.ndim == 2
+    assert np.isfinite(hm.cells).all() and hm.cells.min() >= -0.05
+    kept = hm.copy()
+    hm.release()
+    assert kept.shape[0] > 0
+
+
+def test_a_bad_job_is_refused_with_its_reason(cell):
+    herb, _ = cell
+    with pytest.raises(Rejected) as e:
+        herb.submit([9999])
+    assert e.value.reason == RejectReason.UnknownObject
+    with pytest.raises(Rejected) as e:
+        herb.submit([])
+    assert e.value.reason == RejectReason.Empty
+    # And the daemon is still there to take the next one.
+    t0 = time.monotonic()
+    hm = herb.heightmap(timeout_s=10.0)
+    hm.release()
+    assert time.monotonic() - t0 < 10.0
