@@ -21,8 +21,8 @@ pub struct WatchView {
     pub prefix: String,
     /// The newest status, and when it arrived (s, the caller's clock).
     last: Option<(Status, f64)>,
-    /// The first heartbeat's cycle count and time, for the loop rate.
-    first: Option<(u64, f64)>,
+    /// The first status's cycle count and stamp (ns), for the loop rate.
+    first: Option<(u64, u64)>,
     /// The current (or last) job's latest decision.
     decided: Option<Status>,
     /// The latest simulated outcome.
@@ -49,7 +49,7 @@ impl WatchView {
             return;
         }
         if self.first.is_none() {
-            self.first = Some((s.cycles, t));
+            self.first = Some((s.cycles, s.header.stamp_ns));
         }
         self.last = Some((*s, t));
         let Some(ev) = StatusEvent::from_code(s.event) else {
@@ -175,8 +175,10 @@ impl WatchView {
             );
         }
         // Loop statistics.
-        let rate = self.first.and_then(|(c0, t0)| {
-            (at - t0 > 0.5).then(|| (s.cycles.saturating_sub(c0)) as f64 / (at - t0))
+        // Cycles over herbd's own stamps (a status from history arrives late).
+        let rate = self.first.and_then(|(c0, st0)| {
+            let dt = s.header.stamp_ns.saturating_sub(st0) as f64 / 1e9;
+            (dt > 0.5).then(|| s.cycles.saturating_sub(c0) as f64 / dt)
         });
         let _ = writeln!(
             out,
@@ -255,7 +257,7 @@ mod tests {
 
     fn status(event: StatusEvent, cycles: u64) -> Status {
         Status {
-            header: Header::at(cycles + 1, 1_000 + cycles),
+            header: Header::at(cycles + 1, cycles * 1_000_000),
             job_id: 42,
             event: event as u32,
             state: JobState::Running as u32,

@@ -87,7 +87,7 @@ fn draw(path: &Path, title: &str, hm: &Heightmap, objects: &[PictureObject]) -> 
     root.fill(&WHITE)?;
     let root = root.titled(title, ("sans-serif", 22))?;
     let (top, side) = root.split_vertically(640);
-    let (top_map, scale) = top.split_horizontally(880);
+    let (top_map, scale) = top.split_horizontally(860);
     let max_m = SUCCESS_TOP_Z;
     let (mx, my) = (BOX_HALF_X + 0.06, BOX_HALF_Y + 0.05);
 
@@ -103,6 +103,7 @@ fn draw(path: &Path, title: &str, hm: &Heightmap, objects: &[PictureObject]) -> 
         .disable_mesh()
         .x_desc("x (m)")
         .y_desc("y (m)")
+        .label_style(("sans-serif", 14))
         .draw()?;
     let spec = *hm.spec();
     let half = spec.cell / 2.0;
@@ -143,12 +144,14 @@ fn draw(path: &Path, title: &str, hm: &Heightmap, objects: &[PictureObject]) -> 
         .margin_top(40)
         .margin_bottom(50)
         .margin_right(10)
-        .y_label_area_size(60)
+        .y_label_area_size(75)
         .build_cartesian_2d(0f32..1f32, 0f32..max_m)?;
     bar.configure_mesh()
         .disable_mesh()
         .disable_x_axis()
         .y_desc("height (m)")
+        .y_label_style(("sans-serif", 14))
+        .axis_desc_style(("sans-serif", 14))
         .draw()?;
     let steps = 100;
     bar.draw_series((0..steps).map(|i| {
@@ -178,6 +181,7 @@ fn draw(path: &Path, title: &str, hm: &Heightmap, objects: &[PictureObject]) -> 
         .disable_mesh()
         .x_desc("x (m)")
         .y_desc("z (m)")
+        .label_style(("sans-serif", 14))
         .draw()?;
     for o in objects {
         let colour = if o.outside.is_some() { RED } else { BLUE };
@@ -215,6 +219,39 @@ fn draw(path: &Path, title: &str, hm: &Heightmap, objects: &[PictureObject]) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_pack_picture_is_drawn_with_an_object_outside() {
+        use crate::heightmap::GridSpec;
+        let spec = GridSpec::for_box(0.005).unwrap();
+        let mut hm = Heightmap::new(spec);
+        for (i, v) in hm.data_mut().iter_mut().enumerate() {
+            *v = (i % spec.nx) as f32 / spec.nx as f32 * 0.2;
+        }
+        let objects = [
+            PictureObject {
+                label: "1 003".into(),
+                lo: [-0.15, -0.1, 0.0],
+                hi: [-0.05, 0.0, 0.2],
+                outside: None,
+            },
+            PictureObject {
+                label: "2 011 (fixture)".into(),
+                lo: [0.1, 0.0, 0.0],
+                hi: [0.19, 0.05, 0.04],
+                outside: Some(("+x wall".into(), 0.017)),
+            },
+        ];
+        let path = std::env::temp_dir().join(format!("herb-picture-{}.png", std::process::id()));
+        write_pack_picture(&path, "FAILED: fixture", &hm, &objects).unwrap();
+        let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&path).unwrap()));
+        let info = decoder.read_info().unwrap();
+        assert_eq!((info.info().width, info.info().height), (1000, 1040));
+        std::fs::remove_file(&path).unwrap();
+        // A path that cannot be written is an error naming it, not a panic.
+        let bad = Path::new("/proc/herb-no/pack.png");
+        assert!(write_pack_picture(bad, "x", &hm, &objects).unwrap_err().contains("/proc/herb-no"));
+    }
 
     #[test]
     fn the_colour_scale_runs_from_dark_to_light_and_clamps() {

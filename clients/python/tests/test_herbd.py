@@ -55,6 +55,7 @@ def test_a_job_is_submitted_and_followed_to_its_end(cell):
     herb, logs = cell
     ids = catalog_ids(REPO / "models" / "objects.toml")
     objects = [ids.index("003"), ids.index("005")]
+    herb.outcomes()  # subscribe to the loopback's outcomes before the job
     result = herb.pack(objects, timeout_s=300.0)
     events = [StatusEvent(s.event) for s in result.statuses if s.event != StatusEvent.Heartbeat]
     assert result.ok, (events, (logs / "herbd.log").read_text())
@@ -66,8 +67,15 @@ def test_a_job_is_submitted_and_followed_to_its_end(cell):
     # Heartbeats of the running job carry the loop's counters.
     beats = [s for s in result.statuses if s.event == StatusEvent.Heartbeat]
     assert beats and beats[-1].cycles > 0
-    outcomes = [o for o in herb.outcomes() if o.job_id == result.job_id]
-    assert outcomes and outcomes[-1].objects == 2
+    # The simulated box: both objects released by this job (the last one settles after the
+    # job's end).
+    outcomes = []
+    t0 = time.monotonic()
+    while len(outcomes) < 2 and time.monotonic() - t0 < 5.0:
+        outcomes += [o for o in herb.outcomes() if o.job_id == result.job_id]
+        time.sleep(0.05)
+    assert [o.objects for o in outcomes] == [1, 2]
+    assert sorted(o.object_type for o in outcomes) == sorted(objects)
 
 
 def test_a_heightmap_is_a_read_only_view_into_shared_memory(cell):

@@ -376,7 +376,7 @@ fn pack(
                     o.hi[2]
                 )
             };
-            println!("  {who:>10}: {:<28} {where_}", name(catalog, o.object_type));
+            println!("  object {who:<3} {:<28} {where_}", name(catalog, o.object_type));
         }
     }
     if let (Some(p), Some(hm)) = (picture, &latest_frame) {
@@ -389,8 +389,11 @@ fn pack(
                 outside: (o.bound != 0).then(|| (o.bound_name().to_string(), o.over_m)),
             })
             .collect();
-        write_pack_picture(p, &verdict, hm, &objects)?;
-        println!("picture of the final pack: {}", p.display());
+        // The job's result stands whether or not the picture can be drawn.
+        match write_pack_picture(p, &verdict, hm, &objects) {
+            Ok(()) => println!("picture of the final pack: {}", p.display()),
+            Err(e) => eprintln!("herbctl: the picture was not written: {e}"),
+        }
     }
     let mut d = decision_ms.clone();
     let summary = serde_json::json!({
