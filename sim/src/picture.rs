@@ -244,13 +244,18 @@ mod tests {
         ];
         let path = std::env::temp_dir().join(format!("herb-picture-{}.png", std::process::id()));
         write_pack_picture(&path, "FAILED: fixture", &hm, &objects).unwrap();
-        let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&path).unwrap()));
+        let decoder =
+            png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&path).unwrap()));
         let info = decoder.read_info().unwrap();
         assert_eq!((info.info().width, info.info().height), (1000, 1040));
         std::fs::remove_file(&path).unwrap();
         // A path that cannot be written is an error naming it, not a panic.
         let bad = Path::new("/proc/herb-no/pack.png");
-        assert!(write_pack_picture(bad, "x", &hm, &objects).unwrap_err().contains("/proc/herb-no"));
+        assert!(
+            write_pack_picture(bad, "x", &hm, &objects)
+                .unwrap_err()
+                .contains("/proc/herb-no")
+        );
     }
 
     #[test]

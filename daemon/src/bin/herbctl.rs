@@ -376,7 +376,10 @@ fn pack(
                     o.hi[2]
                 )
             };
-            println!("  object {who:<3} {:<28} {where_}", name(catalog, o.object_type));
+            println!(
+                "  object {who:<3} {:<28} {where_}",
+                name(catalog, o.object_type)
+            );
         }
     }
     if let (Some(p), Some(hm)) = (picture, &latest_frame) {
@@ -431,7 +434,7 @@ fn pack(
         println!("{summary}");
     } else {
         println!(
-            "summary: {placed}/{total} placed, decision p50 {:.3} ms (max {:.3}), loop {} cycles, {} deadline misses, worst cycle {:.1} us, faults {:?}",
+            "statistics: decision p50 {:.3} ms (max {:.3}), loop {} cycles, {} deadline misses, worst cycle {:.1} us, faults {:?}",
             pct(&mut d, 0.5),
             pct(&mut d, 1.0),
             s.cycles,
