@@ -173,7 +173,7 @@ impl Cell {
         c.job.job_request(&r, c.now, &mut c.fx);
         c.ticks(100);
         assert!(
-            c.fx.out.iter().any(|o| *o == Out::Plan("plan")),
+            c.fx.out.contains(&Out::Plan("plan")),
             "the fixture job is planned"
         );
         c.fx.out.clear();
