@@ -592,7 +592,7 @@ fn watch(
                 print!("{text}");
             } else {
                 // Home, clear, draw.
-                print!("\x1b[H\x1b[2J{text}(Ctrl-C quits)\n");
+                println!("\x1b[H\x1b[2J{text}(Ctrl-C quits)");
             }
             use std::io::Write;
             let _ = std::io::stdout().flush();
