@@ -110,11 +110,13 @@ const ROBOT_SIDE_NEVER: &[&str] = &["tract-onnx", "herb-decide", "herb-daemon", 
 /// empty since the loopback left herb-daemon.
 const PENDING: &[(&str, &str)] = &[];
 
-/// Package name -> names of its normal and build dependencies, as cargo resolves them.
+/// Package name -> names of its normal and build dependencies, as cargo resolves them. Not
+/// `--offline`: `cargo metadata` reads the manifests of every platform's packages (Windows-only
+/// ones included), which a Linux build never downloads, so a fresh cargo home must fetch them.
 fn resolved_graph() -> BTreeMap<String, BTreeSet<String>> {
     let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
     let out = Command::new(env!("CARGO"))
-        .args(["metadata", "--format-version", "1", "--offline"])
+        .args(["metadata", "--format-version", "1"])
         .current_dir(root)
         .output()
         .expect("cargo metadata runs");
