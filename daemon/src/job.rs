@@ -767,7 +767,8 @@ impl Job {
         self.count = (r.count as usize).min(MAX_JOB_OBJECTS);
         self.objects = r.objects;
         self.ordered = r.ordered;
-        self.order = r.order;
+        // Until the planner answers, statuses name the current object from the submitted list.
+        self.order = if r.ordered { r.order } else { r.objects };
         self.index = (r.index as usize).min(self.count);
         self.done = (r.done as usize).min(self.index);
         self.holding = r.holding;
@@ -870,7 +871,7 @@ impl Job {
     }
 
     fn current_type(&self) -> u32 {
-        if self.ordered && self.index < self.count {
+        if self.index < self.count {
             self.order[self.index] as u32
         } else {
             NO_OBJECT

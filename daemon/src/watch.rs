@@ -3,7 +3,7 @@
 //! state; [`WatchView::render`] draws it as text, a pure function of the state and the time,
 //! so that it is tested without a terminal.
 
-use herb_ipc::{Fault, JobState, NO_OBJECT, SimOutcome, Status, StatusEvent};
+use herb_ipc::{Fault, JobState, NO_OBJECT, SimObject, SimOutcome, Status, StatusEvent};
 use std::collections::VecDeque;
 use std::fmt::Write;
 
@@ -206,21 +206,7 @@ impl WatchView {
             self.faults
         );
         if let Some(o) = &self.outcome {
-            let outside: Vec<String> = o
-                .objects_listed()
-                .iter()
-                .enumerate()
-                .filter(|(_, so)| so.bound != 0)
-                .map(|(i, so)| {
-                    format!(
-                        "object {} ({}) over the {} by {:.0} mm",
-                        i + 1,
-                        name(so.object_type),
-                        so.bound_name(),
-                        so.over_m * 1000.0
-                    )
-                })
-                .collect();
+            let outside = outside_objects(o, name);
             let _ = writeln!(
                 out,
                 "box (simulated): {} objects, {}, compactness {:.3}",
@@ -239,6 +225,24 @@ impl WatchView {
         }
         out
     }
+}
+
+/// How `o` crosses the success volume, e.g. `over the +x wall by 8 mm`; `None` when inside.
+pub fn crossing(o: &SimObject) -> Option<String> {
+    (o.bound != 0).then(|| format!("over the {} by {:.0} mm", o.bound_name(), o.over_m * 1000.0))
+}
+
+/// Every object of `outcome` outside the success volume, numbered by its place in the box and
+/// named by `name`, e.g. `object 3 (011) over the +x wall by 8 mm`.
+pub fn outside_objects(outcome: &SimOutcome, name: &dyn Fn(u32) -> String) -> Vec<String> {
+    outcome
+        .objects_listed()
+        .iter()
+        .enumerate()
+        .filter_map(|(i, o)| {
+            crossing(o).map(|c| format!("object {} ({}) {c}", i + 1, name(o.object_type)))
+        })
+        .collect()
 }
 
 /// `HH:MM:SS` UTC of a `std::time::SystemTime`.

@@ -361,20 +361,12 @@ fn pack(
         .unwrap_or_default();
     if !json {
         for (who, o) in &listed {
-            let where_ = if o.bound == 0 {
-                "inside".to_string()
-            } else {
-                format!(
-                    "OUTSIDE: over the {} by {:.0} mm (x {:+.3}..{:+.3}, y {:+.3}..{:+.3}, z {:.3}..{:.3} m)",
-                    o.bound_name(),
-                    o.over_m * 1000.0,
-                    o.lo[0],
-                    o.hi[0],
-                    o.lo[1],
-                    o.hi[1],
-                    o.lo[2],
-                    o.hi[2]
-                )
+            let where_ = match herb_daemon::watch::crossing(o) {
+                None => "inside".to_string(),
+                Some(c) => format!(
+                    "OUTSIDE: {c} (x {:+.3}..{:+.3}, y {:+.3}..{:+.3}, z {:.3}..{:.3} m)",
+                    o.lo[0], o.hi[0], o.lo[1], o.hi[1], o.lo[2], o.hi[2]
+                ),
             };
             println!(
                 "  object {who:<3} {:<28} {where_}",
@@ -464,24 +456,9 @@ fn verdict(
     outcome: Option<&SimOutcome>,
     catalog: &Catalog,
 ) -> String {
-    let outside: Vec<String> = outcome
-        .map(|o| {
-            o.objects_listed()
-                .iter()
-                .enumerate()
-                .filter(|(_, so)| so.bound != 0)
-                .map(|(i, so)| {
-                    format!(
-                        "object {} ({}) over the {} by {:.0} mm",
-                        i + 1,
-                        id_of(catalog, so.object_type),
-                        so.bound_name(),
-                        so.over_m * 1000.0
-                    )
-                })
-                .collect()
-        })
-        .unwrap_or_default();
+    let outside = outcome.map_or_else(Vec::new, |o| {
+        herb_daemon::watch::outside_objects(o, &|t| id_of(catalog, t))
+    });
     let outside_text = if outside.is_empty() {
         String::new()
     } else {
@@ -560,11 +537,7 @@ fn watch(
         .subscriber::<SimOutcome>(&services.sim_outcome())
         .map_err(|e| e.to_string())?;
     let t0 = Instant::now();
-    let label = |t: u32| {
-        let id = id_of(catalog, t);
-        let n = name(catalog, t);
-        if n == "-" { id } else { n }
-    };
+    let label = |t: u32| name(catalog, t);
     let mut view = WatchView::new(&cli.prefix);
     let mut next_draw = 0.0;
     loop {

@@ -98,10 +98,19 @@ fn us(h: &hdrhistogram::Histogram<u64>, q: f64) -> f64 {
     }
 }
 
+/// The histogram's largest value in microseconds (0 when empty).
+fn max_us(h: &hdrhistogram::Histogram<u64>) -> f64 {
+    if h.is_empty() {
+        0.0
+    } else {
+        h.max() as f64 / 1000.0
+    }
+}
+
 fn summary(s: &LoopStats) -> serde_json::Value {
     let h = |h: &hdrhistogram::Histogram<u64>| {
         serde_json::json!({
-            "p50": us(h, 0.5), "p99": us(h, 0.99), "max": if h.is_empty() { 0.0 } else { h.max() as f64 / 1000.0 },
+            "p50": us(h, 0.5), "p99": us(h, 0.99), "max": max_us(h),
             "n": h.len(),
         })
     };
@@ -175,16 +184,6 @@ fn describe(s: &Status) -> Option<String> {
 /// The statistics of one reporting interval as a log line.
 fn stats_line(s: &LoopStats) -> String {
     let f = |h: &hdrhistogram::Histogram<u64>, q: f64| format!("{:.1}", us(h, q));
-    let max = |h: &hdrhistogram::Histogram<u64>| {
-        format!(
-            "{:.1}",
-            if h.is_empty() {
-                0.0
-            } else {
-                h.max() as f64 / 1000.0
-            }
-        )
-    };
     logfmt::line(
         "stats",
         &[
@@ -192,7 +191,7 @@ fn stats_line(s: &LoopStats) -> String {
             ("deadline_misses", &s.misses),
             ("cycle_p50_us", &f(&s.cycle_ns, 0.5)),
             ("cycle_p99_us", &f(&s.cycle_ns, 0.99)),
-            ("cycle_max_us", &max(&s.cycle_ns)),
+            ("cycle_max_us", &format!("{:.1}", max_us(&s.cycle_ns))),
             ("jitter_p99_us", &f(&s.jitter_ns, 0.99)),
             ("decisions", &s.decision_ns.len()),
             ("decision_p99_us", &f(&s.decision_ns, 0.99)),
