@@ -109,6 +109,11 @@ struct EvalArgs {
     /// Reward whose return the lookahead teacher maximises (simple, c, cs<alpha>).
     #[arg(long, default_value = "cs0.6")]
     lookahead_reward: String,
+    /// Objects the lookahead teacher simulates per rollout, the candidate's included (to the
+    /// episode's end when absent): horizon 1 is the candidate's own settling, what a student
+    /// that sees only the next object could at best learn.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    lookahead_horizon: Option<u64>,
     /// Base seed (episode i uses seed + i).
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -366,7 +371,8 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
             ),
             (None, mode) => {
                 let mode = mode.expect("every method without a replay has an order");
-                let rule = m.lattice_rule(&catalog, a.lookahead_k, lookahead_reward, None);
+                let horizon = a.lookahead_horizon.map(|h| h as usize);
+                let rule = m.lattice_rule(&catalog, a.lookahead_k, lookahead_reward, horizon);
                 let results = match rule {
                     _ if m.bc_models(&a.bc_models).is_some() => run_bc_method(
                         &catalog,
@@ -412,7 +418,13 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
                 };
                 // The table names the teacher's k; the CSV keeps the method's name.
                 let shown = match m {
-                    Method::Lookahead => format!("lookahead (teacher, k = {})", a.lookahead_k),
+                    Method::Lookahead => match a.lookahead_horizon {
+                        Some(h) => format!(
+                            "lookahead (teacher, k = {}, horizon {h})",
+                            a.lookahead_k
+                        ),
+                        None => format!("lookahead (teacher, k = {})", a.lookahead_k),
+                    },
                     _ => shown,
                 };
                 (format!("{shown} ({})", mode.name()), mode.name(), results)
