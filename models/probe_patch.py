@@ -116,6 +116,8 @@ def main():
     ap.add_argument("--updates", type=int, default=4000)
     ap.add_argument("--every", type=int, default=1000)
     ap.add_argument("--batch", type=int, default=128)
+    ap.add_argument("--max-k", type=int, default=64,
+                    help="score only the first candidates (BLBF order) of each state")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--margins", default="",
@@ -132,7 +134,8 @@ def main():
     known = ~np.isnan(ret)
     keep = known[:, 0] & (known.sum(1) > 1)
     rows, ret, known = rows[keep], ret[keep], known[keep]
-    k = int(known.sum(1).max())  # the teacher tries the first k candidates
+    # The teacher tries the first k candidates.
+    k = min(int(known.sum(1).max()), a.max_k)
     ret, known = ret[:, :k], known[:, :k]
     n = len(rows)
     if n < 10:
