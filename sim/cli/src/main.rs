@@ -419,10 +419,9 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
                 // The table names the teacher's k; the CSV keeps the method's name.
                 let shown = match m {
                     Method::Lookahead => match a.lookahead_horizon {
-                        Some(h) => format!(
-                            "lookahead (teacher, k = {}, horizon {h})",
-                            a.lookahead_k
-                        ),
+                        Some(h) => {
+                            format!("lookahead (teacher, k = {}, horizon {h})", a.lookahead_k)
+                        }
                         None => format!("lookahead (teacher, k = {})", a.lookahead_k),
                     },
                     _ => shown,

@@ -108,3 +108,52 @@ fn one_herb_row_per_policy() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn the_lookahead_horizon_names_its_row_and_refuses_zero() {
+    let out = herb_sim(&["eval", "--method", "lookahead", "--lookahead-horizon", "0"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--lookahead-horizon"), "{err}");
+
+    let Some(root) = herb_sim::paths::boxed_root_for_tests() else {
+        return;
+    };
+    let dir = std::env::temp_dir().join(format!("herb-eval-horizon-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let s = |p: &Path| p.to_str().unwrap().to_owned();
+    let md = dir.join("t.md");
+    let out = herb_sim(&[
+        "eval",
+        "--boxed",
+        &s(&root),
+        "--method",
+        "lookahead",
+        "--lookahead-k",
+        "2",
+        "--lookahead-horizon",
+        "1",
+        "--limit",
+        "1",
+        "--quiet",
+        "--out",
+        &s(&md),
+        "--csv",
+        &s(&dir.join("t.csv")),
+        "--plots",
+        &s(&dir),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let table = std::fs::read_to_string(&md).unwrap();
+    assert!(
+        table
+            .lines()
+            .any(|l| l.starts_with("| lookahead (teacher, k = 2, horizon 1) (beam3) (ours) |")),
+        "{table}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
