@@ -16,6 +16,34 @@ fn herb_sim(args: &[&str]) -> Output {
         .expect("run herb-sim")
 }
 
+/// `herb-sim eval` on the BoxED episodes at `root` with `args`, its table, CSV and plots written
+/// into `dir`; fails the test if it fails. Returns the table (Markdown) and the CSV.
+fn eval_into(root: &Path, dir: &Path, args: &[&str]) -> (String, String) {
+    let s = |p: &Path| p.to_str().unwrap().to_owned();
+    let (md, csv) = (dir.join("t.md"), dir.join("t.csv"));
+    let mut all = vec!["eval".to_owned(), "--boxed".to_owned(), s(root)];
+    all.extend(args.iter().map(|a| a.to_string()));
+    for (flag, path) in [
+        ("--out", &md),
+        ("--csv", &csv),
+        ("--plots", &dir.to_path_buf()),
+    ] {
+        all.push(flag.to_owned());
+        all.push(s(path));
+    }
+    all.push("--quiet".to_owned());
+    let out = herb_sim(&all.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (
+        std::fs::read_to_string(&md).unwrap(),
+        std::fs::read_to_string(&csv).unwrap(),
+    )
+}
+
 #[test]
 fn herb_needs_a_policy_and_a_policy_needs_herb() {
     let out = herb_sim(&["eval", "--method", "herb"]);
@@ -51,35 +79,21 @@ fn one_herb_row_per_policy() {
     let (a, b) = (dir.join("first.onnx"), dir.join("second.onnx"));
     std::fs::copy(&src, &a).unwrap();
     std::fs::copy(&src, &b).unwrap();
-    let md = dir.join("t.md");
-    let csv = dir.join("t.csv");
     let s = |p: &Path| p.to_str().unwrap().to_owned();
-    let out = herb_sim(&[
-        "eval",
-        "--boxed",
-        &s(&root),
-        "--method",
-        "herb",
-        "--policy",
-        &s(&a),
-        "--policy",
-        &s(&b),
-        "--limit",
-        "2",
-        "--quiet",
-        "--out",
-        &s(&md),
-        "--csv",
-        &s(&csv),
-        "--plots",
-        &s(&dir),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let (table, rows) = eval_into(
+        &root,
+        &dir,
+        &[
+            "--method",
+            "herb",
+            "--policy",
+            &s(&a),
+            "--policy",
+            &s(&b),
+            "--limit",
+            "2",
+        ],
     );
-    let table = std::fs::read_to_string(&md).unwrap();
     let row = |name: &str| {
         table
             .lines()
@@ -93,7 +107,6 @@ fn one_herb_row_per_policy() {
     };
     // Success and objects packed match (latency is measured, so it is not compared).
     assert_eq!(row("first"), row("second"));
-    let rows = std::fs::read_to_string(&csv).unwrap();
     assert_eq!(
         rows.lines()
             .filter(|l| l.starts_with("herb first,"))
@@ -121,34 +134,20 @@ fn the_lookahead_horizon_names_its_row_and_refuses_zero() {
     };
     let dir = std::env::temp_dir().join(format!("herb-eval-horizon-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let s = |p: &Path| p.to_str().unwrap().to_owned();
-    let md = dir.join("t.md");
-    let out = herb_sim(&[
-        "eval",
-        "--boxed",
-        &s(&root),
-        "--method",
-        "lookahead",
-        "--lookahead-k",
-        "2",
-        "--lookahead-horizon",
-        "1",
-        "--limit",
-        "1",
-        "--quiet",
-        "--out",
-        &s(&md),
-        "--csv",
-        &s(&dir.join("t.csv")),
-        "--plots",
-        &s(&dir),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let (table, _) = eval_into(
+        &root,
+        &dir,
+        &[
+            "--method",
+            "lookahead",
+            "--lookahead-k",
+            "2",
+            "--lookahead-horizon",
+            "1",
+            "--limit",
+            "1",
+        ],
     );
-    let table = std::fs::read_to_string(&md).unwrap();
     assert!(
         table
             .lines()
