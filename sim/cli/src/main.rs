@@ -326,7 +326,7 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
     let model = if a
         .method
         .iter()
-        .any(|m| m.order(a.sequence) == Some(Order::Beam3))
+        .any(|m| m.order(a.sequence).is_some_and(|o| o.uses_sequence_model()))
     {
         Some(SequenceModel::load(&a.sequence_model, &catalog)?)
     } else {

@@ -35,7 +35,7 @@ fn main() {
     let catalog = Catalog::builtin(&meshes).expect("catalog");
     let model = SequenceModel::load(Path::new("models/sequence.json"), &catalog).expect("model");
     let (sessions, _) = herb_sim::boxed::load_all(&root, &catalog).expect("sessions");
-    for o in [Order::Human, Order::Beam3, Order::Largest, Order::Random] {
+    for o in Order::ALL {
         let (mut rho, mut firstvol, mut n) = (0.0, 0.0, 0.0);
         for s in &sessions {
             let ep = s.episode(&catalog);

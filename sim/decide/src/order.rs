@@ -2,7 +2,7 @@
 //! model, or one of the reference orders of Table I.
 
 use crate::error::{DecideError, Result};
-use crate::sequence::{SequenceModel, beam3};
+use crate::sequence::{SequenceModel, beam3, beam3_from_start};
 use herb_sim::{Catalog, TypeIdx};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
@@ -11,8 +11,12 @@ use rand_chacha::ChaCha8Rng;
 /// How the objects of an episode are ordered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Order {
-    /// Beam-3 over the human transition model.
+    /// Beam-3 over the human transition model, each search rooted at the last object chosen
+    /// ([`beam3`]).
     Beam3,
+    /// Beam-3 as Algorithm 1 writes it, every search rooted at `<start>`
+    /// ([`beam3_from_start`]).
+    Beam3Start,
     /// The human order.
     Human,
     /// Largest hull volume first (ties: catalog order).
@@ -23,12 +27,24 @@ pub enum Order {
 
 impl Order {
     /// Every order.
-    pub const ALL: [Order; 4] = [Self::Beam3, Self::Human, Self::Largest, Self::Random];
+    pub const ALL: [Order; 5] = [
+        Self::Beam3,
+        Self::Beam3Start,
+        Self::Human,
+        Self::Largest,
+        Self::Random,
+    ];
+
+    /// True for the orders that need the sequence model (the Beam-3 readings).
+    pub fn uses_sequence_model(&self) -> bool {
+        matches!(self, Self::Beam3 | Self::Beam3Start)
+    }
 
     /// Name used on the command line, in the bindings and in tables.
     pub fn name(&self) -> &'static str {
         match self {
             Self::Beam3 => "beam3",
+            Self::Beam3Start => "beam3-start",
             Self::Human => "human",
             Self::Largest => "largest",
             Self::Random => "random",
@@ -47,12 +63,15 @@ impl Order {
             return Err(DecideError::EmptyObjectList);
         }
         match self {
-            Self::Beam3 => {
+            Self::Beam3 | Self::Beam3Start => {
                 let m = model.ok_or_else(|| DecideError::SequenceModel {
-                    origin: "beam3".into(),
+                    origin: self.name().into(),
                     message: "no sequence model loaded".into(),
                 })?;
-                beam3(m, objects)
+                match self {
+                    Self::Beam3 => beam3(m, objects),
+                    _ => beam3_from_start(m, objects),
+                }
             }
             Self::Human => Ok(objects.to_vec()),
             Self::Largest => {

@@ -1,6 +1,6 @@
 //! Beam-3 (HERB paper, Algorithm 1) on hand-built chains, and the fitted model.
 
-use herb_decide::sequence::{self, SequenceModel, State, beam3, greedy};
+use herb_decide::sequence::{self, SequenceModel, State, beam3, beam3_from_start, greedy};
 use herb_sim::paths::MeshSource;
 use herb_sim::{Catalog, TypeIdx};
 
@@ -61,6 +61,28 @@ fn algorithm_1_worked_example_beats_greedy() {
     assert_eq!(greedy(&m, &[a, b, cc]).unwrap(), vec![a, cc, b]);
     // The input order does not matter.
     assert_eq!(beam3(&m, &[cc, a, b]).unwrap(), vec![b, a, cc]);
+}
+
+/// The two readings of Algorithm 1, by hand. start: A 0.5, C 0.3, B 0.2. A->B 1, B->C 1,
+/// C->A 1. Objects {A, B, C}.
+///
+/// First search (from start, both readings): [A .5, C .3, B .2] -> [AB .5, CA .3, BC .2] ->
+/// [ABC .5, CAB .3, BCA .2] -> A.
+/// Rooted at the last object (`beam3`), from A with {B, C} left: [B 1] -> [BC 1] -> B, then C.
+/// Rooted at start (`beam3_from_start`), {B, C} left: [C .3, B .2]; C cannot go on (A is
+/// used) and is carried, B goes on to BC .2 -> [C .3, BC .2]; nothing extends -> C, then B.
+#[test]
+fn algorithm_1_read_literally_restarts_every_search_from_start() {
+    let c = catalog();
+    let (a, b, cc) = abc(&c);
+    let m = chain(
+        &c,
+        &[(a, 0.5), (cc, 0.3), (b, 0.2)],
+        &[(a, b, 1.0), (b, cc, 1.0), (cc, a, 1.0)],
+    );
+    assert_eq!(beam3(&m, &[a, b, cc]).unwrap(), vec![a, b, cc]);
+    assert_eq!(beam3_from_start(&m, &[a, b, cc]).unwrap(), vec![a, cc, b]);
+    assert_eq!(beam3_from_start(&m, &[b, cc, a]).unwrap(), vec![a, cc, b]);
 }
 
 /// Beam width 5 prunes: a path whose prefix falls out of the top 5 is never completed, even if

@@ -15,7 +15,7 @@
 //!
 //! The Gymnasium classes are in the Python package (`herb_sim/__init__.py`).
 
-use herb_decide::sequence::{SequenceModel, beam3};
+use herb_decide::sequence::{SequenceModel, beam3, beam3_from_start};
 use herb_decide::{Blbf, Decider, Method, Order};
 use herb_sim::features::{self, CANDIDATE_LEN, CONTEXT_LEN, DecisionFeatures};
 use herb_sim::lattice::{Lattice, MAX_CANDIDATES, Placement};
@@ -58,6 +58,7 @@ impl Sampler {
             .collect();
         match (self.order, &self.model) {
             (Order::Beam3, Some(m)) => beam3(m, &v).unwrap_or(v),
+            (Order::Beam3Start, Some(m)) => beam3_from_start(m, &v).unwrap_or(v),
             _ => {
                 v.shuffle(rng);
                 v
@@ -223,7 +224,8 @@ impl VecEnv {
 
 #[pymethods]
 impl VecEnv {
-    /// `num_envs` environments. `reward`: `simple`, `c` or `cs<alpha>`; `sequence`: `beam3` or
+    /// `num_envs` environments. `reward`: `simple`, `c` or `cs<alpha>`; `sequence`: `beam3`,
+    /// `beam3-start` (Algorithm 1 read literally, `herb_decide::sequence::beam3_from_start`) or
     /// `random`; `boxed`: the BoxED folder (meshes; default `HERB_BOXED` or ../shared/boxed,
     /// primitives without it); `meshes=False` forces primitives; `sequence_model`: the
     /// transition counts (default `models/sequence.json` in the working directory, else in
@@ -256,10 +258,10 @@ impl VecEnv {
         let reward = RewardMode::parse(reward).map_err(value_err)?;
         // Sampled episodes have no human order to keep and no reason to go largest first.
         let order = match sequence.parse::<Order>() {
-            Ok(o @ (Order::Beam3 | Order::Random)) => o,
+            Ok(o @ (Order::Beam3 | Order::Beam3Start | Order::Random)) => o,
             _ => {
                 return Err(value_err(format!(
-                    "sequence {sequence:?}: expected beam3 or random"
+                    "sequence {sequence:?}: expected beam3, beam3-start or random"
                 )));
             }
         };
@@ -271,7 +273,7 @@ impl VecEnv {
         };
         let catalog: SharedCatalog = Arc::new(Catalog::builtin(&source).map_err(value_err)?);
         let model = match order {
-            Order::Beam3 => {
+            Order::Beam3 | Order::Beam3Start => {
                 let p = sequence_model
                     .map(std::path::PathBuf::from)
                     .unwrap_or_else(|| {

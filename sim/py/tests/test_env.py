@@ -79,7 +79,7 @@ def test_cs_rewards_are_in_range():
     [
         (dict(reward="cs1.5"), "alpha"),
         (dict(reward="fast"), "unknown reward mode"),
-        (dict(sequence="sorted"), "beam3 or random"),
+        (dict(sequence="sorted"), "beam3, beam3-start or random"),
         (dict(min_objects=6, max_objects=5), "objects per episode"),
         (dict(sequence_model="/nonexistent/sequence.json"), "sequence.json"),
     ],
