@@ -5,8 +5,8 @@
     python models/validate.py --rule blbf --rule lattice-blbf --rule lookahead --k 8
 
 Each policy (or rule) packs the same ``--episodes`` episodes sampled as in training (``herb_sim``: 10 to 25
-random catalog objects, Beam-3 order, seed ``--seed``), acting deterministically through
-onnxruntime on the shipped ONNX contract. Prints success rate and mean objects packed per
+random catalog objects, Beam-3 order unless ``--sequence`` says otherwise, seed ``--seed``),
+acting deterministically through onnxruntime on the shipped ONNX contract. Prints success rate and mean objects packed per
 policy. Used to choose between training runs without looking at the BoxED test episodes
 (Table I). Needs onnxruntime for
 ``--policy``. ``--rule`` runs a decision rule in Rust instead: ``blbf`` (the daemon's BLBF
@@ -52,13 +52,13 @@ def onnx_actor(path):
                                         for k in range(len(obs))]).astype(np.float32)
 
 
-def validate(act, episodes, seed, reward, boxed, rule=None, k=8, horizon=None):
+def validate(act, episodes, seed, reward, boxed, rule=None, k=8, horizon=None, sequence="beam3"):
     """Success rate and mean objects packed of ``act`` (a policy from ``onnx_actor``) or, with
     ``rule``, of a lattice rule stepped in Rust, on the validation episodes."""
     # One environment per episode; each counts its first episode only (autoreset keeps the
     # finished ones stepping, their later episodes are ignored), so short episodes are not
     # over-represented.
-    env = herb_sim.HerbVectorEnv(episodes, reward=reward, sequence="beam3", seed=seed, boxed=boxed)
+    env = herb_sim.HerbVectorEnv(episodes, reward=reward, sequence=sequence, seed=seed, boxed=boxed)
     obs = env.reset(seed=seed)[0]
     done = np.zeros(episodes, bool)
     packed = np.zeros(episodes, int)
@@ -94,6 +94,8 @@ def main():
     ap.add_argument("--episodes", type=int, default=256)
     ap.add_argument("--seed", type=int, default=777)
     ap.add_argument("--reward", default="cs0.6", help="reward mode (does not change the episodes)")
+    ap.add_argument("--sequence", default="beam3", choices=["beam3", "beam3-start", "random"],
+                    help="object order of the episodes (beam3-start: Algorithm 1 read literally)")
     ap.add_argument("--boxed", default=None)
     a = ap.parse_args()
     if not 1 <= a.episodes <= 4096:
@@ -102,14 +104,15 @@ def main():
         raise SystemExit(f"--horizon {a.horizon}: need at least 1 object")
     if not a.policy and not a.rule:
         raise SystemExit("give at least one --policy or --rule")
-    print(f"{a.episodes} training-distribution episodes, seed {a.seed}")
+    print(f"{a.episodes} training-distribution episodes, seed {a.seed}, order {a.sequence}")
     for p in a.policy:
-        s, n = validate(onnx_actor(p), a.episodes, a.seed, a.reward, a.boxed)
+        s, n = validate(onnx_actor(p), a.episodes, a.seed, a.reward, a.boxed, sequence=a.sequence)
         print(f"{p}: success {100 * s:.2f} %, objects packed {n:.2f}", flush=True)
     for r in a.rule:
         t = time.perf_counter()
         s, n = validate(None, a.episodes, a.seed, a.reward, a.boxed,
-                        rule=None if r == "blbf" else r, k=a.k, horizon=a.horizon)
+                        rule=None if r == "blbf" else r, k=a.k, horizon=a.horizon,
+                        sequence=a.sequence)
         label = f"{r} (k = {a.k})" if r in ("lookahead", "geo-lookahead") else r
         if r == "lookahead" and a.horizon is not None:
             label = f"{r} (k = {a.k}, horizon {a.horizon})"
