@@ -203,19 +203,24 @@ def main():
                       f"{report(score, held)} | train {report(score, train[:len(held)])}",
                       flush=True)
         if margins:
-            def regret(idx, m):
+            def scored(idx):
+                # Scored once per index set; every margin is applied to the same scores.
                 with torch.no_grad():
                     q = torch.cat([score(idx[i:i + 512]) for i in range(0, len(idx), 512)]).numpy()
-                q = np.where(known[idx], q, -np.inf)
+                return idx, np.where(known[idx], q, -np.inf)
+
+            def regret(sq, m):
+                idx, q = sq
                 pick = np.where(q.max(1) > m, q.argmax(1), 0)
                 best = np.where(known[idx], ret[idx], -np.inf).max(1)
                 chosen = ret[idx, pick]
                 return np.mean(best - chosen), np.mean(chosen < best - 0.5), np.mean(pick != 0)
 
-            best_m = min(margins, key=lambda m: regret(choose, m)[0])
+            on_choose, on_held = scored(choose), scored(held)
+            best_m = min(margins, key=lambda m: regret(on_choose, m)[0])
             base0 = np.mean(np.where(known[held], ret[held], -np.inf).max(1) - ret[held, 0])
             for m in margins:
-                r, big, leave = regret(held, m)
+                r, big, leave = regret(on_held, m)
                 tag = " (chosen on the 10 % slice)" if m == best_m else ""
                 print(f"{arch} margin {m}{tag}: held out regret {r:.4f} (candidate 0: "
                       f"{base0:.4f}) big misses {big:.3f} leaves 0 in {leave:.3f}", flush=True)

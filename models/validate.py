@@ -6,8 +6,8 @@
 
 Each policy (or rule) packs the same ``--episodes`` episodes sampled as in training (``herb_sim``: 10 to 25
 random catalog objects, Beam-3 order unless ``--sequence`` says otherwise, seed ``--seed``),
-acting deterministically through onnxruntime on the shipped ONNX contract. Prints success rate and mean objects packed per
-policy. Used to choose between training runs without looking at the BoxED test episodes
+acting deterministically through onnxruntime on the shipped ONNX contract. Prints success rate
+and mean objects packed per policy. Used to choose between training runs without looking at the BoxED test episodes
 (Table I). Needs onnxruntime for
 ``--policy``. ``--rule`` runs a decision rule in Rust instead: ``blbf`` (the daemon's BLBF
 heuristic, through the same action mapping as a policy), ``lattice-blbf`` (BLBF restricted to the

@@ -418,12 +418,13 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
                 };
                 // The table names the teacher's k; the CSV keeps the method's name.
                 let shown = match m {
-                    Method::Lookahead => match a.lookahead_horizon {
-                        Some(h) => {
-                            format!("lookahead (teacher, k = {}, horizon {h})", a.lookahead_k)
-                        }
-                        None => format!("lookahead (teacher, k = {})", a.lookahead_k),
-                    },
+                    Method::Lookahead => {
+                        let horizon = a
+                            .lookahead_horizon
+                            .map(|h| format!(", horizon {h}"))
+                            .unwrap_or_default();
+                        format!("lookahead (teacher, k = {}{horizon})", a.lookahead_k)
+                    }
                     _ => shown,
                 };
                 (format!("{shown} ({})", mode.name()), mode.name(), results)

@@ -29,19 +29,18 @@ fn spearman(vols: &[f32]) -> f64 {
     if sxx == 0.0 { 0.0 } else { sxy / sxx }
 }
 
-fn main() {
-    let root = herb_sim::paths::boxed_root(None).expect("boxed");
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let root = herb_sim::paths::boxed_root(None)
+        .ok_or("BoxED not found: set HERB_BOXED or put it at ../shared/boxed")?;
     let meshes = herb_sim::paths::mesh_source(None, Some(&root));
-    let catalog = Catalog::builtin(&meshes).expect("catalog");
-    let model = SequenceModel::load(Path::new("models/sequence.json"), &catalog).expect("model");
-    let (sessions, _) = herb_sim::boxed::load_all(&root, &catalog).expect("sessions");
+    let catalog = Catalog::builtin(&meshes)?;
+    let model = SequenceModel::load(Path::new("models/sequence.json"), &catalog)?;
+    let (sessions, _) = herb_sim::boxed::load_all(&root, &catalog)?;
     for o in Order::ALL {
         let (mut rho, mut firstvol, mut n) = (0.0, 0.0, 0.0);
         for s in &sessions {
             let ep = s.episode(&catalog);
-            let seq = o
-                .order(&catalog, Some(&model), &ep.objects, 0)
-                .expect("order");
+            let seq = o.order(&catalog, Some(&model), &ep.objects, 0)?;
             let vols: Vec<f32> = seq.iter().map(|&t| catalog.shape(t).volume).collect();
             rho += spearman(&vols);
             let k = vols.len().div_ceil(3);
@@ -55,4 +54,5 @@ fn main() {
             firstvol / n
         );
     }
+    Ok(())
 }

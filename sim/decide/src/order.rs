@@ -8,6 +8,9 @@ use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
+/// A Beam-3 reading: orders objects with the sequence model.
+pub type BeamSearch = fn(&SequenceModel, &[TypeIdx]) -> Result<Vec<TypeIdx>>;
+
 /// How the objects of an episode are ordered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Order {
@@ -35,9 +38,19 @@ impl Order {
         Self::Random,
     ];
 
+    /// The Beam-3 reading of this order ([`beam3`] or [`beam3_from_start`]), `None` for the
+    /// orders that do not use the sequence model.
+    pub fn beam_search(&self) -> Option<BeamSearch> {
+        match self {
+            Self::Beam3 => Some(beam3),
+            Self::Beam3Start => Some(beam3_from_start),
+            Self::Human | Self::Largest | Self::Random => None,
+        }
+    }
+
     /// True for the orders that need the sequence model (the Beam-3 readings).
     pub fn uses_sequence_model(&self) -> bool {
-        matches!(self, Self::Beam3 | Self::Beam3Start)
+        self.beam_search().is_some()
     }
 
     /// Name used on the command line, in the bindings and in tables.
@@ -62,17 +75,15 @@ impl Order {
         if objects.is_empty() {
             return Err(DecideError::EmptyObjectList);
         }
+        if let Some(search) = self.beam_search() {
+            let m = model.ok_or_else(|| DecideError::SequenceModel {
+                origin: self.name().into(),
+                message: "no sequence model loaded".into(),
+            })?;
+            return search(m, objects);
+        }
         match self {
-            Self::Beam3 | Self::Beam3Start => {
-                let m = model.ok_or_else(|| DecideError::SequenceModel {
-                    origin: self.name().into(),
-                    message: "no sequence model loaded".into(),
-                })?;
-                match self {
-                    Self::Beam3 => beam3(m, objects),
-                    _ => beam3_from_start(m, objects),
-                }
-            }
+            Self::Beam3 | Self::Beam3Start => unreachable!("ordered by beam_search above"),
             Self::Human => Ok(objects.to_vec()),
             Self::Largest => {
                 let mut v = objects.to_vec();

@@ -15,7 +15,7 @@
 //!
 //! The Gymnasium classes are in the Python package (`herb_sim/__init__.py`).
 
-use herb_decide::sequence::{SequenceModel, beam3, beam3_from_start};
+use herb_decide::sequence::SequenceModel;
 use herb_decide::{Blbf, Decider, Method, Order};
 use herb_sim::features::{self, CANDIDATE_LEN, CONTEXT_LEN, DecisionFeatures};
 use herb_sim::lattice::{Lattice, MAX_CANDIDATES, Placement};
@@ -56,9 +56,8 @@ impl Sampler {
         let mut v: Vec<TypeIdx> = (0..n)
             .map(|_| TypeIdx(rng.random_range(0..self.catalog_len)))
             .collect();
-        match (self.order, &self.model) {
-            (Order::Beam3, Some(m)) => beam3(m, &v).unwrap_or(v),
-            (Order::Beam3Start, Some(m)) => beam3_from_start(m, &v).unwrap_or(v),
+        match (self.order.beam_search(), &self.model) {
+            (Some(search), Some(m)) => search(m, &v).unwrap_or(v),
             _ => {
                 v.shuffle(rng);
                 v
@@ -272,18 +271,17 @@ impl VecEnv {
             MeshSource::None("meshes=False".into())
         };
         let catalog: SharedCatalog = Arc::new(Catalog::builtin(&source).map_err(value_err)?);
-        let model = match order {
-            Order::Beam3 | Order::Beam3Start => {
-                let p = sequence_model
-                    .map(std::path::PathBuf::from)
-                    .unwrap_or_else(|| {
-                        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/sequence.json")
-                    });
-                Some(Arc::new(
-                    SequenceModel::load(&p, &catalog).map_err(value_err)?,
-                ))
-            }
-            _ => None,
+        let model = if order.uses_sequence_model() {
+            let p = sequence_model
+                .map(std::path::PathBuf::from)
+                .unwrap_or_else(|| {
+                    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/sequence.json")
+                });
+            Some(Arc::new(
+                SequenceModel::load(&p, &catalog).map_err(value_err)?,
+            ))
+        } else {
+            None
         };
         let sampler = Sampler {
             catalog_len: catalog.len() as u16,
