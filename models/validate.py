@@ -5,7 +5,7 @@
     python models/validate.py --rule blbf --rule lattice-blbf --rule lookahead --k 8
 
 Each policy (or rule) packs the same ``--episodes`` episodes sampled as in training (``herb_sim``: 10 to 25
-random catalog objects, Beam-3 order unless ``--sequence`` says otherwise, seed ``--seed``),
+random catalog objects, HERB's order (``beam3-start``) unless ``--sequence`` says otherwise, seed ``--seed``),
 acting deterministically through onnxruntime on the shipped ONNX contract. Prints success rate
 and mean objects packed per policy. Used to choose between training runs without looking at the BoxED test episodes
 (Table I). Needs onnxruntime for
@@ -52,7 +52,7 @@ def onnx_actor(path):
                                         for k in range(len(obs))]).astype(np.float32)
 
 
-def validate(act, episodes, seed, reward, boxed, rule=None, k=8, horizon=None, sequence="beam3"):
+def validate(act, episodes, seed, reward, boxed, rule=None, k=8, horizon=None, sequence=herb_sim.HERB_ORDER):
     """Success rate and mean objects packed of ``act`` (a policy from ``onnx_actor``) or, with
     ``rule``, of a lattice rule stepped in Rust, on the validation episodes."""
     # One environment per episode; each counts its first episode only (autoreset keeps the
@@ -94,8 +94,9 @@ def main():
     ap.add_argument("--episodes", type=int, default=256)
     ap.add_argument("--seed", type=int, default=777)
     ap.add_argument("--reward", default="cs0.6", help="reward mode (does not change the episodes)")
-    ap.add_argument("--sequence", default="beam3", choices=["beam3", "beam3-start", "random"],
-                    help="object order of the episodes (beam3-start: Algorithm 1 read literally)")
+    ap.add_argument("--sequence", default=herb_sim.HERB_ORDER, choices=["beam3", "beam3-start", "random"],
+                    help="object order of the episodes (default HERB's, beam3-start: Algorithm 1 as written; "
+                         "beam3: each search rooted at the last object chosen, HERB's order until issue 13)")
     ap.add_argument("--boxed", default=None)
     a = ap.parse_args()
     if not 1 <= a.episodes <= 4096:

@@ -10,7 +10,8 @@
 use crate::config::Config;
 pub use crate::plan::{MAX_SEGMENTS, MotionPlan, Request, Response, Segment};
 use herb_decide::DecideError;
-use herb_decide::sequence::{SequenceModel, beam3};
+use herb_decide::Order;
+use herb_decide::sequence::SequenceModel;
 use herb_decide::{Decider, HeightmapView, Policy};
 use herb_ipc::bus::{Bus, Sub};
 use herb_ipc::{Fault, GripperAction, HeightmapFrame, MAX_JOB_OBJECTS, Services};
@@ -176,14 +177,16 @@ impl PlannerCore {
         })
     }
 
-    /// Orders a job's objects (Beam-3; kept as given when `ordered`, a recovered job's) and
-    /// keeps the order for the decisions' lookahead.
+    /// Orders a job's objects (HERB's Beam-3, [`Order::HERB`]; kept as given when `ordered`, a
+    /// recovered job's) and keeps the order for the decisions' lookahead.
     fn order(&mut self, objects: &[u16], ordered: bool) -> Option<Vec<TypeIdx>> {
         let v: Vec<TypeIdx> = objects.iter().map(|&o| TypeIdx(o)).collect();
         let order = if ordered {
             v
         } else {
-            beam3(&self.sequence, &v).ok()?
+            Order::HERB
+                .order(&self.catalog, Some(&self.sequence), &v, 0)
+                .ok()?
         };
         self.job_order.clear();
         self.job_order.extend_from_slice(&order);

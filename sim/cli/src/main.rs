@@ -88,8 +88,8 @@ struct EvalArgs {
     /// Method (repeat for several rows).
     #[arg(long, value_parser = method_parser(&Method::ALL))]
     method: Vec<Method>,
-    /// Object order for herb and blbf (defaults: beam3 for herb, largest for blbf); the
-    /// replays and random use the human order.
+    /// Object order for herb and blbf (defaults: HERB's, beam3-start, for herb and the
+    /// lookahead rules, largest for the BLBF rules); the replays and random use the human order.
     #[arg(long, value_parser = order_parser())]
     sequence: Option<Order>,
     /// The ONNX placement policy for herb (repeat for one herb row per policy, labelled by

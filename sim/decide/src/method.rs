@@ -12,7 +12,7 @@ use herb_sim::teacher::{GeoLookahead, LatticeRule, Lookahead};
 /// of the lattice rules (the teachers and their baselines).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Method {
-    /// HERB: Beam-3 order (default) and an ONNX placement policy.
+    /// HERB: HERB's Beam-3 order ([`Order::HERB`], default) and an ONNX placement policy.
     Herb,
     /// The PackIt SO(2) heuristic, largest first (default order).
     Blbf,
@@ -36,12 +36,12 @@ pub enum Method {
     /// The BLBF rule restricted to the placement lattice (largest first by default).
     LatticeBlbf,
     /// The lookahead teacher: the best of k lattice candidates by the return of a lattice-BLBF
-    /// rollout to the episode's end (Beam-3 order by default).
+    /// rollout to the episode's end (HERB's order by default).
     Lookahead,
-    /// The lattice BLBF rule keeping room for later objects (Beam-3 order by default).
+    /// The lattice BLBF rule keeping room for later objects (HERB's order by default).
     LatticeReserve,
     /// The geometric lookahead teacher: the best of k lattice candidates by a physics-free
-    /// lattice-BLBF rollout (Beam-3 order by default).
+    /// lattice-BLBF rollout (HERB's order by default).
     GeoLookahead,
 }
 
@@ -108,7 +108,7 @@ impl Method {
     }
 
     /// The object order of this method's rows: `chosen` if given, else largest first for the
-    /// BLBF rules and Beam-3 for the others; `None` for the replays (human order).
+    /// BLBF rules and HERB's ([`Order::HERB`]) for the others; `None` for the replays (human order).
     pub fn order(&self, chosen: Option<Order>) -> Option<Order> {
         if self.replay().is_some() {
             return None;
@@ -117,7 +117,7 @@ impl Method {
             (Some(o), _) => o,
             (None, Self::Blbf | Self::LatticeBlbf | Self::PackitSo3) => Order::Largest,
             (None, Self::BcMse | Self::BcMdn) => Order::Human,
-            (None, _) => Order::Beam3,
+            (None, _) => Order::HERB,
         })
     }
 

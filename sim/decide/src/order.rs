@@ -29,6 +29,13 @@ pub enum Order {
 }
 
 impl Order {
+    /// HERB's order: Beam-3 as Algorithm 1 writes it ([`Order::Beam3Start`]), herbd's planner,
+    /// the HERB rows of Table I and the training environments order episodes with it. The
+    /// reading rooted at the last object chosen ([`Order::Beam3`], HERB's order until issue 13)
+    /// stays available for comparison (`models/README.md`, "HERB's Beam-3 read as Algorithm 1
+    /// writes it").
+    pub const HERB: Order = Self::Beam3Start;
+
     /// Every order.
     pub const ALL: [Order; 5] = [
         Self::Beam3,

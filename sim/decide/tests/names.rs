@@ -25,7 +25,7 @@ fn replays_keep_the_human_order_and_the_others_default_as_documented() {
             Method::Human | Method::HumanPose | Method::Random | Method::HumanRecorded => None,
             Method::Blbf | Method::LatticeBlbf | Method::PackitSo3 => Some(Order::Largest),
             Method::BcMse | Method::BcMdn => Some(Order::Human),
-            _ => Some(Order::Beam3),
+            _ => Some(Order::Beam3Start),
         };
         assert_eq!(m.order(None), expected, "{m}");
         assert_eq!(m.replay().is_some(), expected.is_none(), "{m}");
@@ -46,4 +46,11 @@ fn policies_are_blbf_or_a_model_path() {
     for s in ["blbf", "a/b.onnx"] {
         assert_eq!(s.parse::<PolicySpec>().unwrap().to_string(), s);
     }
+}
+
+#[test]
+fn herb_orders_with_beam3_as_algorithm_1_writes_it() {
+    // Issue 13: HERB's Beam-3 is the literal reading (every search from <start>).
+    assert_eq!(Order::HERB, Order::Beam3Start);
+    assert_eq!(Method::Herb.order(None), Some(Order::HERB));
 }

@@ -4,8 +4,9 @@
 //! with the GIL released: one Python call advances every environment. Observations are the
 //! shared layout (`herb_sim::ObsLayout`, `[N, 2, 224, 224]` f32), actions `[N, 3]` in
 //! `[-1, 1]`. Episodes are sampled as in the paper's training: a random multiset of catalog
-//! objects (size uniform in `[min_objects, max_objects]`, types uniform), ordered by Beam-3
-//! over the human transition model, or in random order for the ablation. With `autoreset`, an
+//! objects (size uniform in `[min_objects, max_objects]`, types uniform), ordered by HERB's
+//! Beam-3 over the human transition model (`Order::HERB`), by the other Beam-3 reading, or in
+//! random order for the ablation. With `autoreset`, an
 //! environment whose episode ended starts the next one in the same step (its returned
 //! observation is the new episode's first).
 //!
@@ -223,20 +224,21 @@ impl VecEnv {
 
 #[pymethods]
 impl VecEnv {
-    /// `num_envs` environments. `reward`: `simple`, `c` or `cs<alpha>`; `sequence`: `beam3`,
-    /// `beam3-start` (Algorithm 1 read literally, `herb_decide::sequence::beam3_from_start`) or
-    /// `random`; `boxed`: the BoxED folder (meshes; default `HERB_BOXED` or ../shared/boxed,
+    /// `num_envs` environments. `reward`: `simple`, `c` or `cs<alpha>`; `sequence`:
+    /// `beam3-start` (HERB's order, Algorithm 1 read literally,
+    /// `herb_decide::sequence::beam3_from_start`; the default, `HERB_ORDER`), `beam3` (each
+    /// search rooted at the last object chosen) or `random`; `boxed`: the BoxED folder (meshes; default `HERB_BOXED` or ../shared/boxed,
     /// primitives without it); `meshes=False` forces primitives; `sequence_model`: the
     /// transition counts (default `models/sequence.json` in the working directory, else in
     /// the checkout the extension was built from); `threads`:
     /// rayon threads (default: all cores).
     #[new]
-    #[pyo3(signature = (num_envs, reward="cs0.6", sequence="beam3", seed=0, min_objects=10, max_objects=25, boxed=None, meshes=true, sequence_model=None, threads=None, autoreset=true))]
+    #[pyo3(signature = (num_envs, reward="cs0.6", sequence=None, seed=0, min_objects=10, max_objects=25, boxed=None, meshes=true, sequence_model=None, threads=None, autoreset=true))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         num_envs: usize,
         reward: &str,
-        sequence: &str,
+        sequence: Option<&str>,
         seed: u64,
         min_objects: usize,
         max_objects: usize,
@@ -256,6 +258,7 @@ impl VecEnv {
         }
         let reward = RewardMode::parse(reward).map_err(value_err)?;
         // Sampled episodes have no human order to keep and no reason to go largest first.
+        let sequence = sequence.unwrap_or(Order::HERB.name());
         let order = match sequence.parse::<Order>() {
             Ok(o @ (Order::Beam3 | Order::Beam3Start | Order::Random)) => o,
             _ => {
@@ -988,6 +991,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(half_turn_candidates, m)?)?;
     m.add_function(wrap_pyfunction!(half_turn_context, m)?)?;
     m.add_function(wrap_pyfunction!(human_demonstrations, m)?)?;
+    m.add("HERB_ORDER", Order::HERB.name())?;
     m.add("OBS_LEN", ObsLayout::LEN)?;
     m.add("MODEL_INPUT_SHAPE", ObsLayout::INPUT_SHAPE.to_vec())?;
     m.add("OBS_SIZE", ObsLayout::SIZE)?;

@@ -7,7 +7,9 @@
 Observations follow the shared layout (``[2, 224, 224]`` float32 in ``[0, 1]``: box heightmap
 and the next object's top-down projection); actions are ``(x, y, theta)`` in ``[-1, 1]^3``.
 Rewards: ``simple``, ``c`` or ``cs<alpha>`` (HERB paper). Episodes: random multisets of catalog
-objects ordered by Beam-3 (``sequence="beam3"``) or randomly (``sequence="random"``).
+objects ordered by HERB's Beam-3 (``HERB_ORDER``, ``"beam3-start"``: Algorithm 1 as written; the
+default), by the other reading (``"beam3"``, each search rooted at the last object chosen) or
+randomly (``"random"``).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
-from ._native import (BOX_HALF_X, BOX_HALF_Y, CANDIDATE_LEN, CONTEXT_LEN, HEIGHT_SCALE_M, INPUT_NAME,
+from ._native import (BOX_HALF_X, BOX_HALF_Y, CANDIDATE_LEN, CONTEXT_LEN, HEIGHT_SCALE_M, HERB_ORDER, INPUT_NAME,
                       MAX_CANDIDATES, MODEL_INPUT_SHAPE, MODEL_OUTPUT_SHAPE, OBS_CELL_M, OBS_CHANNELS, OBS_LEN,
                       OBS_SIZE, OUTPUT_NAME, VecEnv, half_turn_candidates, half_turn_context,
                       human_demonstrations)
