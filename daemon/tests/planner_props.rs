@@ -12,12 +12,12 @@
 use herb_daemon::config::Config;
 use herb_daemon::plan::{MotionPlan, Request, Response};
 use herb_daemon::planner::PlannerCore;
-use herb_decide::{DecisionInput, Policy};
+use herb_decide::{DecisionInput, Order, Policy, SequenceModel};
 use herb_ipc::{Fault, HeightmapFrame, MAX_JOB_OBJECTS};
 use herb_robot::kinematics::LEFT_TOP_DOWN_NOMINAL;
 use herb_sim::observation::ObsLayout;
 use herb_sim::paths::MeshSource;
-use herb_sim::{Catalog, GridSpec};
+use herb_sim::{Catalog, GridSpec, TypeIdx};
 use proptest::prelude::*;
 use std::path::Path;
 use std::sync::Arc;
@@ -184,5 +184,51 @@ fn a_plausible_action_is_planned_and_checked() {
             outcome, None,
             "object {object}: a plausible action was refused"
         );
+    }
+}
+
+/// herbd orders a job with HERB's Beam-3 (`Order::HERB`: every search from `<start>`, as
+/// Algorithm 1 writes it), and keeps a recovered job's order as given.
+#[test]
+fn jobs_are_ordered_with_herbs_beam3_and_recovered_ones_kept_as_given() {
+    let cfg = config();
+    let catalog = catalog();
+    let model = SequenceModel::load(&cfg.models.sequence, &catalog).unwrap();
+    let mut core =
+        PlannerCore::with_policy(&cfg, catalog.clone(), Box::new(Scripted([0.0; 3]))).unwrap();
+    let job: Vec<u16> = vec![20, 3, 3, 11, 7, 0, 15, 22, 9, 1, 18];
+    let types: Vec<TypeIdx> = job.iter().map(|&t| TypeIdx(t)).collect();
+    let ids = |v: Vec<TypeIdx>| v.iter().map(|t| t.0).collect::<Vec<u16>>();
+    let herb = ids(Order::HERB
+        .order(&catalog, Some(&model), &types, 0)
+        .unwrap());
+    // The job tells the two readings apart, so the check below says which one herbd uses.
+    let other = ids(Order::Beam3
+        .order(&catalog, Some(&model), &types, 0)
+        .unwrap());
+    assert_ne!(herb, other);
+    for (ordered, want) in [(false, herb), (true, job.clone())] {
+        let mut objects = [0u16; MAX_JOB_OBJECTS];
+        objects[..job.len()].copy_from_slice(&job);
+        let r = core.handle(
+            Request::Order {
+                job_id: 7,
+                objects,
+                count: job.len(),
+                ordered,
+            },
+            None,
+        );
+        match r {
+            Response::Ordered {
+                job_id,
+                order,
+                count,
+            } => {
+                assert_eq!(job_id, 7);
+                assert_eq!(&order[..count], &want[..], "ordered: {ordered}");
+            }
+            _ => panic!("the job was not ordered (ordered: {ordered})"),
+        }
     }
 }

@@ -132,3 +132,22 @@ def test_expert_actions_of_an_ended_episode_are_invalid():
     assert term.all()
     a, valid = single.expert_actions()
     assert not valid.any() and np.all(a == 0.0)
+
+
+def test_episodes_default_to_herbs_order():
+    # HERB orders with Beam-3 as Algorithm 1 writes it (issue 13); the bindings default to it.
+    assert herb_sim.HERB_ORDER == "beam3-start"
+
+    def second_objects(**kw):
+        # Both readings pick the same first object (a search from <start>); they part from the
+        # second on. One central placement, then channel 1 shows each environment's next object.
+        v = herb_sim.VecEnv(8, seed=11, threads=1, autoreset=False, meshes=False, min_objects=8,
+                            max_objects=12, **kw)
+        v.reset()
+        obs, _, done, _ = v.step(np.zeros((8, 3), dtype=np.float32))
+        assert not done.any()
+        return obs[:, 1].copy()
+
+    default = second_objects()
+    assert np.array_equal(default, second_objects(sequence=herb_sim.HERB_ORDER))
+    assert not np.array_equal(default, second_objects(sequence="beam3"))
