@@ -6,9 +6,8 @@
 //! `[-1, 1]`. Episodes are sampled as in the paper's training: a random multiset of catalog
 //! objects (size uniform in `[min_objects, max_objects]`, types uniform), ordered by HERB's
 //! Beam-3 over the human transition model (`Order::HERB`), by the other Beam-3 reading, or in
-//! random order for the ablation. With `autoreset`, an
-//! environment whose episode ended starts the next one in the same step (its returned
-//! observation is the new episode's first).
+//! random order for the ablation. With `autoreset`, an environment whose episode ended starts
+//! the next one in the same step (its returned observation is the new episode's first).
 //!
 //! [`VecEnv::expert_actions`] labels every environment's current state with the BLBF
 //! heuristic's action (`Blbf` through herbd's `Decider`, the same path the `blbf` rows of Table I run), for
@@ -227,8 +226,8 @@ impl VecEnv {
     /// `num_envs` environments. `reward`: `simple`, `c` or `cs<alpha>`; `sequence`:
     /// `beam3-start` (HERB's order, Algorithm 1 read literally,
     /// `herb_decide::sequence::beam3_from_start`; the default, `HERB_ORDER`), `beam3` (each
-    /// search rooted at the last object chosen) or `random`; `boxed`: the BoxED folder (meshes; default `HERB_BOXED` or ../shared/boxed,
-    /// primitives without it); `meshes=False` forces primitives; `sequence_model`: the
+    /// search rooted at the last object chosen) or `random`; `boxed`: the BoxED folder
+    /// (meshes; default `HERB_BOXED` or ../shared/boxed, primitives without it); `meshes=False` forces primitives; `sequence_model`: the
     /// transition counts (default `models/sequence.json` in the working directory, else in
     /// the checkout the extension was built from); `threads`:
     /// rayon threads (default: all cores).
