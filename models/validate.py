@@ -4,12 +4,13 @@
     python models/validate.py --policy runs/cs09/policy.onnx --policy runs/cs09-bc/policy.onnx
     python models/validate.py --rule blbf --rule lattice-blbf --rule lookahead --k 8
 
-Each policy (or rule) packs the same ``--episodes`` episodes sampled as in training (``herb_sim``: 10 to 25
-random catalog objects, HERB's order (``beam3-start``) unless ``--sequence`` says otherwise, seed ``--seed``),
-acting deterministically through onnxruntime on the shipped ONNX contract. Prints success rate
-and mean objects packed per policy. Used to choose between training runs without looking at the BoxED test episodes
-(Table I). Needs onnxruntime for
-``--policy``. ``--rule`` runs a decision rule in Rust instead: ``blbf`` (the daemon's BLBF
+Each policy (or rule) packs the same ``--episodes`` episodes sampled as in training
+(``herb_sim``: 10 to 25 random catalog objects, HERB's order ``beam3-start`` unless
+``--sequence`` says otherwise, seed ``--seed``), acting deterministically through onnxruntime
+on the shipped ONNX contract. Prints success rate and mean objects packed per policy. Used to
+choose between training runs without looking at the BoxED test episodes (Table I). Needs
+onnxruntime for ``--policy``. ``--rule`` runs a decision rule in Rust instead: ``blbf`` (the
+daemon's BLBF
 heuristic, through the same action mapping as a policy), ``lattice-blbf`` (BLBF restricted to the
 placement lattice), ``lattice-reserve`` (keeping room for later objects), ``lookahead`` (the
 teacher, ``--k`` candidates, rollouts of ``--horizon`` objects or to the end) or

@@ -227,10 +227,10 @@ impl VecEnv {
     /// `beam3-start` (HERB's order, Algorithm 1 read literally,
     /// `herb_decide::sequence::beam3_from_start`; the default, `HERB_ORDER`), `beam3` (each
     /// search rooted at the last object chosen) or `random`; `boxed`: the BoxED folder
-    /// (meshes; default `HERB_BOXED` or ../shared/boxed, primitives without it); `meshes=False` forces primitives; `sequence_model`: the
-    /// transition counts (default `models/sequence.json` in the working directory, else in
-    /// the checkout the extension was built from); `threads`:
-    /// rayon threads (default: all cores).
+    /// (meshes; default `HERB_BOXED` or ../shared/boxed, primitives without it);
+    /// `meshes=False` forces primitives; `sequence_model`: the transition counts (default
+    /// `models/sequence.json` in the working directory, else in the checkout the extension was
+    /// built from); `threads`: rayon threads (default: all cores).
     #[new]
     #[pyo3(signature = (num_envs, reward="cs0.6", sequence=None, seed=0, min_objects=10, max_objects=25, boxed=None, meshes=true, sequence_model=None, threads=None, autoreset=true))]
     #[allow(clippy::too_many_arguments)]
