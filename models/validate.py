@@ -10,11 +10,10 @@ Each policy (or rule) packs the same ``--episodes`` episodes sampled as in train
 on the shipped ONNX contract. Prints success rate and mean objects packed per policy. Used to
 choose between training runs without looking at the BoxED test episodes (Table I). Needs
 onnxruntime for ``--policy``. ``--rule`` runs a decision rule in Rust instead: ``blbf`` (the
-daemon's BLBF
-heuristic, through the same action mapping as a policy), ``lattice-blbf`` (BLBF restricted to the
-placement lattice), ``lattice-reserve`` (keeping room for later objects), ``lookahead`` (the
-teacher, ``--k`` candidates, rollouts of ``--horizon`` objects or to the end) or
-``geo-lookahead`` (the teacher's rollouts without physics).
+daemon's BLBF heuristic, through the same action mapping as a policy), ``lattice-blbf`` (BLBF
+restricted to the placement lattice), ``lattice-reserve`` (keeping room for later objects),
+``lookahead`` (the teacher, ``--k`` candidates, rollouts of ``--horizon`` objects or to the end)
+or ``geo-lookahead`` (the teacher's rollouts without physics).
 """
 
 import argparse
