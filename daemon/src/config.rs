@@ -116,6 +116,24 @@ pub struct Config {
     pub record: RecordConfig,
     /// The job journal (a job survives a daemon crash).
     pub journal: JournalConfig,
+    /// What the cell does after a fault it can recover from by itself.
+    pub recovery: RecoveryConfig,
+}
+
+/// Recovery from faults the cell handles by itself.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RecoveryConfig {
+    /// After a missed grasp (the gripper closed on nothing), the gripper opens and the pick is
+    /// tried again with the same placement this many times (0 to 5); then the object is skipped
+    /// (status `Skipped`, fault `MissedGrasp`) and the job goes on with the next one.
+    pub grasp_retries: u32,
+}
+
+impl Default for RecoveryConfig {
+    fn default() -> Self {
+        Self { grasp_retries: 1 }
+    }
 }
 
 /// What a restarted herbd does with an unfinished job found in its journal.
@@ -187,6 +205,7 @@ impl Default for Config {
             limits: JointLimits::baxter_left(),
             record: RecordConfig::default(),
             journal: JournalConfig::default(),
+            recovery: RecoveryConfig::default(),
         }
     }
 }
@@ -242,6 +261,12 @@ impl ConfigFile for Config {
             return Err(format!(
                 "rt.fifo_priority {} outside 0..=99",
                 self.rt.fifo_priority
+            ));
+        }
+        if self.recovery.grasp_retries > 5 {
+            return Err(format!(
+                "recovery.grasp_retries {} outside 0..=5",
+                self.recovery.grasp_retries
             ));
         }
         let t = &self.timeouts;

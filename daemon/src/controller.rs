@@ -20,9 +20,9 @@ use crate::record::{FRAME_META, LoopRec, OutDigest, Recorder, RespRec};
 use hdrhistogram::Histogram;
 use herb_ipc::bus::{Bus, CancelServer, JobServer, Pub, Sub};
 use herb_ipc::{
-    CancelJobReply, CancelJobRequest, GripperAction, GripperCommand, GripperState, Header,
-    HeightmapFrame, JointCommand, JointState, PackJobReply, PackJobRequest, Payload, RejectReason,
-    Status, StatusEvent, monotonic_ns,
+    ArmStatus, CancelJobReply, CancelJobRequest, GripperAction, GripperCommand, GripperState,
+    Header, HeightmapFrame, JointCommand, JointState, PackJobReply, PackJobRequest, Payload,
+    RejectReason, Status, StatusEvent, monotonic_ns,
 };
 use herb_robot::motion::Setpoint;
 use herb_robot::rt::{set_timer_slack, sleep_until};
@@ -106,6 +106,7 @@ pub struct Shared {
 pub struct Ports {
     js: Sub<JointState>,
     gs: Sub<GripperState>,
+    arm: Sub<ArmStatus>,
     hm: Sub<HeightmapFrame>,
     jobs: JobServer,
     cancel: CancelServer,
@@ -127,6 +128,7 @@ impl Ports {
         Ok(Self {
             js: bus.subscriber(&s.joint_state())?,
             gs: bus.subscriber(&s.gripper_state())?,
+            arm: bus.subscriber(&s.arm_status())?,
             hm: bus.subscriber(&s.heightmap())?,
             jobs: bus.job_server()?,
             cancel: bus.cancel_server()?,
@@ -468,6 +470,16 @@ impl Controller {
                 m: *m,
             });
             job.gripper_state(publisher, m, now, received);
+        }
+        while let Ok(Some(s)) = p.arm.receive() {
+            let (publisher, received) = (s.header().publisher_id().value(), monotonic_ns());
+            let m = s.payload();
+            log(LoopRec::Arm {
+                publisher,
+                received,
+                m: *m,
+            });
+            job.arm_status(publisher, m, now, received);
         }
         while let Ok(Some(s)) = p.hm.receive() {
             let f = s.payload();

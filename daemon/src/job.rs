@@ -24,11 +24,24 @@
 //!
 //! # Faults
 //!
-//! Joint states, gripper states or heightmaps older than their timeouts are a fault: a moving
-//! arm brakes (a Ruckig brake from the last commanded state), a status reports the fault, and
-//! the job holds. When every input has been fresh for `resume_after_s`, the job resumes from
-//! the measured configuration: an object still held is placed, an object lost from the
-//! gripper (the adapter restarted) is picked again, otherwise the current object starts over.
+//! Joint states, gripper states or heightmaps older than their timeouts are a fault, a status
+//! reports it, and the job holds. Joint states that stop are named by the arm adapter's own
+//! status ([`herb_ipc::ArmStatus`]): robot disabled, e-stop, robot error, master lost, robot
+//! silent; with no recent status from the adapter, `JointStateTimeout` (the adapter is silent).
+//! With the arm unseen, nothing is commanded from then on: no brake is streamed (the adapter
+//! does not pass commands on while it withholds state; the robot holds by itself). With the arm
+//! seen, a moving arm brakes (a Ruckig brake from the last commanded state) and then nothing is
+//! commanded. **While a job is faulted, no joint command is sent**, so nothing planned before an
+//! interruption can reach the robot after it. When every input has been fresh for
+//! `resume_after_s`, the job resumes from the configuration measured then: an object still held
+//! is placed, an object lost from the gripper (the adapter restarted) is picked again,
+//! otherwise the current object starts over.
+//!
+//! A grasp that does not hold within `gripper_action_s` is a missed grasp
+//! ([`Fault::MissedGrasp`]): the gripper opens, and the pick is tried again with the same
+//! placement (no new decision) up to `grasp_retries` times; then the object is skipped
+//! ([`StatusEvent::Skipped`]) and the job goes on. A job starts with the gripper opened unless
+//! it holds something.
 //! A second job while one runs is rejected (`Busy`), not queued: a client resubmits.
 //! No joint command leaves the configured limits: every sample is checked before it is
 //! published, and one outside is replaced by holding the last command (counted).
@@ -47,9 +60,10 @@ use crate::config::{Timeouts, secs_to_ns};
 use crate::journal::{JournalRecord, ObjectPhase, Placement};
 use crate::plan::{MotionPlan, Request, Response};
 use herb_ipc::{
-    CancelJobRequest, Fault, GRIPPER_REPEAT_NS, GripperAction, GripperState, HEARTBEAT_PERIOD_NS,
-    Header, HeightmapFrame, InOrder, JobState, JointState, MAX_FUTURE_STAMP_NS, MAX_JOB_OBJECTS,
-    NO_OBJECT, PackJobRequest, RejectReason, Status, StatusEvent,
+    ARM_STATUS_PERIOD_NS, ArmBlocker, ArmStatus, CancelJobRequest, Fault, GRIPPER_REPEAT_NS,
+    GripperAction, GripperState, HEARTBEAT_PERIOD_NS, Header, HeightmapFrame, InOrder, JobState,
+    JointState, MAX_FUTURE_STAMP_NS, MAX_JOB_OBJECTS, NO_OBJECT, PackJobRequest, RejectReason,
+    Status, StatusEvent,
 };
 use herb_robot::kinematics::DOF;
 use herb_robot::motion::Setpoint;
@@ -95,6 +109,8 @@ pub struct JobParams {
     pub upper: [f64; DOF],
     /// Object types in the catalog (a request naming another is rejected).
     pub catalog_len: usize,
+    /// Picks tried again after a missed grasp before the object is skipped.
+    pub grasp_retries: u32,
 }
 
 impl JobParams {
@@ -105,6 +121,7 @@ impl JobParams {
             lower: cfg.limits.lower,
             upper: cfg.limits.upper,
             catalog_len,
+            grasp_retries: cfg.recovery.grasp_retries,
         }
     }
 }
@@ -158,6 +175,11 @@ enum Phase {
     Faulted {
         healthy_since: Option<u64>,
     },
+    /// A grasp missed: the gripper opens (commanded at `since`), then the pick is tried again
+    /// or the object skipped.
+    Regrasp {
+        since: u64,
+    },
     /// A job taken up from the journal after a restart: `asked` once the planner has its
     /// order; then it waits, faulted, for fresh inputs.
     Recovering {
@@ -175,6 +197,7 @@ pub struct Job {
     lower: [f64; DOF],
     upper: [f64; DOF],
     catalog_len: usize,
+    grasp_retries: u32,
     // latched inputs
     js: Option<JointState>,
     js_at: u64,
@@ -184,6 +207,10 @@ pub struct Job {
     gs_at: u64,
     /// Order of the gripper states.
     gs_order: InOrder,
+    /// The arm adapter's latest word on why it withholds state, and its stamp.
+    arm_blocker: ArmBlocker,
+    arm_at: u64,
+    arm_order: InOrder,
     /// When the newest valid heightmap was received (the cycle's start).
     hm_rx_at: u64,
     /// The newest valid heightmap's capture stamp.
@@ -204,6 +231,8 @@ pub struct Job {
     holding: bool,
     /// The current object's decided placement and release configuration.
     placement: Option<Placement>,
+    /// Missed grasps of the current object.
+    missed: u32,
     /// The job was taken up from the journal and has not resumed yet.
     recovered: bool,
     /// The job taken up from the journal is to be ended, not resumed.
@@ -278,6 +307,8 @@ pub struct JobSnapshot {
     pub limit_holds: u64,
     /// Stopping.
     pub stopping: bool,
+    /// The arm adapter's last status: blocker code, stamp, order check.
+    pub arm: (u32, u64, Option<(u128, u64, u64)>),
 }
 
 /// A recovered job's arm stands at an object's release configuration when every joint is
@@ -295,6 +326,19 @@ fn release_q(plan: &MotionPlan) -> Option<[f64; DOF]> {
         .map(|s| s.position)
 }
 
+/// Faults that mean the arm's state is not seen (joint states stopped).
+fn arm_unseen(f: Fault) -> bool {
+    matches!(
+        f,
+        Fault::JointStateTimeout
+            | Fault::RobotDisabled
+            | Fault::RobotEStop
+            | Fault::RobotError
+            | Fault::MasterLost
+            | Fault::RobotSilent
+    )
+}
+
 /// A state is not from the future when stamped at most [`MAX_FUTURE_STAMP_NS`] past the
 /// cycle's start, or not past the clock when it was received (the loop may have been preempted
 /// since the cycle began).
@@ -310,12 +354,16 @@ impl Job {
             lower: p.lower,
             upper: p.upper,
             catalog_len: p.catalog_len,
+            grasp_retries: p.grasp_retries,
             js: None,
             js_at: 0,
             js_order: InOrder::default(),
             gs: None,
             gs_at: 0,
             gs_order: InOrder::default(),
+            arm_blocker: ArmBlocker::None,
+            arm_at: 0,
+            arm_order: InOrder::default(),
             hm_rx_at: 0,
             hm_stamp: 0,
             rejected: 0,
@@ -330,6 +378,7 @@ impl Job {
             release_stamp: 0,
             holding: false,
             placement: None,
+            missed: 0,
             recovered: false,
             abandoning: false,
             fault: Fault::None,
@@ -378,6 +427,20 @@ impl Job {
         }
     }
 
+    /// The arm adapter's status, as [`Job::joint_state`].
+    pub fn arm_status(&mut self, publisher: u128, m: &ArmStatus, now: u64, received_ns: u64) {
+        match m.validate() {
+            Ok(())
+                if not_from_the_future(m.header.stamp_ns, now, received_ns)
+                    && self.arm_order.accept(publisher, &m.header) =>
+            {
+                self.arm_blocker = ArmBlocker::from_code(m.blocker).unwrap_or(ArmBlocker::None);
+                self.arm_at = m.header.stamp_ns;
+            }
+            _ => self.rejected += 1,
+        }
+    }
+
     /// A heightmap frame, read in place: only its header and grid are checked here (the
     /// planner checks every cell of the frame it decides on).
     pub fn heightmap(&mut self, f: &HeightmapFrame, now: u64) {
@@ -399,8 +462,8 @@ impl Job {
                 Err((RejectReason::ShuttingDown, 0))
             } else if self.phase != Phase::Idle {
                 Err((RejectReason::Busy, 0))
-            } else if !self.inputs_fresh(now) {
-                Err((RejectReason::NotReady, 0))
+            } else if let Some(why) = self.not_ready(now) {
+                Err((RejectReason::NotReady, why as u32))
             } else {
                 Ok(())
             }
@@ -482,10 +545,18 @@ impl Job {
         self.fault = Fault::None;
         self.cancelling = false;
         self.holding = self.gs.is_some_and(|g| g.holding == 1);
+        self.missed = 0;
         self.release_stamp = 0;
         let q = self.js.map(|j| j.position).unwrap_or_default();
         self.cmd = Setpoint::at_rest(q);
         self.commanding = true;
+        // A known gripper state to start from: open, unless it holds something (which the job
+        // then deals with as its first object's grasp would: it is never dropped here).
+        if !self.holding {
+            self.grip_cmd = GripperAction::Open;
+            self.grip_object = NO_OBJECT;
+            self.grip_due = true;
+        }
         let _ = fx.plan(Request::Order {
             job_id: r.job_id,
             objects,
@@ -656,6 +727,7 @@ impl Job {
             last_heartbeat: self.last_heartbeat,
             limit_holds: self.limit_holds,
             stopping: self.stopping,
+            arm: (self.arm_blocker as u32, self.arm_at, self.arm_order.last()),
         })
     }
 
@@ -697,6 +769,10 @@ impl Job {
         self.last_heartbeat = s.last_heartbeat;
         self.limit_holds = s.limit_holds;
         self.stopping = s.stopping;
+        self.arm_blocker = ArmBlocker::from_code(s.arm.0).unwrap_or(ArmBlocker::None);
+        self.arm_at = s.arm.1;
+        self.arm_order = InOrder::with_last(s.arm.2);
+        self.missed = 0;
     }
 
     /// The state reported in statuses.
@@ -733,7 +809,9 @@ impl Job {
             Phase::Streaming { .. } | Phase::Gripper { .. } if self.holding => {
                 ObjectPhase::Carrying
             }
-            Phase::Streaming { .. } | Phase::Gripper { .. } => ObjectPhase::Moving,
+            Phase::Streaming { .. } | Phase::Gripper { .. } | Phase::Regrasp { .. } => {
+                ObjectPhase::Moving
+            }
             Phase::Braking { .. } | Phase::Faulted { .. } | Phase::Recovering { .. } => {
                 ObjectPhase::Halted
             }
@@ -781,13 +859,33 @@ impl Job {
         self.phase = Phase::Recovering { asked: false };
     }
 
-    fn inputs_fresh(&self, now: u64) -> bool {
-        self.js.is_some() && self.gs.is_some() && self.stale_input(now).is_none()
+    /// Why a job cannot run now, if it cannot: the stale input's fault (see
+    /// [`Job::stale_input`]), or the missing one's.
+    fn not_ready(&self, now: u64) -> Option<Fault> {
+        if self.js.is_none() {
+            Some(self.joint_fault(now))
+        } else if self.gs.is_none() {
+            Some(Fault::GripperStateTimeout)
+        } else {
+            self.stale_input(now)
+        }
+    }
+
+    /// The fault for joint states that stopped: what the arm adapter says, if it said it
+    /// recently (within three of its periods); else the adapter is silent.
+    fn joint_fault(&self, now: u64) -> Fault {
+        let said_recently =
+            self.arm_at != 0 && now.saturating_sub(self.arm_at) < 3 * ARM_STATUS_PERIOD_NS;
+        if said_recently {
+            self.arm_blocker.fault()
+        } else {
+            Fault::JointStateTimeout
+        }
     }
 
     fn stale_input(&self, now: u64) -> Option<Fault> {
         if now.saturating_sub(self.js_at) >= self.t.joint_state_ns {
-            Some(Fault::JointStateTimeout)
+            Some(self.joint_fault(now))
         } else if now.saturating_sub(self.gs_at) >= self.t.gripper_state_ns {
             Some(Fault::GripperStateTimeout)
         } else if now.saturating_sub(self.hm_rx_at) >= self.t.heightmap_ns {
@@ -811,11 +909,17 @@ impl Job {
         }
     }
 
-    /// A fault: report, brake if moving, hold.
+    /// A fault: report, brake if moving and the arm is seen, hold.
     fn raise(&mut self, fx: &mut impl Effects, fault: Fault) {
         self.fault = fault;
         self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
-        self.begin_brake(fx);
+        if arm_unseen(fault) {
+            // No joint state: the adapter passes no command on; a brake streamed now would
+            // only be a setpoint planned before the interruption.
+            self.enter_faulted(fx);
+        } else {
+            self.begin_brake(fx);
+        }
     }
 
     /// The last command moves the arm.
@@ -914,6 +1018,7 @@ impl Job {
             after_stamp_ns: self.release_stamp,
             from: self.cmd.position,
             place_only,
+            repick: false,
             pose,
             buf,
         };
@@ -939,6 +1044,7 @@ impl Job {
             }
             Phase::Streaming { seg, cursor } => self.stream(fx, now, seg, cursor),
             Phase::Gripper { action, seg, since } => self.grip(fx, now, action, seg, since),
+            Phase::Regrasp { since } => self.regrasp(fx, now, since),
             Phase::Braking {
                 cursor,
                 seg,
@@ -977,10 +1083,16 @@ impl Job {
                 if self.stopping || self.job_id == 0 {
                     return;
                 }
-                if !self.inputs_fresh(now) {
+                if let Some(why) = self.not_ready(now) {
                     self.phase = Phase::Faulted {
                         healthy_since: None,
                     };
+                    // The arm adapter said more about the joint states that stopped (or it
+                    // changed: an e-stop became a disable): say it once.
+                    if arm_unseen(why) && arm_unseen(self.fault) && why != self.fault {
+                        self.fault = why;
+                        self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+                    }
                     return;
                 }
                 let since = healthy_since.unwrap_or(now);
@@ -1022,14 +1134,84 @@ impl Job {
                     self.done += 1;
                     self.emit(fx, StatusEvent::Placed, ty, pose, dns);
                     self.index += 1;
+                    self.missed = 0;
                     self.placement = None;
                 }
             }
             self.next_segment(fx, now, seg + 1);
         } else if now.saturating_sub(since) > self.t.gripper_action_ns {
+            if action == GripperAction::Close && g.holding == 0 {
+                // Closed on nothing (or not holding in time): open, then pick again or skip.
+                self.fault = Fault::MissedGrasp;
+                self.missed += 1;
+                self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+                self.grip_cmd = GripperAction::Open;
+                self.grip_object = NO_OBJECT;
+                self.grip_due = true;
+                self.phase = Phase::Regrasp { since: now };
+                return;
+            }
             self.fault = Fault::Gripper;
             self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
             self.finish(fx, StatusEvent::JobFailed);
+        }
+    }
+
+    /// After a missed grasp: once the gripper reports open, pick again with the same placement
+    /// (at most `grasp_retries` times), else skip the object.
+    fn regrasp(&mut self, fx: &mut impl Effects, now: u64, since: u64) {
+        if self.stopping {
+            return;
+        }
+        let Some(g) = self.gs else { return };
+        let opened = g.closed == 0 && g.header.stamp_ns >= since;
+        if !opened {
+            if now.saturating_sub(since) > self.t.gripper_action_ns {
+                self.fault = Fault::Gripper;
+                self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+                self.finish(fx, StatusEvent::JobFailed);
+            }
+            return;
+        }
+        if self.cancelling {
+            self.retreat(fx);
+            return;
+        }
+        if self.missed <= self.grasp_retries && self.placement.is_some() {
+            self.request_repick(fx, now);
+            return;
+        }
+        // Given up: skipped with its reason, the job goes on.
+        self.emit(fx, StatusEvent::Skipped, self.current_type(), [0.0; 4], 0);
+        self.index += 1;
+        self.missed = 0;
+        self.placement = None;
+        if self.index >= self.count {
+            self.finish(fx, StatusEvent::JobDone);
+        } else {
+            self.phase = Phase::WaitHeightmap { since: now };
+        }
+    }
+
+    /// Asks for the current object's pick and place again, at its decided placement.
+    fn request_repick(&mut self, fx: &mut impl Effects, now: u64) {
+        let (Some(p), Some(buf)) = (self.placement, self.spare.take()) else {
+            return;
+        };
+        let req = Request::Plan {
+            index: self.index as u32,
+            object: self.order[self.index],
+            after_stamp_ns: self.release_stamp,
+            from: self.cmd.position,
+            place_only: false,
+            repick: true,
+            pose: p.pose,
+            buf,
+        };
+        match fx.plan(req) {
+            Ok(()) => self.phase = Phase::Planning { since: now },
+            Err(Request::Plan { buf, .. }) => self.spare = Some(buf),
+            Err(_) => {}
         }
     }
 
@@ -1229,13 +1411,18 @@ impl Job {
 
     fn publish(&mut self, now: u64, fx: &mut impl Effects) {
         if self.commanding {
+            // Faulted, nothing moves the arm: the robot holds by itself, and the next command
+            // is planned from the state measured when the job resumes.
+            let halted = matches!(self.phase, Phase::Faulted { .. } | Phase::Recovering { .. });
             let q = self.cmd.position;
             let inside = (0..DOF).all(|i| q[i] >= self.lower[i] && q[i] <= self.upper[i]);
-            if inside {
-                fx.joint(&self.cmd);
-            } else {
-                // Never reached by planned samples (checked by the planner); a guard.
-                self.limit_holds += 1;
+            if !halted {
+                if inside {
+                    fx.joint(&self.cmd);
+                } else {
+                    // Never reached by planned samples (checked by the planner); a guard.
+                    self.limit_holds += 1;
+                }
             }
             if self.grip_due || now.saturating_sub(self.grip_sent_at) >= GRIPPER_REPEAT_NS {
                 self.grip_due = false;
@@ -1245,6 +1432,10 @@ impl Job {
         }
         if now.saturating_sub(self.last_heartbeat) >= HEARTBEAT_PERIOD_NS {
             self.last_heartbeat = now;
+            // Between jobs, a heartbeat's fault says why a job would be refused now.
+            if self.phase == Phase::Idle {
+                self.fault = self.not_ready(now).unwrap_or(Fault::None);
+            }
             self.emit(fx, StatusEvent::Heartbeat, self.current_type(), [0.0; 4], 0);
         }
     }

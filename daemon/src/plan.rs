@@ -123,7 +123,8 @@ pub enum Request {
     },
     /// Decide and plan object `index` from rest at `from`, on a heightmap stamped after
     /// `after_stamp_ns`. With `place_only`, the object is already held: reuse `pose` and plan
-    /// only the placing moves.
+    /// only the placing moves. With `repick`, a grasp missed: reuse `pose` (decided already)
+    /// and plan the pick and the placing moves again.
     Plan {
         /// Index in the order.
         index: u32,
@@ -135,7 +136,9 @@ pub enum Request {
         from: [f64; DOF],
         /// Held already: place at `pose`.
         place_only: bool,
-        /// The placement to reuse with `place_only`.
+        /// The grasp missed: pick again and place at `pose`, no new decision.
+        repick: bool,
+        /// The placement to reuse with `place_only` or `repick`.
         pose: [f32; 4],
         /// Buffer to fill.
         buf: Box<MotionPlan>,

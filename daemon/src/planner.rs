@@ -200,14 +200,15 @@ impl PlannerCore {
         object: u16,
         frame: Option<&HeightmapFrame>,
         from: [f64; DOF],
-        place_only: Option<[f32; 4]>,
+        reuse: Option<[f32; 4]>,
+        pick: bool,
         buf: &mut MotionPlan,
     ) -> Result<(), Fault> {
         buf.reset();
         buf.index = index;
         buf.object = object;
         let ty = TypeIdx(object);
-        let pose = match place_only {
+        let pose = match reuse {
             Some(p) => p,
             None => {
                 let Some(frame) = frame else {
@@ -245,7 +246,7 @@ impl PlannerCore {
         if let Some(up) = lift_to(&self.arm, &self.ik, &from, transit) {
             go(&up, None, buf, &mut self.motion)?;
         }
-        if place_only.is_none() {
+        if pick {
             go(&w.pre_grasp, None, buf, &mut self.motion)?;
             go(&w.grasp, Some(GripperAction::Close), buf, &mut self.motion)?;
             go(&w.pre_grasp, None, buf, &mut self.motion)?;
@@ -311,6 +312,7 @@ impl PlannerCore {
         match r {
             Request::Plan {
                 place_only: false,
+                repick: false,
                 after_stamp_ns,
                 ..
             } => Some(*after_stamp_ns),
@@ -357,12 +359,13 @@ impl PlannerCore {
                 object,
                 from,
                 place_only,
+                repick,
                 pose,
                 mut buf,
                 ..
             } => {
-                let reuse = place_only.then_some(pose);
-                match self.plan(index, object, frame, from, reuse, &mut buf) {
+                let reuse = (place_only || repick).then_some(pose);
+                match self.plan(index, object, frame, from, reuse, !place_only, &mut buf) {
                     Ok(()) => Response::Planned(buf),
                     Err(fault) => Response::Failed { fault, buf },
                 }

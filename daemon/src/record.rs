@@ -32,8 +32,8 @@ use crate::digest::Fnv;
 use crate::job::JobSnapshot;
 use crate::plan::Request;
 use herb_ipc::{
-    CancelJobRequest, GripperAction, GripperState, HeightmapFrame, JointState, MAX_JOB_OBJECTS,
-    PackJobRequest, Payload, RejectReason, Status,
+    ArmStatus, CancelJobRequest, GripperAction, GripperState, HeightmapFrame, JointState,
+    MAX_JOB_OBJECTS, PackJobRequest, Payload, RejectReason, Status,
 };
 use herb_robot::kinematics::DOF;
 use herb_robot::motion::Setpoint;
@@ -92,6 +92,15 @@ pub enum LoopRec {
         received: u64,
         /// The payload.
         m: GripperState,
+    },
+    /// The arm adapter's status.
+    Arm {
+        /// iceoryx2 publisher id.
+        publisher: u128,
+        /// Clock when received.
+        received: u64,
+        /// The payload.
+        m: ArmStatus,
     },
     /// A heightmap frame's header and grid ([`FRAME_META`] bytes).
     Frame([u8; FRAME_META]),
@@ -183,6 +192,7 @@ impl OutDigest {
                 after_stamp_ns,
                 from,
                 place_only,
+                repick,
                 pose,
                 ..
             } => {
@@ -191,6 +201,10 @@ impl OutDigest {
                     .u64(*object as u64)
                     .u64(*after_stamp_ns)
                     .u64(*place_only as u64);
+                // Logs written before re-picks existed hash the same.
+                if *repick {
+                    h.u64(1);
+                }
                 for v in from {
                     h.f64(*v);
                 }
@@ -242,6 +256,7 @@ mod kind {
     pub const GAP: u8 = 11;
     pub const PLAN_FRAME: u8 = 12;
     pub const FRAME_CELLS: u8 = 13;
+    pub const ARM: u8 = 14;
 }
 
 /// Little-endian encoding of record payloads.
@@ -498,6 +513,9 @@ fn encode_snapshot(requests_before: u64, s: &JobSnapshot) -> Vec<u8> {
         .u64(s.last_heartbeat)
         .u64(s.limit_holds)
         .u8(s.stopping as u8);
+    // Appended later: a snapshot without it reads as "nothing said yet".
+    e.u32(s.arm.0).u64(s.arm.1);
+    opt_order(&mut e, s.arm.2);
     e.0
 }
 
@@ -538,6 +556,11 @@ fn decode_snapshot(b: &[u8]) -> Option<(u64, JobSnapshot)> {
     let commanding = d.bool()?;
     let grip = (d.u32()?, d.u32()?, d.bool()?, d.u64()?);
     let (last_heartbeat, limit_holds, stopping) = (d.u64()?, d.u64()?, d.bool()?);
+    let arm = if d.0.is_empty() {
+        (0, 0, None)
+    } else {
+        (d.u32()?, d.u64()?, opt_order(&mut d)?)
+    };
     Some((
         before,
         JobSnapshot {
@@ -562,6 +585,7 @@ fn decode_snapshot(b: &[u8]) -> Option<(u64, JobSnapshot)> {
             commanding,
             grip,
             last_heartbeat,
+            arm,
             limit_holds,
             stopping,
         },
@@ -590,6 +614,14 @@ fn encode_loop(r: &LoopRec) -> (u8, Vec<u8>) {
         } => {
             e.u128(*publisher).u64(*received).bytes(m.as_bytes());
             kind::GS
+        }
+        LoopRec::Arm {
+            publisher,
+            received,
+            m,
+        } => {
+            e.u128(*publisher).u64(*received).bytes(m.as_bytes());
+            kind::ARM
         }
         LoopRec::Frame(meta) => {
             e.bytes(meta);
@@ -872,6 +904,8 @@ pub enum Entry {
     /// See [`LoopRec`].
     Gs(u128, u64, GripperState),
     /// See [`LoopRec`].
+    Arm(u128, u64, ArmStatus),
+    /// See [`LoopRec`].
     Frame([u8; FRAME_META]),
     /// See [`LoopRec`].
     Resp(RespRec),
@@ -987,6 +1021,7 @@ impl Log {
                 }
                 kind::JS => (|| Some(Entry::Js(d.u128()?, d.u64()?, d.payload()?)))(),
                 kind::GS => (|| Some(Entry::Gs(d.u128()?, d.u64()?, d.payload()?)))(),
+                kind::ARM => (|| Some(Entry::Arm(d.u128()?, d.u64()?, d.payload()?)))(),
                 kind::FRAME => d.bytes().and_then(|b| b.try_into().ok()).map(Entry::Frame),
                 kind::RESP => (|| {
                     Some(Entry::Resp(RespRec {
@@ -1189,6 +1224,7 @@ mod tests {
             lower: cfg.limits.lower,
             upper: cfg.limits.upper,
             catalog_len: 24,
+            grasp_retries: 1,
         };
         let snap = crate::job::Job::new(params, buf(), buf())
             .snapshot()

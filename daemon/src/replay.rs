@@ -216,6 +216,7 @@ pub fn replay(log: &Log, opts: &ReplayOptions) -> Result<(Outcome, Replayed), St
             }
             Entry::Js(p, r, m) => job.joint_state(p, &m, now, r),
             Entry::Gs(p, r, m) => job.gripper_state(p, &m, now, r),
+            Entry::Arm(p, r, m) => job.arm_status(p, &m, now, r),
             Entry::Frame(meta) => {
                 let mut b = frame.as_bytes().to_vec();
                 b[..meta.len()].copy_from_slice(&meta);

@@ -80,8 +80,15 @@ impl WatchView {
             ),
             StatusEvent::Fault => {
                 self.faults += 1;
-                format!("FAULT {fault:?}")
+                format!("FAULT {fault:?} ({})", fault.describe())
             }
+            StatusEvent::Skipped => format!(
+                "object {}/{} ({}) skipped: {}",
+                s.object_index + 1,
+                s.objects_total,
+                name(s.object_type),
+                fault.describe()
+            ),
             StatusEvent::Braked => "braked: standing still".into(),
             StatusEvent::Resumed => "resumed".into(),
             StatusEvent::JobDone => format!(
@@ -195,14 +202,16 @@ impl WatchView {
             s.rejected_inputs
         );
         let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
+        // Between jobs the fault is why a job would be refused now; in a job, the last one.
+        let said = match (fault, state) {
+            (Fault::None, JobState::Idle) => "none: ready for a job".to_string(),
+            (Fault::None, _) => "none".to_string(),
+            (f, JobState::Idle) => format!("robot not ready: {}", f.describe()),
+            (f, _) => format!("{f:?} ({}, the last one)", f.describe()),
+        };
         let _ = writeln!(
             out,
-            "fault: {}; {} fault events since watching",
-            if fault == Fault::None {
-                "none".to_string()
-            } else {
-                format!("{fault:?} (the last one)")
-            },
+            "fault: {said}; {} fault events since watching",
             self.faults
         );
         if let Some(o) = &self.outcome {
@@ -303,8 +312,8 @@ mod tests {
             "[#######.......................]  25 %",
             "last decision: object 2 at x +0.010 y -0.020 z 0.050 m, yaw +1.50 rad, in 0.412 ms",
             "loop: 2000 cycles (1000 Hz), 2 deadline misses (0.1000 %), worst cycle 85.1 us",
-            "fault: JointStateTimeout (the last one); 1 fault events",
-            "10:00:01  FAULT JointStateTimeout",
+            "fault: JointStateTimeout (adapter silent: no joint state from the arm adapter, the last one); 1 fault events",
+            "10:00:01  FAULT JointStateTimeout (adapter silent: no joint state from the arm adapter)",
         ] {
             assert!(text.contains(want), "{want:?} in\n{text}");
         }

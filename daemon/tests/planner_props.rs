@@ -92,6 +92,7 @@ fn check_plan(
         after_stamp_ns: 0,
         from: LEFT_TOP_DOWN_NOMINAL,
         place_only: place_only.is_some(),
+        repick: false,
         pose: place_only.unwrap_or_default(),
         buf,
     };

@@ -46,6 +46,8 @@ pub const MAX_FUTURE_STAMP_NS: u64 = 1_000_000;
 pub const GRIPPER_REPEAT_NS: u64 = 100_000_000;
 /// `herbd` publishes a [`StatusEvent::Heartbeat`] this often (ns).
 pub const HEARTBEAT_PERIOD_NS: u64 = 100_000_000;
+/// An arm adapter publishes its [`ArmStatus`] at least this often (ns).
+pub const ARM_STATUS_PERIOD_NS: u64 = 100_000_000;
 
 /// `CLOCK_MONOTONIC` now, in nanoseconds.
 pub fn monotonic_ns() -> u64 {
@@ -374,6 +376,75 @@ impl GripperState {
     }
 }
 
+/// Why the arm adapter withholds joint state (the robot must not be moved), as it tells herbd
+/// on the `arm_status` service.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum ArmBlocker {
+    /// The robot may move: joint states flow.
+    None = 0,
+    /// The robot is disabled (an operator, or never enabled).
+    Disabled = 1,
+    /// The robot's emergency stop is pressed (or was, and the robot was not enabled since).
+    EStop = 2,
+    /// The robot reports an error.
+    RobotError = 3,
+    /// The adapter lost its middleware's master (ROS 1).
+    MasterLost = 4,
+    /// The robot stopped reporting its state to the adapter.
+    RobotSilent = 5,
+}
+
+impl ArmBlocker {
+    /// The blocker for a wire code, if defined.
+    pub fn from_code(c: u32) -> Option<Self> {
+        use ArmBlocker::*;
+        [None, Disabled, EStop, RobotError, MasterLost, RobotSilent]
+            .get(c as usize)
+            .copied()
+    }
+
+    /// The fault herbd reports when joint states stop while the adapter says this.
+    pub fn fault(self) -> Fault {
+        match self {
+            Self::None => Fault::JointStateTimeout,
+            Self::Disabled => Fault::RobotDisabled,
+            Self::EStop => Fault::RobotEStop,
+            Self::RobotError => Fault::RobotError,
+            Self::MasterLost => Fault::MasterLost,
+            Self::RobotSilent => Fault::RobotSilent,
+        }
+    }
+}
+
+/// The arm adapter's own state, published every [`ARM_STATUS_PERIOD_NS`] and at once when
+/// it changes: whether it passes joint states and commands on, and if not, why.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::ArmStatus")]
+pub struct ArmStatus {
+    /// Header.
+    pub header: Header,
+    /// [`ArmBlocker`] code.
+    pub blocker: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// Joint commands the adapter refused because their target was farther from the measured
+    /// position than its bound, or planned before the robot became ready (since it started).
+    pub commands_refused: u64,
+}
+payload!(ArmStatus);
+
+impl ArmStatus {
+    /// Header and blocker code.
+    pub fn validate(&self) -> Result<(), Invalid> {
+        self.header.validate()?;
+        ArmBlocker::from_code(self.blocker)
+            .map(|_| ())
+            .ok_or(Invalid::new("blocker", Reason::UnknownCode))
+    }
+}
+
 /// A heightmap of the box interior from the camera adapter (or the loopback): row-major, row 0
 /// at +y, column 0 at -x, cells of `cell_m` centred on the box (`herb_sim::GridSpec`).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
@@ -466,6 +537,9 @@ pub enum StatusEvent {
     /// The job was cancelled ([`CancelJobRequest`]): the arm braked and retreated (or, if it
     /// was faulted, stands where it stopped); objects not yet placed stay unpacked.
     JobCancelled = 10,
+    /// An object was given up (`fault` says why, e.g. [`Fault::MissedGrasp`] after its
+    /// retries): it stays unpacked and the job goes on with the next one.
+    Skipped = 11,
 }
 
 /// Why the daemon stopped or failed.
@@ -499,9 +573,46 @@ pub enum Fault {
     /// job journal: the job resumes from the measured robot state, or is abandoned when
     /// configured so (`journal.on_restart = "abandon"`).
     Restarted = 11,
+    /// Joint states stopped: the adapter says the robot is disabled.
+    RobotDisabled = 12,
+    /// Joint states stopped: the adapter says the robot's emergency stop is pressed.
+    RobotEStop = 13,
+    /// Joint states stopped: the adapter says the robot reports an error.
+    RobotError = 14,
+    /// Joint states stopped: the adapter lost its middleware's master (ROS 1).
+    MasterLost = 15,
+    /// Joint states stopped: the adapter says the robot stopped reporting.
+    RobotSilent = 16,
+    /// The gripper closed on nothing (or did not grip in time): it is opened, and the pick is
+    /// tried again or the object skipped (`[recovery]`).
+    MissedGrasp = 17,
 }
 
 impl Fault {
+    /// What the fault means, in a few words for an operator.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Fault::None => "none",
+            Fault::JointStateTimeout => "adapter silent: no joint state from the arm adapter",
+            Fault::GripperStateTimeout => "no gripper state from the arm adapter",
+            Fault::HeightmapTimeout => "no heightmap from the camera",
+            Fault::Gripper => "the gripper did not reach its commanded state in time",
+            Fault::Unreachable => "a waypoint is out of the arm's reach",
+            Fault::Decision => "the placement decision failed",
+            Fault::Motion => "trajectory generation failed",
+            Fault::Stop => "herbd is stopping",
+            Fault::ObjectLost => "the object was lost from the gripper",
+            Fault::NoFeasiblePlacement => "no feasible placement for the next object",
+            Fault::Restarted => "herbd restarted with this job unfinished",
+            Fault::RobotDisabled => "robot disabled",
+            Fault::RobotEStop => "robot e-stopped",
+            Fault::RobotError => "robot in error",
+            Fault::MasterLost => "ROS master lost",
+            Fault::RobotSilent => "robot silent (no state reaches the adapter)",
+            Fault::MissedGrasp => "missed grasp",
+        }
+    }
+
     /// The fault for a wire code, if defined.
     pub fn from_code(c: u32) -> Option<Self> {
         use Fault::*;
@@ -518,6 +629,12 @@ impl Fault {
             ObjectLost,
             NoFeasiblePlacement,
             Restarted,
+            RobotDisabled,
+            RobotEStop,
+            RobotError,
+            MasterLost,
+            RobotSilent,
+            MissedGrasp,
         ]
         .get(c as usize)
         .copied()
@@ -550,6 +667,7 @@ impl StatusEvent {
             JobFailed,
             Shutdown,
             JobCancelled,
+            Skipped,
         ]
         .get(c as usize)
         .copied()
@@ -984,6 +1102,10 @@ impl Services {
     /// pub-sub [`JointState`], adapter -> herbd.
     pub fn joint_state(&self) -> String {
         self.name("joint_state")
+    }
+    /// pub-sub [`ArmStatus`], arm adapter -> herbd, clients.
+    pub fn arm_status(&self) -> String {
+        self.name("arm_status")
     }
     /// pub-sub [`JointCommand`], herbd -> adapter.
     pub fn joint_command(&self) -> String {

@@ -5,6 +5,8 @@
 
 #![warn(missing_docs)]
 
+/// Cell calibration by touch: the box pose for `[cell]` from touched corners.
+pub mod calibrate;
 pub mod cell;
 pub mod config_file;
 pub mod kinematics;

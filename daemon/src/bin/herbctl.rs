@@ -48,6 +48,10 @@ enum Cmd {
         /// Print the summary as one JSON line.
         #[arg(long)]
         json: bool,
+        /// A real cell fed by hand: say which object to put at the pick station, and when
+        /// (as each object is decided, and again after a missed grasp).
+        #[arg(long)]
+        operator: bool,
     },
     /// Empty the simulated box (the loopback; a real cell's box is emptied by hand). Refused
     /// while herbd runs a job.
@@ -169,7 +173,7 @@ fn pack(
     ids: &[String],
     picture: &Option<PathBuf>,
     timeout: f64,
-    json: bool,
+    (json, operator): (bool, bool),
 ) -> Result<bool, String> {
     let (objects, what) = objects_of(cli, session, ids, catalog)?;
     let (bus, services, status, frames) = listen(cli)?;
@@ -179,15 +183,27 @@ fn pack(
     let client = bus.job_client().map_err(|e| e.to_string())?;
     let deadline = Instant::now() + Duration::from_secs_f64(timeout);
     let job_id = (monotonic_ns() & 0xffff_ffff) << 16 | (std::process::id() as u64 & 0xffff) | 1;
-    eprintln!(
-        "herbctl: submitting job {job_id}: {what}, {} objects",
-        objects.len()
-    );
+    if what.ends_with(" objects") {
+        eprintln!("herbctl: submitting job {job_id}: {what}");
+    } else {
+        eprintln!(
+            "herbctl: submitting job {job_id}: {what}, {} objects",
+            objects.len()
+        );
+    }
 
-    // Submit, waiting for the daemon to come up.
+    // Submit, waiting for the daemon to come up and the robot to be ready (said at once, and
+    // again when the reason changes).
+    let mut not_ready: Option<Fault> = None;
     let reply = 'submit: loop {
         if Instant::now() > deadline {
-            return Err("no reply from herbd (is it running with this prefix?)".into());
+            return Err(match not_ready {
+                Some(f) => format!(
+                    "robot not ready: {} (gave up after {timeout} s)",
+                    f.describe()
+                ),
+                None => "no reply from herbd (is it running with this prefix?)".into(),
+            });
         }
         let req = PackJobRequest::new(job_id, &objects);
         let pending = client.send_copy(req).map_err(|e| format!("send: {e:?}"))?;
@@ -201,7 +217,11 @@ fn pack(
             if let Ok(Some(r)) = pending.receive() {
                 let r = *r.payload();
                 if r.validate() == Ok(RejectReason::NotReady) {
-                    // The robot adapter is still starting: ask again.
+                    let why = Fault::from_code(r.detail).unwrap_or(Fault::JointStateTimeout);
+                    if not_ready != Some(why) {
+                        eprintln!("herbctl: robot not ready: {}; waiting", why.describe());
+                        not_ready = Some(why);
+                    }
                     std::thread::sleep(Duration::from_millis(200));
                     continue 'submit;
                 }
@@ -220,6 +240,7 @@ fn pack(
     let mut faults = Vec::new();
     let mut last: Option<Status> = None;
     let mut placed = 0u32;
+    let mut skipped = 0u32;
     let mut total = objects.len() as u32;
     let mut ok = None;
     let mut latest_frame: Option<Heightmap> = None;
@@ -264,6 +285,12 @@ fn pack(
             let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
             match StatusEvent::from_code(s.event) {
                 Some(StatusEvent::Decided) => {
+                    if operator {
+                        println!(
+                            "operator: put {} at the pick station",
+                            name(catalog, s.object_type)
+                        );
+                    }
                     decision_ms.push(s.decision_ns as f64 / 1e6);
                     println!(
                         "object {:>2}/{total}: {:<28} x {:+.3} y {:+.3} z {:.3} m yaw {:+.2} rad  decision {:.3} ms",
@@ -282,7 +309,22 @@ fn pack(
                 }
                 Some(StatusEvent::Fault) => {
                     faults.push(format!("{fault:?}"));
-                    println!("FAULT {fault:?}: braking and holding");
+                    println!("FAULT {fault:?} ({}): halting", fault.describe());
+                    if operator && fault == Fault::MissedGrasp {
+                        println!(
+                            "operator: put {} at the pick station (the pick is tried again)",
+                            name(catalog, s.object_type)
+                        );
+                    }
+                }
+                Some(StatusEvent::Skipped) => {
+                    skipped += 1;
+                    println!(
+                        "skipped object {}/{total} ({}): {}",
+                        s.object_index + 1,
+                        name(catalog, s.object_type),
+                        fault.describe()
+                    );
                 }
                 Some(StatusEvent::Braked) => println!("braked: standing still"),
                 Some(StatusEvent::Resumed) => println!("resumed"),
@@ -396,6 +438,7 @@ fn pack(
         "ok": ok == Some(true),
         "state": format!("{:?}", JobState::from_code(s.state).unwrap_or(JobState::Idle)),
         "placed": placed,
+        "skipped": skipped,
         "objects": total,
         "decisions": decision_ms.len(),
         "decision_ms_p50": pct(&mut d, 0.5),
@@ -901,7 +944,16 @@ fn main() -> ExitCode {
             picture,
             timeout,
             json,
-        } => pack(&cli, &catalog, session, objects, picture, *timeout, *json),
+            operator,
+        } => pack(
+            &cli,
+            &catalog,
+            session,
+            objects,
+            picture,
+            *timeout,
+            (*json, *operator),
+        ),
         Cmd::Status { timeout } => status(&cli, *timeout),
         Cmd::Watch {
             period,

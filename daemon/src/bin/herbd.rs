@@ -132,7 +132,12 @@ fn describe(s: &Status) -> Option<String> {
         JobState::from_code(s.state).unwrap_or(JobState::Idle)
     );
     let placed = format!("{}/{}", s.objects_done, s.objects_total);
-    let object = format!("{}/{}", s.object_index + 1, s.objects_total);
+    // After the last object there is no current one (not "4/3").
+    let object = if s.object_index < s.objects_total {
+        format!("{}/{}", s.object_index + 1, s.objects_total)
+    } else {
+        "none".to_string()
+    };
     let ms = format!("{:.3}", s.decision_ns as f64 / 1e6);
     let p = s.pose.map(|v| format!("{v:.4}"));
     let job: &dyn std::fmt::Display = &s.job_id;
@@ -178,6 +183,15 @@ fn describe(s: &Status) -> Option<String> {
             logfmt::line("job_cancelled", &[("job", job), ("placed", &placed)])
         }
         StatusEvent::Shutdown => logfmt::line("shutdown", &[("state", &state)]),
+        StatusEvent::Skipped => logfmt::line(
+            "skipped",
+            &[
+                ("job", job),
+                ("object", &object),
+                ("type", &s.object_type),
+                ("fault", &fault),
+            ],
+        ),
     })
 }
 

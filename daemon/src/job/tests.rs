@@ -104,6 +104,7 @@ fn params() -> JobParams {
         lower: cfg.limits.lower,
         upper: cfg.limits.upper,
         catalog_len: CATALOG,
+        grasp_retries: cfg.recovery.grasp_retries,
     }
 }
 
@@ -167,6 +168,7 @@ fn answer(r: Request) -> Response {
             object,
             from,
             place_only,
+            repick,
             pose,
             mut buf,
             ..
@@ -174,7 +176,7 @@ fn answer(r: Request) -> Response {
             fill(&mut buf, from, place_only);
             buf.index = index;
             buf.object = object;
-            if place_only {
+            if place_only || repick {
                 buf.pose = pose;
             } else {
                 buf.pose = [0.1 * (index + 1) as f32, 0.2, 0.05, 0.3];
@@ -237,6 +239,11 @@ struct Rig {
     /// Answer planner requests at the start of the next tick.
     auto: bool,
     finished: bool,
+    /// What the arm adapter says each tick (`None`: it says nothing).
+    arm: Option<ArmBlocker>,
+    arm_seq: u64,
+    /// While joint states are withheld the arm sags this much per tick on s1 (rad).
+    sag: f64,
 }
 
 impl Rig {
@@ -272,6 +279,9 @@ impl Rig {
             stop: false,
             auto: true,
             finished: false,
+            arm: None,
+            arm_seq: 0,
+            sag: 0.0,
         };
         r.ticks(3);
         r
@@ -299,6 +309,19 @@ impl Rig {
 
     fn feed(&mut self) {
         let now = self.now;
+        if let Some(b) = self.arm {
+            self.arm_seq += 1;
+            let m = ArmStatus {
+                header: Header::at(self.arm_seq, now),
+                blocker: b as u32,
+                reserved: 0,
+                commands_refused: 0,
+            };
+            self.job.arm_status(3, &m, now, now);
+        }
+        if !self.js_up {
+            self.q[1] += self.sag;
+        }
         if self.js_up {
             let m = self.js(now);
             self.job.joint_state(1, &m, now, now);
@@ -524,12 +547,13 @@ fn not_ready_without_joint_state_gripper_state_or_a_recent_heightmap() {
     // Never heard from the arm.
     let mut r = Rig::new();
     r.job = Job::new(params(), buffer(), buffer());
-    assert_eq!(r.submit(1, &[1]), (RejectReason::NotReady, 0));
+    let joint = Fault::JointStateTimeout as u32;
+    assert_eq!(r.submit(1, &[1]), (RejectReason::NotReady, joint));
     // Joint states stale (100 ms), then fresh again.
     let mut r = Rig::new();
     r.js_up = false;
     r.ticks(100);
-    assert_eq!(r.submit(1, &[1]), (RejectReason::NotReady, 0));
+    assert_eq!(r.submit(1, &[1]), (RejectReason::NotReady, joint));
     r.js_up = true;
     r.tick();
     assert_eq!(r.submit(2, &[1]), (RejectReason::None, 0));
@@ -545,12 +569,14 @@ fn not_ready_without_joint_state_gripper_state_or_a_recent_heightmap() {
     let mut r = Rig::new();
     r.gs_up = false;
     r.ticks(200);
-    assert_eq!(r.submit(1, &[1]), (RejectReason::NotReady, 0));
+    let grip = Fault::GripperStateTimeout as u32;
+    assert_eq!(r.submit(1, &[1]), (RejectReason::NotReady, grip));
     // No heightmap for 2 s: the camera counts too.
     let mut r = Rig::new();
     r.camera_up = false;
     r.ticks(2000);
-    assert_eq!(r.submit(1, &[1]), (RejectReason::NotReady, 0));
+    let camera = Fault::HeightmapTimeout as u32;
+    assert_eq!(r.submit(1, &[1]), (RejectReason::NotReady, camera));
     assert_eq!(r.job.rejected_inputs(), 1);
 }
 
@@ -578,7 +604,8 @@ fn a_job_while_braking_or_faulted_is_busy() {
     r.until(200, "plan", is_plan);
     r.respond();
     r.ticks(2); // streaming
-    r.js_up = false;
+    r.job.t.gripper_state_ns = 20 * MS; // soon stale: the arm is seen, it brakes
+    r.gs_up = false;
     r.until(200, "brake", is_brake);
     assert!(matches!(r.phase(), Phase::Braking { .. }));
     assert_eq!(r.submit(8, &[2]), (RejectReason::Busy, 0));
@@ -1056,7 +1083,7 @@ fn open_reports_placed_and_the_release_stamp_gates_the_next_plan() {
 }
 
 #[test]
-fn a_gripper_that_never_holds_fails_the_job_after_the_timeout() {
+fn a_missed_grasp_opens_and_picks_again_at_the_same_placement_without_a_new_decision() {
     let (mut r, _) = streaming();
     r.grasps = false;
     r.until(3000, "close", is_close);
@@ -1067,19 +1094,50 @@ fn a_gripper_that_never_holds_fails_the_job_after_the_timeout() {
     while r.now < since + t {
         r.tick();
     }
-    assert!(
-        matches!(r.phase(), Phase::Gripper { .. }),
-        "not at the timeout"
-    );
+    assert!(matches!(r.phase(), Phase::Gripper { .. }), "not yet");
+    r.grasps = true; // the operator puts the object there
     r.tick();
-    let ev = r.events();
     assert_eq!(
-        &ev[ev.len() - 2..],
-        &[StatusEvent::Fault, StatusEvent::JobFailed]
+        r.last(StatusEvent::Fault).fault,
+        herb_ipc::Fault::MissedGrasp as u32
     );
-    let s = r.last(StatusEvent::JobFailed);
-    assert_eq!((s.fault, s.job_id), (Fault::Gripper as u32, 7));
+    assert!(matches!(r.phase(), Phase::Regrasp { .. }));
+    r.until(100, "open", is_open);
+    r.until_event(5000, StatusEvent::JobDone);
+    use StatusEvent::*;
+    let decided = r.events().iter().filter(|e| **e == Decided).count();
+    assert_eq!(decided, 1, "announced once: {:?}", r.events());
+    let s = r.last(JobDone);
+    assert_eq!(
+        (s.objects_done, s.fault),
+        (1, herb_ipc::Fault::MissedGrasp as u32)
+    );
     assert_eq!(r.count(is_brake), 0, "the arm was at rest");
+}
+
+#[test]
+fn grasps_missed_past_the_retries_skip_the_object_and_the_job_goes_on() {
+    let mut r = Rig::started(&[1, 2]);
+    r.grasps = false;
+    r.until_event(20_000, StatusEvent::Skipped);
+    let s = r.last(StatusEvent::Skipped);
+    assert_eq!(s.fault, Fault::MissedGrasp as u32);
+    r.grasps = true;
+    r.until_event(10_000, StatusEvent::JobDone);
+    let ev = r.events();
+    let misses = r
+        .statuses()
+        .iter()
+        .filter(|s| event(s) == StatusEvent::Fault && s.fault == Fault::MissedGrasp as u32)
+        .count();
+    assert_eq!(misses, 1 + params().grasp_retries as usize, "{ev:?}");
+    let done = r.last(StatusEvent::JobDone);
+    assert_eq!((done.objects_done, done.objects_total), (1, 2));
+    // The next job starts from an open gripper.
+    let mark = r.fx.out.len();
+    assert_eq!(r.submit(8, &[3]), (RejectReason::None, 0));
+    r.tick();
+    assert!(r.fx.out[mark..].iter().any(is_open), "opened at the start");
 }
 
 #[test]
@@ -1161,42 +1219,124 @@ fn a_three_object_job_reports_the_golden_event_sequence() {
 // ---------------------------------------------------------------------------------------
 
 #[test]
-fn a_stale_joint_state_while_streaming_brakes_along_the_plan_then_along_the_brake() {
-    let (mut r, samples) = streaming();
-    r.auto = false;
+fn a_stale_joint_state_halts_at_once_and_nothing_is_commanded_until_the_resume() {
+    let (mut r, _) = streaming();
     r.ticks(2);
     r.js_up = false;
-    r.until(200, "brake", is_brake);
+    r.sag = 0.05e-3; // 0.05 rad/s while unpowered
+    let mark = r.fx.out.len();
+    r.until_event(200, StatusEvent::Braked);
     let s = r.last(StatusEvent::Fault);
     assert_eq!(s.fault, Fault::JointStateTimeout as u32);
-    let Request::Brake { state, buf } = r.take() else {
-        panic!()
-    };
-    let asked = r.fx.out.iter().rposition(is_brake).unwrap();
-    let last_sent = r.joints_since(0).len() - r.joints_since(asked).len();
     assert_eq!(
-        state,
-        r.joints_since(0)[last_sent - 1],
-        "from the last command"
+        r.count(is_brake),
+        0,
+        "the arm is not seen: no brake streamed"
     );
-    // Until the brake arrives: along the plan to its segment end (the fault came late in
-    // the first segments; hold where it ends).
-    let mark = r.fx.out.len();
-    r.ticks(2);
-    for c in r.joints_since(mark) {
-        assert!(samples.contains(&c) || c.velocity == [0.0; DOF], "{c:?}");
-    }
-    let resp = answer(Request::Brake { state, buf });
-    let Response::Braked(b) = &resp else { panic!() };
-    let brake = b.setpoints.as_slice().to_vec();
-    r.deliver(resp);
-    let mark = r.fx.out.len();
-    r.ticks(brake.len() + 1);
-    assert_eq!(r.joints_since(mark)[..brake.len()], brake[..]);
-    assert_eq!(r.events().last(), Some(&StatusEvent::Braked));
     assert!(matches!(r.phase(), Phase::Faulted { .. }));
-    let last = *r.joints_since(mark).last().unwrap();
-    assert_eq!(last.velocity, [0.0; DOF]);
+    // Faulted: not one joint command, however long it lasts.
+    let faulted = r.fx.out.len();
+    r.ticks(2000);
+    assert!(r.joints_since(faulted).is_empty(), "nothing while faulted");
+    let sagged = r.q;
+    assert!((sagged[1] - r.joints_since(mark).last().unwrap().position[1]) > 0.09);
+    // Back: the first command is the measured (sagged) position, after the window.
+    r.js_up = true;
+    let back = r.fx.out.len();
+    r.until_event(5000, StatusEvent::Resumed);
+    let first = r.joints_since(back);
+    let first = first.first().expect("commands after the resume");
+    assert_eq!(first.position, sagged, "from the state measured after it");
+    r.until_event(5000, StatusEvent::JobDone);
+}
+
+#[test]
+fn joint_states_stopped_are_named_by_the_adapter_and_the_name_follows_it() {
+    for (said, fault) in [
+        (ArmBlocker::Disabled, Fault::RobotDisabled),
+        (ArmBlocker::EStop, Fault::RobotEStop),
+        (ArmBlocker::MasterLost, Fault::MasterLost),
+        (ArmBlocker::RobotSilent, Fault::RobotSilent),
+        (ArmBlocker::RobotError, Fault::RobotError),
+    ] {
+        let (mut r, _) = streaming();
+        r.arm = Some(ArmBlocker::None);
+        r.ticks(2);
+        r.arm = Some(said);
+        r.js_up = false;
+        r.until_event(200, StatusEvent::Braked);
+        assert_eq!(r.last(StatusEvent::Fault).fault, fault as u32);
+        assert_eq!(r.count(is_brake), 0);
+        // Refused while it lasts, with the reason in the detail.
+        r.ticks(10);
+        assert_eq!(
+            r.submit(9, &[1]),
+            (RejectReason::Busy, 0),
+            "a job is still on"
+        );
+    }
+    // An e-stop released into a disable: said once more.
+    let (mut r, _) = streaming();
+    r.arm = Some(ArmBlocker::EStop);
+    r.js_up = false;
+    r.until_event(200, StatusEvent::Braked);
+    r.arm = Some(ArmBlocker::Disabled);
+    r.ticks(50);
+    let faults: Vec<u32> = r
+        .statuses()
+        .iter()
+        .filter(|s| event(s) == StatusEvent::Fault)
+        .map(|s| s.fault)
+        .collect();
+    assert_eq!(
+        faults,
+        vec![Fault::RobotEStop as u32, Fault::RobotDisabled as u32]
+    );
+    // The adapter silent too (no status for 300 ms): JointStateTimeout, i.e. adapter silent.
+    let mut r = Rig::new();
+    r.arm = None;
+    r.js_up = false;
+    r.ticks(400);
+    assert_eq!(
+        r.submit(1, &[1]),
+        (RejectReason::NotReady, Fault::JointStateTimeout as u32)
+    );
+    // Idle with the robot disabled: refused with the reason, which heartbeats carry too.
+    let mut r = Rig::new();
+    r.arm = Some(ArmBlocker::Disabled);
+    r.js_up = false;
+    r.ticks(200);
+    assert_eq!(
+        r.submit(1, &[1]),
+        (RejectReason::NotReady, Fault::RobotDisabled as u32)
+    );
+    let hb =
+        r.fx.out
+            .iter()
+            .rev()
+            .find_map(|o| match o {
+                Out::Status(s) if event(s) == StatusEvent::Heartbeat => Some(*s),
+                _ => None,
+            })
+            .unwrap();
+    assert_eq!(hb.fault, Fault::RobotDisabled as u32);
+    r.js_up = true;
+    r.arm = Some(ArmBlocker::None);
+    r.ticks(200);
+    assert_eq!(r.submit(2, &[1]), (RejectReason::None, 0));
+}
+
+#[test]
+fn a_gripper_state_timeout_brakes_a_seen_arm_then_commands_nothing() {
+    let (mut r, _) = streaming();
+    r.ticks(2);
+    r.job.t.gripper_state_ns = 20 * MS; // soon stale: the arm is seen, it brakes
+    r.gs_up = false;
+    r.until(300, "brake", is_brake);
+    r.until_event(300, StatusEvent::Braked);
+    let after = r.fx.out.len();
+    r.ticks(500);
+    assert!(r.joints_since(after).is_empty(), "nothing while faulted");
 }
 
 #[test]
@@ -1262,7 +1402,8 @@ fn a_failed_brake_or_a_full_ring_enters_faulted_where_it_stands() {
     let (mut r, _) = streaming();
     r.auto = false;
     r.ticks(2);
-    r.js_up = false;
+    r.job.t.gripper_state_ns = 20 * MS; // soon stale: the arm is seen, it brakes
+    r.gs_up = false;
     r.until(200, "brake", is_brake);
     let Request::Brake { buf, .. } = r.take() else {
         panic!()
@@ -1277,7 +1418,8 @@ fn a_failed_brake_or_a_full_ring_enters_faulted_where_it_stands() {
     let (mut r, _) = streaming();
     r.ticks(2);
     r.fx.refuse = true;
-    r.js_up = false;
+    r.job.t.gripper_state_ns = 20 * MS; // soon stale: the arm is seen, it brakes
+    r.gs_up = false;
     r.until_event(200, StatusEvent::Braked);
     assert_eq!(r.count(is_brake), 0);
     assert!(r.job.spare.is_some(), "the brake buffer stays home");
@@ -1363,11 +1505,12 @@ fn a_resume_while_holding_replans_only_the_placement_at_the_same_pose() {
     r.ticks(3); // holding, carrying
     assert!(r.job.holding);
     r.auto = false;
-    r.js_up = false;
+    r.job.t.gripper_state_ns = 20 * MS; // soon stale: the arm is seen, it brakes
+    r.gs_up = false;
     r.until_event(200, StatusEvent::Fault);
     r.respond(); // the brake
     r.until_event(50, StatusEvent::Braked);
-    r.js_up = true;
+    r.gs_up = true;
     r.until(1000, "plan", is_plan);
     assert_eq!(r.events().last(), Some(&StatusEvent::Resumed));
     let Request::Plan {
@@ -1384,6 +1527,7 @@ fn a_resume_while_holding_replans_only_the_placement_at_the_same_pose() {
         after_stamp_ns: 0,
         from: r.q,
         place_only,
+        repick: false,
         pose,
         buf: buffer(),
     });

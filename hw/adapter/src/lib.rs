@@ -8,9 +8,11 @@
 
 use herb_ipc::bus::{Bus, BusError, Pub, Sub};
 use herb_ipc::{
-    DOF, GripperAction, GripperCommand, GripperState, HEIGHTMAP_MAX_CELLS, Header, HeightmapFrame,
-    JointCommand, JointState, Services, zeroed_in_place,
+    ArmBlocker, ArmStatus, DOF, GripperAction, GripperCommand, GripperState, HEIGHTMAP_MAX_CELLS,
+    Header, HeightmapFrame, JointCommand, JointState, Services, zeroed_in_place,
 };
+
+pub mod guard;
 
 /// The end of an adapter process: its final summary (JSON) on stdout and, if asked, in the
 /// `report` file; or its error on stderr. Exit code 0, or 2 on an error or an unwritable report.
@@ -107,6 +109,8 @@ pub struct ArmPorts {
     gripper_commands: Sub<GripperCommand>,
     joint_state: Pub<JointState>,
     gripper_state: Pub<GripperState>,
+    arm_status: Pub<ArmStatus>,
+    arm_status_seq: u64,
     /// Joint commands.
     pub joint: Counters,
     /// Gripper commands.
@@ -123,7 +127,7 @@ impl std::fmt::Debug for ArmPorts {
 }
 
 impl ArmPorts {
-    /// Opens the four services under `bus`'s prefix.
+    /// Opens the five services under `bus`'s prefix.
     pub fn open(bus: &Bus) -> Result<Self, BusError> {
         let s: &Services = bus.services();
         Ok(Self {
@@ -131,6 +135,8 @@ impl ArmPorts {
             gripper_commands: bus.subscriber(&s.gripper_command())?,
             joint_state: bus.publisher(&s.joint_state())?,
             gripper_state: bus.publisher(&s.gripper_state())?,
+            arm_status: bus.publisher(&s.arm_status())?,
+            arm_status_seq: 0,
             joint: Counters::default(),
             gripper: Counters::default(),
         })
@@ -185,6 +191,19 @@ impl ArmPorts {
     /// Publishes the gripper state (best effort).
     pub fn publish_gripper_state(&self, s: GripperState) {
         let _ = self.gripper_state.send_copy(s);
+    }
+
+    /// Publishes the adapter's state (best effort), stamped now: why it withholds joint state,
+    /// if it does, and how many commands its guard refused. Call it every
+    /// [`herb_ipc::ARM_STATUS_PERIOD_NS`] and when the blocker changes.
+    pub fn publish_arm_status(&mut self, blocker: ArmBlocker, commands_refused: u64) {
+        self.arm_status_seq += 1;
+        let _ = self.arm_status.send_copy(ArmStatus {
+            header: Header::now(self.arm_status_seq),
+            blocker: blocker as u32,
+            reserved: 0,
+            commands_refused,
+        });
     }
 }
 

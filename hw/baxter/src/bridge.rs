@@ -2,7 +2,7 @@
 //! mapped by name, the robot's state gate, the command pacing rule and the gripper driver.
 
 use crate::config::{ArmSettings, GripperSettings};
-use herb_ipc::{DOF, GripperAction};
+use herb_ipc::{ArmBlocker, DOF, GripperAction};
 use herb_ros1::baxter_core_msgs::{AssemblyState, EndEffectorCommand, EndEffectorState};
 use herb_ros1::sensor_msgs::JointState as RosJointState;
 
@@ -98,13 +98,13 @@ impl JointMap {
 }
 
 /// Whether the robot may move, from its `AssemblyState`: enabled, not stopped, no error. None
-/// received counts as not.
-pub fn robot_blocker(s: Option<&AssemblyState>) -> Option<&'static str> {
+/// received counts as a silent robot.
+pub fn robot_blocker(s: Option<&AssemblyState>) -> Option<ArmBlocker> {
     match s {
-        None => Some("no robot state yet"),
-        Some(s) if s.stopped => Some("robot stopped (e-stop)"),
-        Some(s) if s.error => Some("robot in error"),
-        Some(s) if !s.enabled => Some("robot disabled"),
+        None => Some(ArmBlocker::RobotSilent),
+        Some(s) if s.stopped => Some(ArmBlocker::EStop),
+        Some(s) if s.error => Some(ArmBlocker::RobotError),
+        Some(s) if !s.enabled => Some(ArmBlocker::Disabled),
         Some(_) => None,
     }
 }
@@ -120,14 +120,15 @@ pub struct HerbdCommand {
 
 /// The pacing rule: at each tick of the command rate, send the latest herbd command if it is
 /// fresh, as is (never extrapolated); otherwise send nothing, so the robot holds after its
-/// command timeout.
+/// command timeout. (The jump guard, `herb_adapter::guard`, then checks it against the
+/// measured position.)
 pub fn command_to_send(
     latest: Option<HerbdCommand>,
     now_ns: u64,
     max_age_ns: u64,
-) -> Option<[f64; DOF]> {
+) -> Option<HerbdCommand> {
     let c = latest?;
-    (now_ns.saturating_sub(c.stamp_ns) <= max_age_ns).then_some(c.position)
+    (now_ns.saturating_sub(c.stamp_ns) <= max_age_ns).then_some(c)
 }
 
 /// What the gripper reports to herbd.
@@ -139,8 +140,10 @@ pub struct Grip {
     pub holding: bool,
 }
 
-/// Drives Baxter's electric gripper: calibrates it once, then sends a `go` command for each of
-/// herbd's open and close requests, resent until the state echoes its sender and sequence.
+/// Drives Baxter's electric gripper: calibrates it once (`calibrate` sent again only if the
+/// gripper is still uncalibrated `calibrate_timeout_s` later: a gripper restarts calibrating on
+/// every `calibrate`), then sends a `go` command for each of herbd's open and close requests,
+/// resent until the state echoes its sender and sequence.
 #[derive(Debug, Clone)]
 pub struct GripperDriver {
     settings: GripperSettings,
@@ -154,6 +157,8 @@ pub struct GripperDriver {
     /// The action whose command the gripper acknowledged last.
     acked: Option<GripperAction>,
     calibrated: bool,
+    /// When `calibrate` was last sent.
+    calibrate_sent: Option<u64>,
     /// The gripper's id (from its state).
     id: Option<u32>,
 }
@@ -169,6 +174,7 @@ impl GripperDriver {
             wanted: None,
             acked: None,
             calibrated: false,
+            calibrate_sent: None,
             id: None,
         }
     }
@@ -218,6 +224,14 @@ impl GripperDriver {
             return Some(c.clone());
         }
         let (command, args, action) = if !self.calibrated {
+            let timeout_ns = (self.settings.calibrate_timeout_s * 1e9) as u64;
+            if self
+                .calibrate_sent
+                .is_some_and(|t| now_ns.saturating_sub(t) < timeout_ns)
+            {
+                return None; // calibrating
+            }
+            self.calibrate_sent = Some(now_ns);
             (EndEffectorCommand::CMD_CALIBRATE, String::new(), None)
         } else {
             let action = self.wanted.filter(|&w| Some(w) != self.acked)?;
@@ -239,7 +253,10 @@ impl GripperDriver {
             sender: self.sender.clone(),
             sequence: self.sequence,
         };
-        self.pending = Some((c.clone(), now_ns, action));
+        // A `go` is resent until acknowledged; `calibrate` only after its timeout (above).
+        if action.is_some() {
+            self.pending = Some((c.clone(), now_ns, action));
+        }
         Some(c)
     }
 }
@@ -336,10 +353,7 @@ mod tests {
             position: [0.5; DOF],
         };
         assert_eq!(command_to_send(None, 2, 10), None);
-        assert_eq!(
-            command_to_send(Some(c), 1_040_000_000, 50_000_000),
-            Some([0.5; DOF])
-        );
+        assert_eq!(command_to_send(Some(c), 1_040_000_000, 50_000_000), Some(c));
         assert_eq!(command_to_send(Some(c), 1_050_000_001, 50_000_000), None);
     }
 
@@ -368,11 +382,18 @@ mod tests {
         d.state(&gstate(100.0, 0, 0, None));
         let cal = d.poll(1).unwrap();
         assert_eq!((cal.command.as_str(), cal.id), ("calibrate", 65664));
-        assert_eq!(d.poll(2), None, "pending, not yet due again");
-        let again = d.poll(600_000_000).unwrap();
-        assert_eq!(again, cal, "resent as is until acknowledged");
-        d.state(&gstate(100.0, 0, 1, Some(&cal)));
-        let go = d.poll(700_000_000).unwrap();
+        // Acknowledged at once, calibrating for a while: one calibrate, however many states
+        // come meanwhile (a gripper restarts its calibration on each).
+        for k in 1..400u64 {
+            d.state(&gstate(100.0, 0, 0, Some(&cal)));
+            assert_eq!(d.poll(1 + k * 10_000_000), None, "calibrate sent once");
+        }
+        // Still uncalibrated after the timeout (5 s): sent again.
+        let again = d.poll(5_000_000_001).unwrap();
+        assert_eq!(again.command, "calibrate");
+        assert!(again.sequence > cal.sequence);
+        d.state(&gstate(100.0, 0, 1, Some(&again)));
+        let go = d.poll(5_100_000_000).unwrap();
         assert_eq!(go.command, "go");
         assert_eq!(go.args, "{\"position\": 0.0}");
         assert!(go.sequence > cal.sequence);
@@ -385,15 +406,20 @@ mod tests {
                 holding: true
             }
         );
-        assert_eq!(d.poll(2_000_000_000), None);
+        assert_eq!(d.poll(6_000_000_000), None);
         // Open: one new command, acknowledged; reported open once the fingers passed 90.
         d.request(GripperAction::Open);
-        let open = d.poll(2_100_000_000).unwrap();
+        let open = d.poll(6_100_000_000).unwrap();
         assert_eq!(open.args, "{\"position\": 100.0}");
         let g = d.state(&gstate(60.0, 0, 1, Some(&open)));
         assert!(g.closed && !g.holding);
         let g = d.state(&gstate(99.0, 0, 1, Some(&open)));
         assert!(!g.closed);
-        assert_eq!(d.poll(3_000_000_000), None);
+        assert_eq!(d.poll(7_000_000_000), None);
+        // A `go` not acknowledged is resent after `resend_s`.
+        d.request(GripperAction::Close);
+        let close = d.poll(7_100_000_000).unwrap();
+        assert_eq!(d.poll(7_200_000_000), None);
+        assert_eq!(d.poll(7_700_000_000), Some(close));
     }
 }

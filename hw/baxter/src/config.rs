@@ -77,9 +77,18 @@ pub struct Ros {
     pub master_uri: String,
     /// This node's name.
     pub node_name: String,
-    /// How often the master is asked whether it is alive (s). While it is not, joint state is
-    /// withheld from herbd (which brakes and reports) and nothing is commanded.
+    /// How often the master is asked whether it is alive and still knows this node (s).
+    /// While it is not alive, joint state is withheld from herbd (which halts and reports
+    /// `MasterLost`) and nothing is commanded; a master that came back without this node (it
+    /// restarted) gets every publisher and subscriber registered again.
     pub master_check_s: f64,
+    /// The address other ROS nodes reach this one at (`ROS_IP`): the robot must reach it.
+    /// Empty: the environment's `ROS_IP`/`ROS_HOSTNAME`, else this PC's hostname (which the
+    /// robot must then resolve).
+    pub ip: String,
+    /// The host name other ROS nodes reach this one at (`ROS_HOSTNAME`); takes precedence over
+    /// `ip`, as in ROS. Empty: see `ip`.
+    pub hostname: String,
 }
 
 /// `[arm]`.
@@ -100,6 +109,14 @@ pub struct ArmSettings {
     pub mode: Mode,
     /// Joint position speed ratio for `position` mode (0 to 1, latched on `speed_ratio`).
     pub speed_ratio: f64,
+    /// The jump guard (`herb_adapter::guard`): a command's target may be at most
+    /// `speed limit x guard_periods / command_rate_hz + tracking_lag_rad` from the measured
+    /// position, per joint; farther, it is refused and counted.
+    pub guard_periods: f64,
+    /// How far the arm trails its command in normal motion (rad), part of the guard's bound.
+    /// The adapter's summary reports the largest offset it passed (`max_command_offset_rad`):
+    /// measure it on the cell and keep this above it.
+    pub tracking_lag_rad: f64,
 }
 
 /// `[gripper]`.
@@ -115,6 +132,9 @@ pub struct GripperSettings {
     /// A command not acknowledged (its sender and sequence echoed in the state) is resent
     /// after this long (s).
     pub resend_s: f64,
+    /// `calibrate` is sent once; again only if the gripper still reports uncalibrated this
+    /// long after (s). A gripper restarts its calibration on every `calibrate`.
+    pub calibrate_timeout_s: f64,
 }
 
 /// `[topics]`.
@@ -145,6 +165,8 @@ impl Default for Ros {
             master_uri: "http://127.0.0.1:11311".into(),
             node_name: "/herb_baxter".into(),
             master_check_s: 0.25,
+            ip: String::new(),
+            hostname: String::new(),
         }
     }
 }
@@ -158,6 +180,8 @@ impl Default for ArmSettings {
             command_timeout_s: 0.2,
             mode: Mode::Position,
             speed_ratio: 1.0,
+            guard_periods: 3.0,
+            tracking_lag_rad: 0.05,
         }
     }
 }
@@ -169,6 +193,7 @@ impl Default for GripperSettings {
             closed_position: 0.0,
             closed_below: 90.0,
             resend_s: 0.5,
+            calibrate_timeout_s: 5.0,
         }
     }
 }
@@ -194,6 +219,12 @@ impl ConfigFile for BaxterConfig {
         herb_ros1::check_master_uri("ros.master_uri", &r.master_uri)?;
         herb_ros1::check_name("ros.node_name", &r.node_name)?;
         in_range("ros.master_check_s", r.master_check_s, 0.01, 10.0)?;
+        if !r.ip.is_empty() && r.ip.parse::<std::net::Ipv4Addr>().is_err() {
+            return Err(format!("ros.ip {:?} is not an IPv4 address", r.ip));
+        }
+        if r.hostname.chars().any(|c| c.is_whitespace() || c == '/') {
+            return Err(format!("ros.hostname {:?} is not a host name", r.hostname));
+        }
         let a = &self.arm;
         for (i, j) in a.joints.iter().enumerate() {
             if j.is_empty() || a.joints[..i].contains(j) {
@@ -204,6 +235,8 @@ impl ConfigFile for BaxterConfig {
         in_range("arm.max_command_age_s", a.max_command_age_s, 0.001, 1.0)?;
         in_range("arm.command_timeout_s", a.command_timeout_s, 0.01, 5.0)?;
         in_range("arm.speed_ratio", a.speed_ratio, 0.0, 1.0)?;
+        in_range("arm.guard_periods", a.guard_periods, 1.0, 20.0)?;
+        in_range("arm.tracking_lag_rad", a.tracking_lag_rad, 0.0, 0.2)?;
         let g = &self.gripper;
         in_range("gripper.open_position", g.open_position, 0.0, 100.0)?;
         in_range("gripper.closed_position", g.closed_position, 0.0, 100.0)?;
@@ -215,6 +248,12 @@ impl ConfigFile for BaxterConfig {
             ));
         }
         in_range("gripper.resend_s", g.resend_s, 0.01, 10.0)?;
+        in_range(
+            "gripper.calibrate_timeout_s",
+            g.calibrate_timeout_s,
+            0.5,
+            60.0,
+        )?;
         let t = &self.topics;
         for (name, topic) in [
             ("topics.joint_states", &t.joint_states),

@@ -7,7 +7,10 @@ use herb_baxter::bridge::HerbdCommand;
 use herb_baxter::config::{BaxterConfig, HerbdView};
 use herb_baxter::ros::{self, Shared, lock};
 use herb_ipc::bus::Bus;
-use herb_ipc::{GripperState, Header, JointState, NO_OBJECT, Services, monotonic_ns};
+use herb_ipc::{
+    ARM_STATUS_PERIOD_NS, ArmBlocker, GripperState, Header, JointState, NO_OBJECT, Services,
+    monotonic_ns,
+};
 use herb_robot::config_file::ConfigFile;
 use herb_robot::rt::{set_timer_slack, sleep_until};
 use std::path::PathBuf;
@@ -58,6 +61,19 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
     if !(cli.rate_hz.is_finite() && (10.0..=10_000.0).contains(&cli.rate_hz)) {
         return Err(format!("--rate-hz {} outside 10..=10000", cli.rate_hz));
     }
+    // The address the robot reaches this node at: roslibrust reads ROS_HOSTNAME, then ROS_IP.
+    for (var, value) in [("ROS_HOSTNAME", &cfg.ros.hostname), ("ROS_IP", &cfg.ros.ip)] {
+        if !value.is_empty() {
+            // SAFETY: no other thread runs yet (the bus, the ROS thread and the signal handler
+            // start below), so nothing reads the environment concurrently.
+            unsafe { std::env::set_var(var, value) };
+        }
+    }
+    let advertised = std::env::var("ROS_HOSTNAME")
+        .or_else(|_| std::env::var("ROS_IP"))
+        .unwrap_or_else(|_| {
+            "this PC's hostname (set ros.ip or ros.hostname on a real cell)".into()
+        });
     let services = Services::new(&herbd.ipc_prefix).map_err(|e| e.to_string())?;
     let stop = Arc::new(AtomicBool::new(false));
     {
@@ -70,10 +86,11 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
     let ros_thread = {
         let (cfg, shared, stop) = (cfg.clone(), shared.clone(), stop.clone());
         let enable = cli.enable;
+        let velocity = herbd.limits.velocity;
         std::thread::Builder::new()
             .name("herb-baxter-ros".into())
             .spawn(move || {
-                let r = ros::run(cfg, enable, shared, stop.clone());
+                let r = ros::run(cfg, velocity, enable, shared, stop.clone());
                 // The ROS side ending ends the process: herbd sees the states stop.
                 stop.store(true, Ordering::Relaxed);
                 r
@@ -81,7 +98,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             .map_err(|e| e.to_string())?
     };
     eprintln!(
-        "herb-baxter: prefix {:?}, master {}, commands at {} Hz ({:?} mode)",
+        "herb-baxter: prefix {:?}, master {}, reached at {advertised}, commands at {} Hz ({:?} mode)",
         herbd.ipc_prefix, cfg.ros.master_uri, cfg.arm.command_rate_hz, cfg.arm.mode
     );
     let (lower, upper) = (herbd.limits.lower, herbd.limits.upper);
@@ -90,6 +107,8 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
     let mut next = monotonic_ns() + period;
     let (mut joint_seen, mut grip_seen, mut seq) = (0u64, 0u64, 0u64);
     let (mut withheld, mut max_excess) = (0u64, 0.0f64);
+    // The adapter's state to herbd: at once on a change, else every ARM_STATUS_PERIOD_NS.
+    let (mut status_said, mut status_at) = (None::<ArmBlocker>, 0u64);
     // A joint state's ROS receipt to its publication to herbd.
     let mut state_latency = ros::latency();
     while !stop.load(Ordering::Relaxed) {
@@ -118,7 +137,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         // The catalog is herbd's business: a real gripper ignores the object type, so any
         // type is accepted here.
         arm.drain_gripper_commands(usize::MAX, |_, a| request = Some(a));
-        let (joint, grip, blocker) = {
+        let (joint, grip, blocker, refused) = {
             let mut s = lock(&shared);
             if latest.is_some() {
                 s.command = latest;
@@ -126,8 +145,13 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             if request.is_some() {
                 s.grip_request = request;
             }
-            (s.joint, s.grip, s.blocker)
+            (s.joint, s.grip, s.blocker, s.counters.commands_refused)
         };
+        let said = blocker.unwrap_or(ArmBlocker::None);
+        if status_said != Some(said) || now.saturating_sub(status_at) >= ARM_STATUS_PERIOD_NS {
+            arm.publish_arm_status(said, refused);
+            (status_said, status_at) = (Some(said), now);
+        }
         if let Some((n, m)) = joint
             && n != joint_seen
         {
@@ -160,9 +184,13 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
     let ros_result = ros_thread
         .join()
         .unwrap_or_else(|_| Err("the ROS thread panicked".into()));
-    let (c, command_latency) = {
+    let (c, command_latency, offsets) = {
         let s = lock(&shared);
-        (s.counters, ros::latency_json(&s.command_latency))
+        (
+            s.counters,
+            ros::latency_json(&s.command_latency),
+            s.max_command_offset_rad,
+        )
     };
     let summary = serde_json::json!({ "baxter_final": {
         "commands": arm.joint.received,
@@ -170,6 +198,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         "gripper_commands_rejected": arm.gripper.rejected,
         "max_limit_excess_rad": max_excess,
         "joint_states_withheld": withheld,
+        "max_command_offset_rad": offsets,
         "ros": c,
         "joint_state_to_herbd_ms": ros::latency_json(&state_latency),
         "command_to_ros_ms": command_latency,

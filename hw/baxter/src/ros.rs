@@ -5,9 +5,10 @@
 
 use crate::bridge::{Grip, GripperDriver, HerbdCommand, JointMap, command_to_send, robot_blocker};
 use crate::config::{BaxterConfig, Mode};
-use herb_ipc::{DOF, GripperAction, monotonic_ns};
+use herb_adapter::guard::{GuardSettings, JumpGuard};
+use herb_ipc::{ArmBlocker, DOF, GripperAction, monotonic_ns};
 use herb_ros1::baxter_core_msgs::{AssemblyState, EndEffectorState, JointCommand};
-use herb_ros1::node::{Next, connect, next};
+use herb_ros1::node::{MasterView, Next, connect, master_view, next};
 use herb_ros1::sensor_msgs::JointState as RosJointState;
 use herb_ros1::std_msgs::{Bool, Float64};
 use roslibrust::ros1::MasterClient;
@@ -49,6 +50,10 @@ pub struct RosCounters {
     pub gripper_commands_sent: u64,
     /// Times the master stopped answering.
     pub master_lost: u64,
+    /// Times the node registered again with a master that had forgotten it (restarted).
+    pub reregistered: u64,
+    /// Joint commands the jump guard refused (`herb_adapter::guard`).
+    pub commands_refused: u64,
 }
 
 pub use herb_adapter::{Latency, latency, latency_json};
@@ -61,7 +66,7 @@ pub struct Shared {
     /// Latest gripper state, its number and receipt time (ROS -> loop).
     pub grip: Option<(u64, u64, Grip)>,
     /// Why the robot must not move now, if it must not (ROS -> loop).
-    pub blocker: Option<&'static str>,
+    pub blocker: Option<ArmBlocker>,
     /// Latest valid herbd joint command (loop -> ROS).
     pub command: Option<HerbdCommand>,
     /// herbd's latest gripper request (loop -> ROS).
@@ -71,6 +76,9 @@ pub struct Shared {
     /// herbd's command stamp to the ROS publish returning (the wait for the pacing tick
     /// included).
     pub command_latency: Latency,
+    /// The largest offset of a sent command's target from the measured position, per joint
+    /// (rad): the tracking lag seen, to set the guard's bound from.
+    pub max_command_offset_rad: [f64; DOF],
 }
 
 impl Default for Shared {
@@ -78,11 +86,12 @@ impl Default for Shared {
         Self {
             joint: None,
             grip: None,
-            blocker: None,
+            blocker: Some(ArmBlocker::RobotSilent),
             command: None,
             grip_request: None,
             counters: RosCounters::default(),
             command_latency: latency(),
+            max_command_offset_rad: [0.0; DOF],
         }
     }
 }
@@ -93,8 +102,10 @@ pub fn lock(shared: &Mutex<Shared>) -> std::sync::MutexGuard<'_, Shared> {
 }
 
 /// Runs the ROS side until `stop` is set; an error ends it (the process then exits).
+/// `velocity`: herbd's joint speed limits (rad/s), which the jump guard's bound is made from.
 pub fn run(
     cfg: BaxterConfig,
+    velocity: [f64; DOF],
     enable: bool,
     shared: Arc<Mutex<Shared>>,
     stop: Arc<AtomicBool>,
@@ -103,7 +114,44 @@ pub fn run(
         .enable_all()
         .build()
         .map_err(|e| format!("tokio runtime: {e}"))?;
-    rt.block_on(session(cfg, enable, shared, stop))
+    rt.block_on(async {
+        let mut carry = Carry {
+            guard: JumpGuard::new(GuardSettings::from_limits(
+                &velocity,
+                cfg.arm.command_rate_hz,
+                cfg.arm.guard_periods,
+                cfg.arm.tracking_lag_rad,
+            )),
+            enabled_seen: false,
+        };
+        loop {
+            match session(&cfg, enable, &shared, &stop, &mut carry).await? {
+                End::Stop => return Ok(()),
+                End::Reregister => {
+                    lock(&shared).counters.reregistered += 1;
+                    eprintln!(
+                        "herb-baxter: the ROS master restarted and forgot this node: registering again"
+                    );
+                }
+            }
+        }
+    })
+}
+
+/// What outlives one registration.
+struct Carry {
+    guard: JumpGuard,
+    /// The robot reported enabled once: `--enable` never asks again (a later disable is an
+    /// operator's, or the e-stop's, and is not undone from here).
+    enabled_seen: bool,
+}
+
+/// How a session ended.
+enum End {
+    /// `stop` was set.
+    Stop,
+    /// The master restarted: register everything again.
+    Reregister,
 }
 
 fn ros_err(what: &str, topic: &str) -> impl FnOnce(roslibrust::ros1::NodeError) -> String {
@@ -111,21 +159,19 @@ fn ros_err(what: &str, topic: &str) -> impl FnOnce(roslibrust::ros1::NodeError) 
     move |e| format!("{what} {topic}: {e}")
 }
 
+/// One registration with the master: advertise, subscribe, then bridge until `stop` is set
+/// (`End::Stop`) or the master restarted (`End::Reregister`); an error ends the process.
 async fn session(
-    cfg: BaxterConfig,
+    cfg: &BaxterConfig,
     enable: bool,
-    shared: Arc<Mutex<Shared>>,
-    stop: Arc<AtomicBool>,
-) -> Result<(), String> {
-    let Some(nh) = connect(
-        &cfg.ros.master_uri,
-        &cfg.ros.node_name,
-        "herb-baxter",
-        &stop,
-    )
-    .await
+    shared: &Mutex<Shared>,
+    stop: &AtomicBool,
+    carry: &mut Carry,
+) -> Result<End, String> {
+    let guard = &mut carry.guard;
+    let Some(nh) = connect(&cfg.ros.master_uri, &cfg.ros.node_name, "herb-baxter", stop).await
     else {
-        return Ok(());
+        return Ok(End::Stop);
     };
     let t = &cfg.topics;
     let cmd_pub = nh
@@ -161,7 +207,7 @@ async fn session(
     } else {
         None
     };
-    let mut enable_pub = if enable {
+    let mut enable_pub = if enable && !carry.enabled_seen {
         Some(
             nh.advertise::<Bool>(&t.enable, 1, false)
                 .await
@@ -207,15 +253,23 @@ async fn session(
 
     let mut assembly: Option<(AssemblyState, u64)> = None;
     let mut master_ok = true;
-    let (mut joint_seq, mut grip_seq) = (0u64, 0u64);
+    let (mut joint_seq, mut grip_seq) = {
+        let s = lock(shared);
+        (s.joint.map_or(0, |j| j.0), s.grip.map_or(0, |g| g.0))
+    };
     let mut last_enable = 0u64;
     let mut last_reject: Option<String> = None;
-    let mut blocker_said: Option<&'static str> = Some("no robot state yet");
+    let mut blocker_said: Option<Option<ArmBlocker>> = None;
+    // Say a refusal when the guard starts refusing, not for every command after it.
+    let mut refusing = false;
+    // Nothing from before this registration is measured now.
+    lock(shared).joint = None;
+    guard.set_ready(false, monotonic_ns());
     while !stop.load(Ordering::Relaxed) {
         tokio::select! {
             m = next(&mut joints) => {
                 let now = monotonic_ns();
-                let mut s = lock(&shared);
+                let mut s = lock(shared);
                 match m {
                     Next::Msg(m) => {
                         s.counters.joint_states += 1;
@@ -245,7 +299,7 @@ async fn session(
             }
             m = next(&mut robot) => match m {
                 Next::Msg(m) => assembly = Some((m, monotonic_ns())),
-                Next::Lagged(n) => lock(&shared).counters.lagged += n,
+                Next::Lagged(n) => lock(shared).counters.lagged += n,
                 Next::Bad(e) => eprintln!("herb-baxter: robot state undecodable: {e}"),
                 Next::Closed => return Err(format!("subscription {} closed", t.robot_state)),
             },
@@ -253,50 +307,62 @@ async fn session(
                 Next::Msg(m) => {
                     let g = driver.state(&m);
                     grip_seq += 1;
-                    lock(&shared).grip = Some((grip_seq, monotonic_ns(), g));
+                    lock(shared).grip = Some((grip_seq, monotonic_ns(), g));
                 }
-                Next::Lagged(n) => lock(&shared).counters.lagged += n,
+                Next::Lagged(n) => lock(shared).counters.lagged += n,
                 Next::Bad(e) => eprintln!("herb-baxter: gripper state undecodable: {e}"),
                 Next::Closed => return Err(format!("subscription {} closed", t.gripper_state)),
             },
             _ = check.tick() => {
-                let ok = matches!(tokio::time::timeout(check_period, master.get_uri()).await, Ok(Ok(_)));
+                let view = master_view(&master, &t.joint_states, &cfg.ros.node_name, check_period).await;
+                let ok = view != MasterView::Lost;
                 if ok != master_ok {
                     master_ok = ok;
                     if ok {
                         eprintln!("herb-baxter: ROS master back");
                     } else {
-                        lock(&shared).counters.master_lost += 1;
+                        lock(shared).counters.master_lost += 1;
                         eprintln!("herb-baxter: ROS master lost: joint state withheld, nothing commanded");
                     }
+                }
+                if view == MasterView::Forgotten {
+                    let mut s = lock(shared);
+                    s.blocker = Some(ArmBlocker::MasterLost);
+                    s.joint = None;
+                    drop(s);
+                    guard.set_ready(false, monotonic_ns());
+                    return Ok(End::Reregister);
                 }
             }
             _ = tick.tick() => {
                 let now = monotonic_ns();
                 let blocker = if !master_ok {
-                    Some("ROS master lost")
+                    Some(ArmBlocker::MasterLost)
                 } else {
                     match &assembly {
-                        Some((_, at)) if now.saturating_sub(*at) > ROBOT_STATE_MAX_AGE_NS => Some("no robot state for 1 s"),
+                        Some((_, at)) if now.saturating_sub(*at) > ROBOT_STATE_MAX_AGE_NS => Some(ArmBlocker::RobotSilent),
                         a => robot_blocker(a.as_ref().map(|(a, _)| a)),
                     }
                 };
-                if blocker != blocker_said {
+                if Some(blocker) != blocker_said {
                     match blocker {
-                        Some(b) => eprintln!("herb-baxter: {b}: joint state withheld, nothing commanded"),
+                        Some(b) => eprintln!("herb-baxter: {}: joint state withheld, nothing commanded", b.fault().describe()),
                         None => eprintln!("herb-baxter: robot ready"),
                     }
-                    blocker_said = blocker;
+                    blocker_said = Some(blocker);
                 }
-                let (latest, request) = {
-                    let mut s = lock(&shared);
+                // A command planned before the robot became ready never reaches it.
+                guard.set_ready(blocker.is_none(), now);
+                let (latest, request, measured) = {
+                    let mut s = lock(shared);
                     s.blocker = blocker;
-                    (s.command, s.grip_request)
+                    (s.command, s.grip_request, s.joint.map(|(_, m)| (m.stamp_ns, m.position)))
                 };
                 // Enabling is asked for at start only: once the robot reports enabled, a later
                 // disable (an operator, the e-stop) is never undone from here.
                 if assembly.as_ref().is_some_and(|(a, _)| a.enabled) {
                     enable_pub = None;
+                    carry.enabled_seen = true;
                 }
                 if let Some(p) = &enable_pub
                     && now.saturating_sub(last_enable) >= ENABLE_PERIOD_NS
@@ -307,13 +373,25 @@ async fn session(
                 if blocker.is_some() {
                     continue;
                 }
-                if let Some(q) = command_to_send(latest, now, max_age_ns) {
-                    command.command.copy_from_slice(&q);
-                    cmd_pub.publish(&command).await.map_err(|e| format!("publish {}: {e}", t.joint_command))?;
-                    let mut s = lock(&shared);
-                    s.counters.commands_sent += 1;
-                    if let Some(c) = latest {
-                        let _ = s.command_latency.record(monotonic_ns().saturating_sub(c.stamp_ns).max(1));
+                if let Some(c) = command_to_send(latest, now, max_age_ns) {
+                    let verdict = guard.check(c.stamp_ns, &c.position, measured.as_ref().map(|(at, q)| (*at, q)), now);
+                    match verdict {
+                        Ok(()) => {
+                            refusing = false;
+                            command.command.copy_from_slice(&c.position);
+                            cmd_pub.publish(&command).await.map_err(|e| format!("publish {}: {e}", t.joint_command))?;
+                            let mut s = lock(shared);
+                            s.counters.commands_sent += 1;
+                            s.max_command_offset_rad = guard.max_offset_rad;
+                            let _ = s.command_latency.record(monotonic_ns().saturating_sub(c.stamp_ns).max(1));
+                        }
+                        Err(r) => {
+                            lock(shared).counters.commands_refused = guard.refused;
+                            if !refusing {
+                                eprintln!("herb-baxter: joint command refused: {r}");
+                                refusing = true;
+                            }
+                        }
                     }
                 }
                 if let Some(a) = request {
@@ -321,11 +399,11 @@ async fn session(
                 }
                 if let Some(c) = driver.poll(now) {
                     grip_pub.publish(&c).await.map_err(|e| format!("publish {}: {e}", t.gripper_command))?;
-                    lock(&shared).counters.gripper_commands_sent += 1;
+                    lock(shared).counters.gripper_commands_sent += 1;
                 }
             }
         }
     }
     drop(ratio_pub);
-    Ok(())
+    Ok(End::Stop)
 }

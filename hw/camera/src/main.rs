@@ -10,7 +10,7 @@ use herb_camera::project::{Depth, FrameStats, Intrinsics, Median, Projector};
 use herb_ipc::bus::Bus;
 use herb_ipc::{Services, monotonic_ns};
 use herb_robot::config_file::ConfigFile;
-use herb_ros1::node::{Next, connect, next};
+use herb_ros1::node::{MasterView, Next, connect, master_view, next};
 use herb_ros1::sensor_msgs::{CameraInfo, Image};
 use herb_sim::heightmap::GridSpec;
 use std::path::PathBuf;
@@ -196,6 +196,11 @@ fn say_once(last: &mut String, what: String) {
     }
 }
 
+/// How often the master is asked whether it still knows this node.
+const MASTER_CHECK: Duration = Duration::from_millis(500);
+
+/// The ROS side: one registration after another (a restarted master forgets this node: it
+/// registers again) until `stop` is set; an error ends it.
 async fn ros_side(
     cfg: CameraConfig,
     spec: GridSpec,
@@ -204,15 +209,24 @@ async fn ros_side(
     counters: Arc<Mutex<Counters>>,
     stop: Arc<AtomicBool>,
 ) -> Result<(), String> {
-    let Some(nh) = connect(
-        &cfg.ros.master_uri,
-        &cfg.ros.node_name,
-        "herb-camera",
-        &stop,
-    )
-    .await
+    while session(&cfg, spec, &frames, &spare, &counters, &stop).await? {
+        eprintln!("herb-camera: the ROS master restarted and forgot this node: registering again");
+    }
+    Ok(())
+}
+
+/// One registration; true when the master forgot this node (register again).
+async fn session(
+    cfg: &CameraConfig,
+    spec: GridSpec,
+    frames: &mpsc::SyncSender<Frame>,
+    spare: &mpsc::Receiver<Vec<f32>>,
+    counters: &Mutex<Counters>,
+    stop: &AtomicBool,
+) -> Result<bool, String> {
+    let Some(nh) = connect(&cfg.ros.master_uri, &cfg.ros.node_name, "herb-camera", stop).await
     else {
-        return Ok(());
+        return Ok(false);
     };
     let t = &cfg.topics;
     let mut images = nh
@@ -231,19 +245,29 @@ async fn ros_side(
     let mut intr: Option<Intrinsics> = None;
     let mut last_said = String::new();
     let mut poll = tokio::time::interval(Duration::from_millis(100));
+    let client_uri = nh
+        .get_client_uri()
+        .await
+        .map_err(|e| format!("node URI: {e}"))?;
+    let master =
+        roslibrust::ros1::MasterClient::new(&cfg.ros.master_uri, client_uri, &cfg.ros.node_name)
+            .await
+            .map_err(|e| format!("master client: {e}"))?;
+    let mut check = tokio::time::interval(MASTER_CHECK);
+    check.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     while !stop.load(Ordering::Relaxed) {
         tokio::select! {
             m = next(&mut infos) => match m {
                 Next::Msg(ci) => match Intrinsics::from_k(ci.width, ci.height, &ci.K) {
                     Ok(i) => intr = Some(i),
                     Err(e) => {
-                        lock(&counters).camera_infos_rejected += 1;
+                        lock(counters).camera_infos_rejected += 1;
                         say_once(&mut last_said, format!("camera info refused: {e}"));
                     }
                 },
-                Next::Lagged(n) => lock(&counters).lagged += n,
+                Next::Lagged(n) => lock(counters).lagged += n,
                 Next::Bad(e) => {
-                    lock(&counters).camera_infos_rejected += 1;
+                    lock(counters).camera_infos_rejected += 1;
                     say_once(&mut last_said, format!("camera info undecodable: {e}"));
                 }
                 Next::Closed => return Err(format!("subscription {} closed", t.camera_info)),
@@ -252,11 +276,11 @@ async fn ros_side(
                 let img = match m {
                     Next::Msg(img) => img,
                     Next::Lagged(n) => {
-                        lock(&counters).lagged += n;
+                        lock(counters).lagged += n;
                         continue;
                     }
                     Next::Bad(e) => {
-                        let mut c = lock(&counters);
+                        let mut c = lock(counters);
                         c.images += 1;
                         c.images_rejected += 1;
                         drop(c);
@@ -266,7 +290,7 @@ async fn ros_side(
                     Next::Closed => return Err(format!("subscription {} closed", t.image)),
                 };
                 let received_ns = monotonic_ns();
-                lock(&counters).images += 1;
+                lock(counters).images += 1;
                 let checked = intr
                     .ok_or_else(|| "no camera info yet".to_string())
                     .and_then(|i| {
@@ -277,7 +301,7 @@ async fn ros_side(
                 let (i, depth, stamp_ns) = match checked {
                     Ok(v) => v,
                     Err(e) => {
-                        lock(&counters).images_rejected += 1;
+                        lock(counters).images_rejected += 1;
                         say_once(&mut last_said, format!("image refused: {e}"));
                         continue;
                     }
@@ -287,16 +311,21 @@ async fn ros_side(
                 median.push(&raw, &mut cells);
                 if frames.try_send(Frame { received_ns, stamp_ns, cells, stats }).is_err() {
                     // The publisher is behind: this frame is dropped, the next one goes.
-                    lock(&counters).lagged += 1;
+                    lock(counters).lagged += 1;
                 }
                 if !last_said.is_empty() {
                     say_once(&mut last_said, "images accepted".into());
                 }
             }
             _ = poll.tick() => {}
+            _ = check.tick() => {
+                if master_view(&master, &t.image, &cfg.ros.node_name, MASTER_CHECK).await == MasterView::Forgotten {
+                    return Ok(true);
+                }
+            }
         }
     }
-    Ok(())
+    Ok(false)
 }
 
 fn run(cli: Cli) -> Result<serde_json::Value, String> {

@@ -32,6 +32,7 @@ fn depth_images_become_heightmaps_that_match_the_truth() {
         adapter: mut cam,
         seen: seen_file,
         report,
+        ..
     } = Camera::start(&ros, &cfg, &spec, &t, 5, 1.5);
     // Camera info only after 1.5 s of images: herb-camera's subscriptions are connected well
     // before then, so it sees images without camera info (refused) whatever the load. Then

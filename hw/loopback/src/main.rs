@@ -16,15 +16,25 @@
 //! - **Sim-only**: publishes a `SimOutcome` after every release (inside, tilt, compactness,
 //!   command counts, the releasing job) for tests, and empties the box on a `SimReset`
 //!   (`herbctl reset`) while nothing is held or settling.
+//! - **Robot state**, as a real arm's adapter reports it: publishes an `ArmStatus` every
+//!   100 ms and on each change. SIGUSR1 toggles a disable and SIGUSR2 an e-stop (released
+//!   enabled): while either holds, joint states are withheld, commands are not followed and
+//!   the arm sags (`--sag` rad/s on s1, half on e1), as a real arm does without power; once it
+//!   can move again it holds where it is until a new command comes. Every command passes the
+//!   adapter's jump guard (`herb_adapter::guard`) first; the summary lists each first
+//!   command's distance from the arm after it could move again (`first_command_offsets_rad`).
+//! - **Missed grasps**: with `--miss-grasps N` the first N grasps close on nothing.
 //!
 //! SIGINT/SIGTERM: prints a JSON summary on stdout and exits 0.
 
 use clap::Parser;
+use herb_adapter::guard::{GuardSettings, JumpGuard};
 use herb_adapter::{ArmPorts, CameraPort, Heightmap};
 use herb_ipc::bus::Bus;
 use herb_ipc::{
-    GripperAction, GripperCommand, GripperState, Header, JointCommand, JointState, MAX_JOB_OBJECTS,
-    NO_OBJECT, SIM_BOUNDS, Services, SimObject, SimOutcome, SimReset, monotonic_ns,
+    ARM_STATUS_PERIOD_NS, ArmBlocker, GripperAction, GripperCommand, GripperState, Header,
+    JointCommand, JointState, MAX_JOB_OBJECTS, NO_OBJECT, SIM_BOUNDS, Services, SimObject,
+    SimOutcome, SimReset, monotonic_ns,
 };
 use herb_loopback::config::{ConfigFile, LoopbackConfig};
 use herb_robot::cell::CellConfig;
@@ -36,7 +46,7 @@ use rapier3d::math::{Pose, Rotation, Vector};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::mpsc;
 use std::time::Duration;
 
@@ -62,6 +72,26 @@ struct Cli {
     /// Also write the final summary (JSON) here.
     #[arg(long)]
     report: Option<PathBuf>,
+    /// How fast the arm sags while disabled or e-stopped (rad/s on s1, half on e1).
+    #[arg(long, default_value_t = 0.05)]
+    sag: f64,
+    /// The first N grasps close on nothing (a missed grasp).
+    #[arg(long, default_value_t = 0)]
+    miss_grasps: u32,
+    /// Jump guard: command periods of travel at the speed limit allowed past the arm.
+    #[arg(long, default_value_t = 3.0)]
+    guard_periods: f64,
+    /// Jump guard: the tracking lag allowed on top (rad).
+    #[arg(long, default_value_t = 0.05)]
+    tracking_lag_rad: f64,
+}
+
+/// SIGUSR1 (disable) and SIGUSR2 (e-stop) toggles, counted by the handler.
+static TOGGLES: [AtomicU32; 2] = [AtomicU32::new(0), AtomicU32::new(0)];
+
+extern "C" fn on_toggle(sig: libc::c_int) {
+    let k = usize::from(sig != libc::SIGUSR1);
+    TOGGLES[k].fetch_add(1, Ordering::Relaxed);
 }
 
 struct Released {
@@ -186,12 +216,24 @@ struct Sim {
     releases: u64,
     last_outcome: Option<SimOutcome>,
     settling: u64,
+    /// Why the arm cannot move (disabled, e-stop), if it cannot.
+    blocker: Option<ArmBlocker>,
+    guard: JumpGuard,
+    /// The last joint state's stamp (the guard compares commands with it).
+    measured_at: u64,
+    /// A command has been followed since the arm could move again.
+    commanded_since_ready: bool,
+    /// Each first command's distance from the arm after it could move again (rad).
+    first_offsets: Vec<f64>,
+    /// Grasps still to miss.
+    miss_grasps: u32,
+    missed: u32,
 }
 
 impl Sim {
     /// A joint command as received, with the adapter's verdict: the largest excess over the
     /// limits is recorded for every one, only valid ones are followed.
-    fn command(&mut self, c: &JointCommand, valid: bool) {
+    fn command(&mut self, c: &JointCommand, valid: bool, now: u64) {
         for i in 0..DOF {
             let p = c.position[i];
             if p.is_finite() {
@@ -199,9 +241,66 @@ impl Sim {
                 self.max_excess = self.max_excess.max(excess);
             }
         }
-        if valid {
-            self.target = c.position;
+        if !valid {
+            return;
         }
+        let q = self.q;
+        if self
+            .guard
+            .check(
+                c.header.stamp_ns,
+                &c.position,
+                Some((self.measured_at, &q)),
+                now,
+            )
+            .is_err()
+        {
+            return;
+        }
+        if !self.commanded_since_ready {
+            self.commanded_since_ready = true;
+            let offset = (0..DOF)
+                .map(|i| (c.position[i] - q[i]).abs())
+                .fold(0.0, f64::max);
+            self.first_offsets.push(offset);
+        }
+        self.target = c.position;
+    }
+
+    /// Applies the signal toggles counted so far; true when the arm's state changed.
+    fn toggles(&mut self, seen: &mut [u32; 2], now: u64) -> bool {
+        let mut changed = false;
+        for (k, seen) in seen.iter_mut().enumerate() {
+            let n = TOGGLES[k].load(Ordering::Relaxed);
+            while *seen != n {
+                *seen = seen.wrapping_add(1);
+                let this = if k == 0 {
+                    ArmBlocker::Disabled
+                } else {
+                    ArmBlocker::EStop
+                };
+                self.blocker = match self.blocker {
+                    Some(b) if b == this => None,
+                    // An e-stop outranks a disable; releasing it leaves the arm enabled.
+                    _ => Some(this),
+                };
+                changed = true;
+            }
+        }
+        if changed {
+            let ready = self.blocker.is_none();
+            self.guard.set_ready(ready, now);
+            if ready {
+                // Powered again: hold where the arm is until a new command comes.
+                self.target = self.q;
+                self.commanded_since_ready = false;
+            }
+            eprintln!(
+                "herb-loopback: {}",
+                self.blocker.map_or("robot ready", |b| b.fault().describe())
+            );
+        }
+        changed
     }
 
     /// A valid gripper command.
@@ -214,7 +313,10 @@ impl Sim {
         match action {
             GripperAction::Close if !self.closed => {
                 self.closed = true;
-                if c.object_type != NO_OBJECT {
+                if self.miss_grasps > 0 {
+                    self.miss_grasps -= 1;
+                    self.missed += 1;
+                } else if c.object_type != NO_OBJECT {
                     let ty = TypeIdx(c.object_type as u16);
                     let h = self.catalog.shape(ty).extents().z as f64;
                     let object = self.cell.pick_object_pose(h);
@@ -278,6 +380,28 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
     }
     let bus = Bus::open("herb-loopback", &services).map_err(|e| e.to_string())?;
     let mut arm = ArmPorts::open(&bus).map_err(|e| e.to_string())?;
+    for sig in [libc::SIGUSR1, libc::SIGUSR2] {
+        // SAFETY: the handler only increments an atomic (async-signal-safe).
+        let prev = unsafe { libc::signal(sig, on_toggle as *const () as libc::sighandler_t) };
+        if prev == libc::SIG_ERR {
+            return Err(format!("signal handler for {sig}"));
+        }
+    }
+    if !(cli.sag.is_finite() && (0.0..=1.0).contains(&cli.sag)) {
+        return Err(format!("--sag {} outside 0..=1 rad/s", cli.sag));
+    }
+    if !(cli.guard_periods.is_finite() && (1.0..=100.0).contains(&cli.guard_periods)) {
+        return Err(format!(
+            "--guard-periods {} outside 1..=100",
+            cli.guard_periods
+        ));
+    }
+    if !(cli.tracking_lag_rad.is_finite() && (0.0..=0.5).contains(&cli.tracking_lag_rad)) {
+        return Err(format!(
+            "--tracking-lag-rad {} outside 0..=0.5",
+            cli.tracking_lag_rad
+        ));
+    }
     let camera = CameraPort::open(&bus).map_err(|e| e.to_string())?;
     let out_pub = bus
         .publisher::<SimOutcome>(&services.sim_outcome())
@@ -312,7 +436,22 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         releases: 0,
         last_outcome: None,
         settling: 0,
+        blocker: None,
+        guard: JumpGuard::new(GuardSettings::from_limits(
+            &cfg.limits.velocity,
+            cli.rate_hz,
+            cli.guard_periods,
+            cli.tracking_lag_rad,
+        )),
+        measured_at: 0,
+        commanded_since_ready: false,
+        first_offsets: Vec::with_capacity(64),
+        miss_grasps: cli.miss_grasps,
+        missed: 0,
     };
+    sim.guard.set_ready(true, monotonic_ns());
+    let mut toggles_seen = [0u32; 2];
+    let mut status_at = 0u64;
     eprintln!(
         "herb-loopback: prefix {:?}, {} Hz, {} objects ({})",
         cfg.ipc_prefix,
@@ -339,8 +478,20 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         if now > next {
             next = now + period;
         }
+        if sim.toggles(&mut toggles_seen, now)
+            || now.saturating_sub(status_at) >= ARM_STATUS_PERIOD_NS
+        {
+            let b = sim.blocker.unwrap_or(ArmBlocker::None);
+            arm.publish_arm_status(b, sim.guard.refused);
+            status_at = now;
+        }
         let (lower, upper) = (sim.lower, sim.upper);
-        arm.drain_joint_commands(&lower, &upper, |c, valid| sim.command(c, valid));
+        if sim.blocker.is_some() {
+            // No power: nothing is followed (commands are still drained and counted).
+            arm.drain_joint_commands(&lower, &upper, |_, _| {});
+        } else {
+            arm.drain_joint_commands(&lower, &upper, |c, valid| sim.command(c, valid, now));
+        }
         let types = sim.catalog.len();
         arm.drain_gripper_commands(types, |c, a| sim.gripper(c, a, &rel_tx));
         // Empty the box on request, only while nothing is held or settling; the heightmap of
@@ -372,23 +523,36 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         } else {
             1.0
         };
-        for i in 0..DOF {
-            // A stall between taking the commands and measuring the time leaves a whole stall's
-            // worth of commanded motion to one short cycle: the arm's speed limit bounds it.
-            let reach = sim.vmax[i] * dt;
-            let nq = sim.q[i] + (a * (sim.target[i] - sim.q[i])).clamp(-reach, reach);
-            sim.qd[i] = (nq - sim.q[i]) / dt;
-            sim.q[i] = nq;
+        if sim.blocker.is_some() {
+            // Unpowered: the arm sags (s1 and e1 under gravity), within its limits.
+            for (i, rate) in [(1, cli.sag), (3, 0.5 * cli.sag)] {
+                let nq = (sim.q[i] + rate * dt).clamp(sim.lower[i], sim.upper[i]);
+                sim.qd[i] = (nq - sim.q[i]) / dt;
+                sim.q[i] = nq;
+            }
+        } else {
+            for i in 0..DOF {
+                // A stall between taking the commands and measuring the time leaves a whole
+                // stall's worth of commanded motion to one short cycle: the arm's speed limit
+                // bounds it.
+                let reach = sim.vmax[i] * dt;
+                let nq = sim.q[i] + (a * (sim.target[i] - sim.q[i])).clamp(-reach, reach);
+                sim.qd[i] = (nq - sim.q[i]) / dt;
+                sim.q[i] = nq;
+            }
         }
         seq += 1;
-        arm.publish_joint_state(JointState {
-            header: Header {
-                stamp_ns: measured,
-                ..Header::now(seq)
-            },
-            position: sim.q,
-            velocity: sim.qd,
-        });
+        sim.measured_at = measured;
+        if sim.blocker.is_none() {
+            arm.publish_joint_state(JointState {
+                header: Header {
+                    stamp_ns: measured,
+                    ..Header::now(seq)
+                },
+                position: sim.q,
+                velocity: sim.qd,
+            });
+        }
         arm.publish_gripper_state(GripperState {
             header: Header::now(seq),
             closed: sim.closed as u32,
@@ -453,6 +617,10 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         "world_error": world_error,
         "resets": resets,
         "resets_refused": resets_refused,
+        "commands_refused": sim.guard.refused,
+        "max_command_offset_rad": sim.guard.max_offset_rad,
+        "first_command_offsets_rad": sim.first_offsets,
+        "missed_grasps": sim.missed,
     }}))
 }
 

@@ -67,3 +67,29 @@ pub async fn next<T: roslibrust::RosMessageType>(s: &mut Subscriber<T>) -> Next<
         None => Next::Closed,
     }
 }
+
+/// What the master says of this node, asked every few hundred milliseconds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MasterView {
+    /// The master answered and lists this node as subscribed to the topic asked about.
+    Registered,
+    /// The master answered but does not know this node: it restarted. Every publisher and
+    /// subscriber must be registered again (a new node handle).
+    Forgotten,
+    /// The master did not answer in time.
+    Lost,
+}
+
+/// Asks `master` (within `timeout`) whether node `node` is still subscribed to `topic`.
+pub async fn master_view(
+    master: &roslibrust::ros1::MasterClient,
+    topic: &str,
+    node: &str,
+    timeout: Duration,
+) -> MasterView {
+    match tokio::time::timeout(timeout, master.get_system_state()).await {
+        Ok(Ok(state)) if state.is_subscribed(topic, node) => MasterView::Registered,
+        Ok(Ok(_)) => MasterView::Forgotten,
+        _ => MasterView::Lost,
+    }
+}

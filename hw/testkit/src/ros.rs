@@ -149,6 +149,8 @@ pub struct Camera {
     pub seen: PathBuf,
     /// Where the fake writes its report on SIGTERM.
     pub report: PathBuf,
+    /// The fake's script and arguments (to restart it).
+    fake_args: (PathBuf, Vec<String>),
 }
 
 impl Camera {
@@ -199,6 +201,7 @@ impl Camera {
         ];
         let script = crate::repo().join("hw/camera/tests/fake_camera.py");
         let fake = ros.python(&script, &args, "fake_camera", Duration::from_millis(500));
+        let fake_args = (script, args);
         let adapter = spawn_env(
             &crate::exe("herb-camera", "herb-camera"),
             &[
@@ -217,6 +220,16 @@ impl Camera {
             adapter,
             seen,
             report,
+            fake_args,
         }
+    }
+
+    /// Stops the fake camera and starts it again in `ros` (a camera node restarted with its
+    /// master); herb-camera keeps running.
+    pub fn restart_fake(&mut self, ros: &RosWorld) {
+        self.fake.signal(libc::SIGTERM);
+        let _ = self.fake.wait_for(Duration::from_secs(10));
+        let (script, args) = &self.fake_args;
+        self.fake = ros.python(script, args, "fake_camera2", Duration::from_millis(500));
     }
 }
