@@ -8,7 +8,9 @@
 #                                            # user, tmpfiles or systemctl step
 #
 # Options: --dest DIR (a staging root, default /), --bin DIR (the built binaries, default
-# target/release), --boxed DIR (the BoxED meshes to copy, default: none; primitives without).
+# target/release), --boxed DIR (the BoxED data to copy: meshes, sessions and catalog, into
+# /opt/herb/boxed, where herbd, the loopback and `herbctl pack --session` find them; default:
+# none, and objects are primitives).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DEST=/
@@ -19,7 +21,7 @@ while [ $# -gt 0 ]; do
     --dest) DEST=${2:?--dest needs a folder}; shift 2 ;;
     --bin) BIN=${2:?--bin needs a folder}; shift 2 ;;
     --boxed) BOXED=${2:?--boxed needs a folder}; shift 2 ;;
-    -h|--help) sed -n '2,12p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,14p' "$0"; exit 0 ;;
     *) echo "install.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -46,7 +48,10 @@ install -m 0644 systemd/sysusers.d/herb.conf "$D/usr/local/lib/sysusers.d/herb.c
 install -m 0644 systemd/tmpfiles.d/herb.conf "$D/usr/local/lib/tmpfiles.d/herb.conf"
 if [ -n "$BOXED" ]; then
   install -d "$D/opt/herb/boxed"
-  cp -r "$BOXED/meshes" "$D/opt/herb/boxed/"
+  for part in meshes sessions catalog.json; do
+    [ -e "$BOXED/$part" ] || { echo "install.sh: $BOXED/$part is missing (is --boxed the BoxED folder?)" >&2; exit 1; }
+    cp -r "$BOXED/$part" "$D/opt/herb/boxed/"
+  done
 fi
 if [ "$D" = "" ]; then
   systemd-sysusers /usr/local/lib/sysusers.d/herb.conf

@@ -336,6 +336,7 @@ fn arm_unseen(f: Fault) -> bool {
             | Fault::RobotError
             | Fault::MasterLost
             | Fault::RobotSilent
+            | Fault::CommandRefused
     )
 }
 
@@ -1089,7 +1090,12 @@ impl Job {
                     };
                     // The arm adapter said more about the joint states that stopped (or it
                     // changed: an e-stop became a disable): say it once.
-                    if arm_unseen(why) && arm_unseen(self.fault) && why != self.fault {
+                    // (An adapter that says "ready" while its first joint state is on the way
+                    // changes nothing.)
+                    let ready_said = self.arm_blocker == ArmBlocker::None
+                        && now.saturating_sub(self.arm_at) < 3 * ARM_STATUS_PERIOD_NS;
+                    if arm_unseen(why) && arm_unseen(self.fault) && why != self.fault && !ready_said
+                    {
                         self.fault = why;
                         self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
                     }

@@ -4,6 +4,7 @@
 
 #![warn(missing_docs)]
 
+pub mod cellcal;
 pub mod config;
 pub mod controller;
 pub mod digest;

@@ -7,7 +7,9 @@
 //! `event` always comes first; keys are lowercase `snake_case`; a value with a space, a quote
 //! or an `=` is written in double quotes with `\"` and `\\` escaped. The events and their keys
 //! are listed in the README ("herbd's log"). Lines are formatted off the loop (reporter,
-//! journal writer, start and end), never in a cycle.
+//! journal writer, start and end), never in a cycle. Under journald (which stamps each line
+//! itself: `$JOURNAL_STREAM` is set) a line is written as is; otherwise it starts with the UTC
+//! time, e.g. `2026-11-26T05:40:00.123Z herbd: event=...`.
 
 use std::fmt::{Display, Write};
 
@@ -21,9 +23,21 @@ pub fn line(event: &str, fields: &[(&str, &dyn Display)]) -> String {
     s
 }
 
-/// Writes [`line`] to stderr (journald, under systemd).
+/// Writes [`line`] to stderr (journald, under systemd), see [`emit`].
 pub fn log(event: &str, fields: &[(&str, &dyn Display)]) {
-    eprintln!("{}", line(event, fields));
+    emit(&line(event, fields));
+}
+
+/// Writes a formatted line to stderr: as is under journald, else after the UTC time.
+pub fn emit(line: &str) {
+    if std::env::var_os("JOURNAL_STREAM").is_some() {
+        eprintln!("{line}");
+    } else {
+        eprintln!(
+            "{} {line}",
+            humantime::format_rfc3339_millis(std::time::SystemTime::now())
+        );
+    }
 }
 
 /// `v` as a value: bare when it has no space, quote or `=`, else quoted and escaped.

@@ -63,16 +63,17 @@ pub struct Qos {
 /// The QoS of the publish-subscribe service whose name ends in `leaf` (a [`Services`] name).
 ///
 /// One publisher for the services that command the robot or speak for it (joint and gripper
-/// commands from herbd, joint and gripper states from the arm's adapter), so no second process
+/// commands from herbd, joint and gripper states and the arm status from the arm's adapter), so no second process
 /// can drive the arm or impersonate it; four for the others. Queues: 256 for events a client
 /// must not lose while polling at 50 Hz (status, outcome), 2 for the 200 KB heightmap frames
 /// (only the newest matters), 16 for the rest.
 pub fn qos(leaf: &str) -> Qos {
-    const SOLE: [&str; 4] = [
+    const SOLE: [&str; 5] = [
         "/joint_command",
         "/gripper_command",
         "/joint_state",
         "/gripper_state",
+        "/arm_status",
     ];
     let depth = if leaf.ends_with("/status") || leaf.ends_with("/outcome") {
         256
@@ -105,6 +106,8 @@ pub fn daemon_node_name(prefix: &str) -> String {
 
 /// The process ids of live nodes called `name`, this process's own excluded.
 pub fn live_nodes_named(name: &str) -> Result<Vec<u32>, BusError> {
+    // iceoryx2's own notices ("No config file was loaded": its config, not HERB's) stay quiet.
+    set_log_level(LogLevel::Error);
     let me = std::process::id();
     let mut found = Vec::new();
     Node::<ipc::Service>::list(Config::global_config(), |state| {

@@ -393,15 +393,26 @@ pub enum ArmBlocker {
     MasterLost = 4,
     /// The robot stopped reporting its state to the adapter.
     RobotSilent = 5,
+    /// The adapter's jump guard refused a command far from the measured position: joint state
+    /// is withheld for a moment so that herbd halts and resumes from the measured state.
+    CommandRefused = 6,
 }
 
 impl ArmBlocker {
     /// The blocker for a wire code, if defined.
     pub fn from_code(c: u32) -> Option<Self> {
         use ArmBlocker::*;
-        [None, Disabled, EStop, RobotError, MasterLost, RobotSilent]
-            .get(c as usize)
-            .copied()
+        [
+            None,
+            Disabled,
+            EStop,
+            RobotError,
+            MasterLost,
+            RobotSilent,
+            CommandRefused,
+        ]
+        .get(c as usize)
+        .copied()
     }
 
     /// The fault herbd reports when joint states stop while the adapter says this.
@@ -413,6 +424,7 @@ impl ArmBlocker {
             Self::RobotError => Fault::RobotError,
             Self::MasterLost => Fault::MasterLost,
             Self::RobotSilent => Fault::RobotSilent,
+            Self::CommandRefused => Fault::CommandRefused,
         }
     }
 }
@@ -586,6 +598,9 @@ pub enum Fault {
     /// The gripper closed on nothing (or did not grip in time): it is opened, and the pick is
     /// tried again or the object skipped (`[recovery]`).
     MissedGrasp = 17,
+    /// Joint states stopped: the adapter refused a command too far from the measured position
+    /// (its jump guard) and halted the arm; the job resumes from the measured state.
+    CommandRefused = 18,
 }
 
 impl Fault {
@@ -610,6 +625,7 @@ impl Fault {
             Fault::MasterLost => "ROS master lost",
             Fault::RobotSilent => "robot silent (no state reaches the adapter)",
             Fault::MissedGrasp => "missed grasp",
+            Fault::CommandRefused => "the adapter refused a command far from the arm",
         }
     }
 
@@ -635,6 +651,7 @@ impl Fault {
             MasterLost,
             RobotSilent,
             MissedGrasp,
+            CommandRefused,
         ]
         .get(c as usize)
         .copied()

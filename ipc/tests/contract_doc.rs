@@ -114,6 +114,11 @@ fn layouts() -> String {
         holding: "1 when an object is held",
         object_type: "held object's catalog type index if known, else `NO_OBJECT`",
         reserved: "zero");
+    layout!(s, ArmStatus,
+        header: "",
+        blocker: "`ArmBlocker` code: why joint state is withheld (0: it is not)",
+        reserved: "zero",
+        commands_refused: "joint commands the adapter's jump guard refused since it started");
     layout!(s, HeightmapFrame,
         header: "stamp: capture time",
         nx: "columns, along box x",
@@ -216,6 +221,13 @@ fn codes() -> String {
     for c in 0..64 {
         add("Fault", Fault::from_code(c).map(|v| format!("{v:?}")), c);
     }
+    for c in 0..64 {
+        add(
+            "ArmBlocker",
+            ArmBlocker::from_code(c).map(|v| format!("{v:?}")),
+            c,
+        );
+    }
     for (c, name) in SIM_BOUNDS.iter().enumerate() {
         add("SimBound", Some(name.to_string()), c as u32);
     }
@@ -231,7 +243,7 @@ fn codes() -> String {
 
 fn constants() -> String {
     format!(
-        "| constant | value |\n| --- | --- |\n| `PROTOCOL_VERSION` | {PROTOCOL_VERSION} |\n| `DOF` | {DOF} |\n| `HEIGHTMAP_MAX_CELLS` | {HEIGHTMAP_MAX_CELLS} |\n| `MAX_JOB_OBJECTS` | {MAX_JOB_OBJECTS} |\n| `NO_OBJECT` | {NO_OBJECT} (0x{NO_OBJECT:X}) |\n| `HEIGHT_RANGE_M` | {} .. {} m |\n| `MAX_JOINT_ABS_RAD` | {MAX_JOINT_ABS_RAD} rad |\n| `MAX_JOINT_SPEED` | {MAX_JOINT_SPEED} rad/s |\n| `MAX_FUTURE_STAMP_NS` | {MAX_FUTURE_STAMP_NS} ns |\n| `GRIPPER_REPEAT_NS` | {GRIPPER_REPEAT_NS} ns |\n| `HEARTBEAT_PERIOD_NS` | {HEARTBEAT_PERIOD_NS} ns |\n",
+        "| constant | value |\n| --- | --- |\n| `PROTOCOL_VERSION` | {PROTOCOL_VERSION} |\n| `DOF` | {DOF} |\n| `HEIGHTMAP_MAX_CELLS` | {HEIGHTMAP_MAX_CELLS} |\n| `MAX_JOB_OBJECTS` | {MAX_JOB_OBJECTS} |\n| `NO_OBJECT` | {NO_OBJECT} (0x{NO_OBJECT:X}) |\n| `HEIGHT_RANGE_M` | {} .. {} m |\n| `MAX_JOINT_ABS_RAD` | {MAX_JOINT_ABS_RAD} rad |\n| `MAX_JOINT_SPEED` | {MAX_JOINT_SPEED} rad/s |\n| `MAX_FUTURE_STAMP_NS` | {MAX_FUTURE_STAMP_NS} ns |\n| `GRIPPER_REPEAT_NS` | {GRIPPER_REPEAT_NS} ns |\n| `HEARTBEAT_PERIOD_NS` | {HEARTBEAT_PERIOD_NS} ns |\n| `ARM_STATUS_PERIOD_NS` | {ARM_STATUS_PERIOD_NS} ns |\n",
         HEIGHT_RANGE_M.0, HEIGHT_RANGE_M.1
     )
 }
@@ -245,6 +257,12 @@ fn services() -> String {
         (sv.joint_state(), "JointState", "arm adapter", "herbd"),
         (sv.joint_command(), "JointCommand", "herbd", "arm adapter"),
         (sv.gripper_state(), "GripperState", "arm adapter", "herbd"),
+        (
+            sv.arm_status(),
+            "ArmStatus",
+            "arm adapter",
+            "herbd, clients",
+        ),
         (
             sv.gripper_command(),
             "GripperCommand",

@@ -1,8 +1,9 @@
 //! Where the BoxED data and meshes are read from. The data is never copied into the repository.
 //!
 //! Resolution order for the BoxED root: an explicit path (CLI flag), the `HERB_BOXED`
-//! environment variable, `../shared/boxed` relative to the working directory, then
-//! `../shared/boxed` relative to the workspace root (so tests find it from any crate folder).
+//! environment variable, `../shared/boxed` relative to the working directory,
+//! `../shared/boxed` relative to the workspace root (so tests find it from any crate folder),
+//! then [`INSTALLED_BOXED`] (where `systemd/install.sh --boxed` puts it on a robot PC).
 //! Meshes: an explicit folder, `HERB_MESHES`, `<boxed root>/meshes` if it exists, else none
 //! (objects fall back to primitives).
 
@@ -22,6 +23,9 @@ pub enum MeshSource {
     None(String),
 }
 
+/// Where `systemd/install.sh --boxed DIR` installs the BoxED sessions and meshes.
+pub const INSTALLED_BOXED: &str = "/opt/herb/boxed";
+
 fn workspace_default() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/boxed")
 }
@@ -34,9 +38,13 @@ pub fn boxed_root(explicit: Option<&Path>) -> Option<PathBuf> {
     if let Some(p) = std::env::var_os(ENV_BOXED) {
         return Some(PathBuf::from(p));
     }
-    [PathBuf::from("../shared/boxed"), workspace_default()]
-        .into_iter()
-        .find(|p| p.is_dir())
+    [
+        PathBuf::from("../shared/boxed"),
+        workspace_default(),
+        PathBuf::from(INSTALLED_BOXED),
+    ]
+    .into_iter()
+    .find(|p| p.is_dir())
 }
 
 /// The mesh source: explicit folder, else `HERB_MESHES` (`none` forces primitives), else

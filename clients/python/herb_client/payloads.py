@@ -68,6 +68,15 @@ class GripperState(_Payload):
     ]
 
 
+class ArmStatus(_Payload):
+    _fields_ = [
+        ("header", Header),
+        ("blocker", _u32),
+        ("reserved", _u32),
+        ("commands_refused", _u64),
+    ]
+
+
 class HeightmapFrame(_Payload):
     _fields_ = [
         ("header", Header),
@@ -175,6 +184,7 @@ PAYLOADS = {
         JointCommand,
         GripperCommand,
         GripperState,
+        ArmStatus,
         HeightmapFrame,
         CancelJobRequest,
         CancelJobReply,
@@ -215,6 +225,7 @@ class StatusEvent(enum.IntEnum):
     JobFailed = 8
     Shutdown = 9
     JobCancelled = 10
+    Skipped = 11
 
 
 class Fault(enum.IntEnum):
@@ -231,6 +242,23 @@ class Fault(enum.IntEnum):
     ObjectLost = 9
     NoFeasiblePlacement = 10
     Restarted = 11
+    RobotDisabled = 12
+    RobotEStop = 13
+    RobotError = 14
+    MasterLost = 15
+    RobotSilent = 16
+    MissedGrasp = 17
+    CommandRefused = 18
+
+
+class ArmBlocker(enum.IntEnum):
+    NONE = 0
+    Disabled = 1
+    EStop = 2
+    RobotError = 3
+    MasterLost = 4
+    RobotSilent = 5
+    CommandRefused = 6
 
 
 class RejectReason(enum.IntEnum):
@@ -254,6 +282,7 @@ CODES = {
     "JobState": JobState,
     "StatusEvent": StatusEvent,
     "Fault": Fault,
+    "ArmBlocker": ArmBlocker,
     "RejectReason": RejectReason,
 }
 

@@ -109,6 +109,16 @@ enum Cmd {
         #[arg(long)]
         plain: bool,
     },
+    /// Measure the box and pick-station poses for herbd's `[cell]` table by touching them with
+    /// the gripper (the arm moved by hand; the arm adapter must run): prints the lines to paste.
+    CalibrateCell {
+        /// Box corners to touch: 3 or 4.
+        #[arg(long, default_value_t = 4)]
+        corners: usize,
+        /// From the gripper's endpoint to the touching tip, along its approach axis (m).
+        #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+        tip_offset: f64,
+    },
     /// Print the daemon's next heartbeat.
     Status {
         /// Give up after this many seconds.
@@ -955,6 +965,23 @@ fn main() -> ExitCode {
             (*json, *operator),
         ),
         Cmd::Status { timeout } => status(&cli, *timeout),
+        Cmd::CalibrateCell {
+            corners,
+            tip_offset,
+        } => {
+            let stdin = std::io::stdin();
+            herb_daemon::cellcal::run(
+                &cli.prefix,
+                *corners,
+                *tip_offset,
+                &mut stdin.lock(),
+                &mut std::io::stderr(),
+            )
+            .map(|cell| {
+                println!("[cell]\n{cell}");
+                true
+            })
+        }
         Cmd::Watch {
             period,
             duration,

@@ -215,6 +215,17 @@ fn stats_line(s: &LoopStats) -> String {
 
 fn run(cli: Cli) -> Result<(), String> {
     let cfg = config(&cli)?;
+    // herbd's own configuration first (iceoryx2 has one of its own, left at its defaults).
+    match &cli.config {
+        Some(p) => logfmt::log("config", &[("file", &p.display())]),
+        None => logfmt::log(
+            "config",
+            &[
+                ("file", &"none"),
+                ("using", &"the defaults (--config FILE)"),
+            ],
+        ),
+    }
     let services = Services::new(&cfg.ipc_prefix).map_err(|e| e.to_string())?;
     // One daemon per prefix: two would answer the same jobs and drive the same arm.
     let node_name = daemon_node_name(&cfg.ipc_prefix);
@@ -351,14 +362,14 @@ fn run(cli: Cli) -> Result<(), String> {
                 while !done.load(Ordering::Relaxed) {
                     while let Ok(mut s) = stats_link.rx.pop() {
                         total.add(&s);
-                        eprintln!("{}", stats_line(&s));
+                        logfmt::emit(&stats_line(&s));
                         s.reset();
                         let _ = stats_link.tx.push(s);
                     }
                     if let Some(sub) = &sub {
                         while let Ok(Some(m)) = sub.receive() {
                             if let Some(line) = describe(m.payload()) {
-                                eprintln!("{line}");
+                                logfmt::emit(&line);
                             }
                         }
                     }

@@ -14,9 +14,15 @@
 //!    tracking arm trails its command. A normal trajectory never comes near it; a jump to a
 //!    setpoint from before a sag is refused.
 //!
-//! Refused commands are counted and the first of each kind is kept for the log.
+//! Refused commands are counted. A command refused for its distance means herbd and the arm
+//! disagree: the adapter then withholds joint state for [`REFUSAL_HOLD_NS`] (saying
+//! `ArmBlocker::CommandRefused`), so that herbd halts and resumes from the measured state.
 
 use herb_ipc::DOF;
+
+/// After a command refused for its distance, joint state is withheld this long (ns): longer
+/// than herbd's joint-state timeout (100 ms by default), so that herbd halts.
+pub const REFUSAL_HOLD_NS: u64 = 300_000_000;
 
 /// How the per-joint bound is made.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -180,7 +186,8 @@ impl JumpGuard {
         for i in 0..DOF {
             let offset = (target[i] - q[i]).abs();
             let bound = self.settings.bound_rad[i];
-            if !(offset <= bound) {
+            // NaN is never within the bound.
+            if offset.is_nan() || offset > bound {
                 return Err(Refusal::TooFar {
                     joint: i,
                     offset_rad: offset,

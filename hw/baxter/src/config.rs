@@ -181,7 +181,7 @@ impl Default for ArmSettings {
             mode: Mode::Position,
             speed_ratio: 1.0,
             guard_periods: 3.0,
-            tracking_lag_rad: 0.05,
+            tracking_lag_rad: 0.12,
         }
     }
 }

@@ -5,10 +5,10 @@
 
 use crate::bridge::{Grip, GripperDriver, HerbdCommand, JointMap, command_to_send, robot_blocker};
 use crate::config::{BaxterConfig, Mode};
-use herb_adapter::guard::{GuardSettings, JumpGuard};
+use herb_adapter::guard::{GuardSettings, JumpGuard, REFUSAL_HOLD_NS, Refusal};
 use herb_ipc::{ArmBlocker, DOF, GripperAction, monotonic_ns};
 use herb_ros1::baxter_core_msgs::{AssemblyState, EndEffectorState, JointCommand};
-use herb_ros1::node::{MasterView, Next, connect, master_view, next};
+use herb_ros1::node::{MasterView, Next, announce_again, connect, master_view, next, topic_of};
 use herb_ros1::sensor_msgs::JointState as RosJointState;
 use herb_ros1::std_msgs::{Bool, Float64};
 use roslibrust::ros1::MasterClient;
@@ -123,16 +123,14 @@ pub fn run(
                 cfg.arm.tracking_lag_rad,
             )),
             enabled_seen: false,
+            refused_until: 0,
         };
         loop {
             match session(&cfg, enable, &shared, &stop, &mut carry).await? {
                 End::Stop => return Ok(()),
-                End::Reregister => {
-                    lock(&shared).counters.reregistered += 1;
-                    eprintln!(
-                        "herb-baxter: the ROS master restarted and forgot this node: registering again"
-                    );
-                }
+                End::Reregister => eprintln!(
+                    "herb-baxter: no robot state since registering again: connecting anew"
+                ),
             }
         }
     })
@@ -144,15 +142,22 @@ struct Carry {
     /// The robot reported enabled once: `--enable` never asks again (a later disable is an
     /// operator's, or the e-stop's, and is not undone from here).
     enabled_seen: bool,
+    /// Joint state is withheld until then after a command refused for its distance.
+    refused_until: u64,
 }
 
 /// How a session ended.
 enum End {
     /// `stop` was set.
     Stop,
-    /// The master restarted: register everything again.
+    /// The robot stayed silent after the node announced itself to a restarted master that
+    /// already knew the robot: start a new node, which connects to the publishers it lists.
     Reregister,
 }
+
+/// After announcing this node again to a master that already listed the robot's publishers,
+/// a new node is made if no robot state arrived within this long.
+const REANNOUNCE_GRACE_NS: u64 = 2_000_000_000;
 
 fn ros_err(what: &str, topic: &str) -> impl FnOnce(roslibrust::ros1::NodeError) -> String {
     let (what, topic) = (what.to_string(), topic.to_string());
@@ -169,6 +174,7 @@ async fn session(
     carry: &mut Carry,
 ) -> Result<End, String> {
     let guard = &mut carry.guard;
+    let refused_until = &mut carry.refused_until;
     let Some(nh) = connect(&cfg.ros.master_uri, &cfg.ros.node_name, "herb-baxter", stop).await
     else {
         return Ok(End::Stop);
@@ -236,6 +242,25 @@ async fn session(
         .await
         .map_err(|e| format!("master client: {e}"))?;
 
+    // What this node registered, to register it again with a restarted master.
+    let subscribed = [
+        topic_of::<RosJointState>(&t.joint_states),
+        topic_of::<AssemblyState>(&t.robot_state),
+        topic_of::<EndEffectorState>(&t.gripper_state),
+    ];
+    let mut published = vec![
+        topic_of::<JointCommand>(&t.joint_command),
+        topic_of::<herb_ros1::baxter_core_msgs::EndEffectorCommand>(&t.gripper_command),
+        topic_of::<Float64>(&t.command_timeout),
+    ];
+    if ratio_pub.is_some() {
+        published.push(topic_of::<Float64>(&t.speed_ratio));
+    }
+    if enable_pub.is_some() {
+        published.push(topic_of::<Bool>(&t.enable));
+    }
+    // Set when the node announced itself again to a master that already knew the robot.
+    let mut announced_at: Option<u64> = None;
     let map = JointMap::new(&cfg.arm);
     let mut driver = GripperDriver::new(cfg.gripper.clone(), &cfg.ros.node_name);
     let mut command = JointCommand {
@@ -326,18 +351,32 @@ async fn session(
                     }
                 }
                 if view == MasterView::Forgotten {
-                    let mut s = lock(shared);
-                    s.blocker = Some(ArmBlocker::MasterLost);
-                    s.joint = None;
-                    drop(s);
-                    guard.set_ready(false, monotonic_ns());
-                    return Ok(End::Reregister);
+                    eprintln!("herb-baxter: the ROS master restarted and forgot this node: registering again");
+                    let known = announce_again(&master, &subscribed, &published).await?;
+                    lock(shared).counters.reregistered += 1;
+                    announced_at = known.then(monotonic_ns);
+                }
+                if let Some(at) = announced_at {
+                    let now = monotonic_ns();
+                    let heard = assembly.as_ref().is_some_and(|(_, rx)| *rx > at);
+                    if heard {
+                        announced_at = None;
+                    } else if now.saturating_sub(at) > REANNOUNCE_GRACE_NS {
+                        let mut s = lock(shared);
+                        s.blocker = Some(ArmBlocker::RobotSilent);
+                        s.joint = None;
+                        drop(s);
+                        guard.set_ready(false, now);
+                        return Ok(End::Reregister);
+                    }
                 }
             }
             _ = tick.tick() => {
                 let now = monotonic_ns();
                 let blocker = if !master_ok {
                     Some(ArmBlocker::MasterLost)
+                } else if now < *refused_until {
+                    Some(ArmBlocker::CommandRefused)
                 } else {
                     match &assembly {
                         Some((_, at)) if now.saturating_sub(*at) > ROBOT_STATE_MAX_AGE_NS => Some(ArmBlocker::RobotSilent),
@@ -386,6 +425,11 @@ async fn session(
                             let _ = s.command_latency.record(monotonic_ns().saturating_sub(c.stamp_ns).max(1));
                         }
                         Err(r) => {
+                            if matches!(r, Refusal::TooFar { .. }) {
+                                // herbd and the arm disagree: halt herbd (state withheld), which
+                                // then resumes from the measured state.
+                                *refused_until = now + REFUSAL_HOLD_NS;
+                            }
                             lock(shared).counters.commands_refused = guard.refused;
                             if !refusing {
                                 eprintln!("herb-baxter: joint command refused: {r}");

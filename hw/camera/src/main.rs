@@ -10,7 +10,7 @@ use herb_camera::project::{Depth, FrameStats, Intrinsics, Median, Projector};
 use herb_ipc::bus::Bus;
 use herb_ipc::{Services, monotonic_ns};
 use herb_robot::config_file::ConfigFile;
-use herb_ros1::node::{MasterView, Next, connect, master_view, next};
+use herb_ros1::node::{MasterView, Next, announce_again, connect, master_view, next, topic_of};
 use herb_ros1::sensor_msgs::{CameraInfo, Image};
 use herb_sim::heightmap::GridSpec;
 use std::path::PathBuf;
@@ -210,12 +210,17 @@ async fn ros_side(
     stop: Arc<AtomicBool>,
 ) -> Result<(), String> {
     while session(&cfg, spec, &frames, &spare, &counters, &stop).await? {
-        eprintln!("herb-camera: the ROS master restarted and forgot this node: registering again");
+        eprintln!("herb-camera: no image since registering again: connecting anew");
     }
     Ok(())
 }
 
-/// One registration; true when the master forgot this node (register again).
+/// After announcing this node again to a master that already listed the camera's publishers,
+/// a new node is made if no image arrived within this long.
+const REANNOUNCE_GRACE: Duration = Duration::from_secs(2);
+
+/// One registration; true when the camera stayed silent after this node announced itself
+/// again to a restarted master (make a new node).
 async fn session(
     cfg: &CameraConfig,
     spec: GridSpec,
@@ -253,6 +258,12 @@ async fn session(
         roslibrust::ros1::MasterClient::new(&cfg.ros.master_uri, client_uri, &cfg.ros.node_name)
             .await
             .map_err(|e| format!("master client: {e}"))?;
+    let subscribed = [
+        topic_of::<Image>(&t.image),
+        topic_of::<CameraInfo>(&t.camera_info),
+    ];
+    let mut announced_at: Option<tokio::time::Instant> = None;
+    let mut last_image: Option<tokio::time::Instant> = None;
     let mut check = tokio::time::interval(MASTER_CHECK);
     check.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     while !stop.load(Ordering::Relaxed) {
@@ -290,6 +301,7 @@ async fn session(
                     Next::Closed => return Err(format!("subscription {} closed", t.image)),
                 };
                 let received_ns = monotonic_ns();
+                last_image = Some(tokio::time::Instant::now());
                 lock(counters).images += 1;
                 let checked = intr
                     .ok_or_else(|| "no camera info yet".to_string())
@@ -320,7 +332,16 @@ async fn session(
             _ = poll.tick() => {}
             _ = check.tick() => {
                 if master_view(&master, &t.image, &cfg.ros.node_name, MASTER_CHECK).await == MasterView::Forgotten {
-                    return Ok(true);
+                    eprintln!("herb-camera: the ROS master restarted and forgot this node: registering again");
+                    let known = announce_again(&master, &subscribed, &[]).await?;
+                    announced_at = known.then(tokio::time::Instant::now);
+                }
+                if let Some(at) = announced_at {
+                    if last_image.is_some_and(|t| t > at) {
+                        announced_at = None;
+                    } else if at.elapsed() > REANNOUNCE_GRACE {
+                        return Ok(true);
+                    }
                 }
             }
         }

@@ -28,7 +28,7 @@
 //! SIGINT/SIGTERM: prints a JSON summary on stdout and exits 0.
 
 use clap::Parser;
-use herb_adapter::guard::{GuardSettings, JumpGuard};
+use herb_adapter::guard::{GuardSettings, JumpGuard, REFUSAL_HOLD_NS, Refusal};
 use herb_adapter::{ArmPorts, CameraPort, Heightmap};
 use herb_ipc::bus::Bus;
 use herb_ipc::{
@@ -225,6 +225,8 @@ struct Sim {
     commanded_since_ready: bool,
     /// Each first command's distance from the arm after it could move again (rad).
     first_offsets: Vec<f64>,
+    /// Joint state is withheld until then after a command refused for its distance.
+    refused_until: u64,
     /// Grasps still to miss.
     miss_grasps: u32,
     missed: u32,
@@ -245,16 +247,18 @@ impl Sim {
             return;
         }
         let q = self.q;
-        if self
-            .guard
-            .check(
-                c.header.stamp_ns,
-                &c.position,
-                Some((self.measured_at, &q)),
-                now,
-            )
-            .is_err()
-        {
+        let verdict = self.guard.check(
+            c.header.stamp_ns,
+            &c.position,
+            Some((self.measured_at, &q)),
+            now,
+        );
+        if let Err(r) = verdict {
+            if matches!(r, Refusal::TooFar { .. }) {
+                // herbd and the arm disagree: halt herbd, which resumes from the arm.
+                self.refused_until = now + REFUSAL_HOLD_NS;
+                self.guard.set_ready(false, now);
+            }
             return;
         }
         if !self.commanded_since_ready {
@@ -267,8 +271,8 @@ impl Sim {
         self.target = c.position;
     }
 
-    /// Applies the signal toggles counted so far; true when the arm's state changed.
-    fn toggles(&mut self, seen: &mut [u32; 2], now: u64) -> bool {
+    /// Applies the signal toggles counted so far.
+    fn toggles(&mut self, seen: &mut [u32; 2], now: u64) {
         let mut changed = false;
         for (k, seen) in seen.iter_mut().enumerate() {
             let n = TOGGLES[k].load(Ordering::Relaxed);
@@ -300,7 +304,6 @@ impl Sim {
                 self.blocker.map_or("robot ready", |b| b.fault().describe())
             );
         }
-        changed
     }
 
     /// A valid gripper command.
@@ -437,13 +440,15 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         last_outcome: None,
         settling: 0,
         blocker: None,
+        // A first-order lag (`--lag-s`) trails by about speed x lag: allowed on top.
         guard: JumpGuard::new(GuardSettings::from_limits(
             &cfg.limits.velocity,
             cli.rate_hz,
-            cli.guard_periods,
+            cli.guard_periods + cli.lag_s * cli.rate_hz,
             cli.tracking_lag_rad,
         )),
         measured_at: 0,
+        refused_until: 0,
         commanded_since_ready: false,
         first_offsets: Vec::with_capacity(64),
         miss_grasps: cli.miss_grasps,
@@ -451,7 +456,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
     };
     sim.guard.set_ready(true, monotonic_ns());
     let mut toggles_seen = [0u32; 2];
-    let mut status_at = 0u64;
+    let (mut status_said, mut status_at) = (None::<ArmBlocker>, 0u64);
     eprintln!(
         "herb-loopback: prefix {:?}, {} Hz, {} objects ({})",
         cfg.ipc_prefix,
@@ -478,12 +483,21 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         if now > next {
             next = now + period;
         }
-        if sim.toggles(&mut toggles_seen, now)
-            || now.saturating_sub(status_at) >= ARM_STATUS_PERIOD_NS
-        {
-            let b = sim.blocker.unwrap_or(ArmBlocker::None);
-            arm.publish_arm_status(b, sim.guard.refused);
-            status_at = now;
+        let refusing = now < sim.refused_until;
+        if !refusing && sim.refused_until != 0 && sim.blocker.is_none() {
+            // The hold after a refusal is over: a new epoch (commands from before refused).
+            sim.refused_until = 0;
+            sim.guard.set_ready(true, now);
+        }
+        sim.toggles(&mut toggles_seen, now);
+        let said = match sim.blocker {
+            Some(b) => b,
+            None if refusing => ArmBlocker::CommandRefused,
+            None => ArmBlocker::None,
+        };
+        if Some(said) != status_said || now.saturating_sub(status_at) >= ARM_STATUS_PERIOD_NS {
+            arm.publish_arm_status(said, sim.guard.refused);
+            (status_said, status_at) = (Some(said), now);
         }
         let (lower, upper) = (sim.lower, sim.upper);
         if sim.blocker.is_some() {
@@ -543,7 +557,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         }
         seq += 1;
         sim.measured_at = measured;
-        if sim.blocker.is_none() {
+        if sim.blocker.is_none() && !refusing {
             arm.publish_joint_state(JointState {
                 header: Header {
                     stamp_ns: measured,

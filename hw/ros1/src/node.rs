@@ -93,3 +93,38 @@ pub async fn master_view(
         _ => MasterView::Lost,
     }
 }
+
+/// A topic and its message type, as the master registers it.
+pub type Topic = (String, &'static str);
+
+/// Topic `name` of message type `T`.
+pub fn topic_of<T: roslibrust::RosMessageType>(name: &str) -> Topic {
+    (name.to_owned(), T::DESCRIPTION.ros_type_name)
+}
+
+/// Registers this node's topics again with a master that forgot it (it restarted), keeping the
+/// node and its connections: peers that are still connected stay connected, and peers that
+/// register later are told about this node. Returns whether the master already knew a
+/// publisher of one of the `subscribed` topics: such a peer registered before this call and
+/// may not have been connected (the caller then registers anew if nothing arrives).
+pub async fn announce_again(
+    master: &roslibrust::ros1::MasterClient,
+    subscribed: &[Topic],
+    published: &[Topic],
+) -> Result<bool, String> {
+    let mut known = false;
+    for (topic, ty) in subscribed {
+        let publishers = master
+            .register_subscriber(topic.as_str(), *ty)
+            .await
+            .map_err(|e| format!("register subscriber {topic}: {e}"))?;
+        known |= !publishers.is_empty();
+    }
+    for (topic, ty) in published {
+        master
+            .register_publisher(topic.as_str(), *ty)
+            .await
+            .map_err(|e| format!("register publisher {topic}: {e}"))?;
+    }
+    Ok(known)
+}
