@@ -19,7 +19,8 @@ followed, and when it can move again (SIGUSR1, the e-stop's release, an enable r
 one (an enable request while e-stopped is refused, as by the real robot). Every command followed
 is measured against the arm, by its largest joint offset from the current position: the largest
 offset is reported, those over --far counted, and the offset of the first command after each
-such transition (and of the very first) listed.
+such transition, of the first after a pause of over 0.5 s in the commands (herbd halted, e.g.
+on a master loss), and of the very first, listed.
 
 The gripper's calibration takes --calibrate-s seconds with no further calibrate command: one
 received while calibrating starts the wait again (a calibrate command to a calibrated gripper
@@ -143,10 +144,13 @@ def main():
             st["max_command_offset"] = max(st["max_command_offset"], offset)
             if offset > a.far:
                 st["commands_far"] += 1
-            if st["first_pending"]:
+            now = time.monotonic()
+            # A command after a pause of over 0.5 s (herbd halted: a master loss, a fault) is a
+            # first command too.
+            if st["first_pending"] or now - st["target_at"] > 0.5:
                 st["first_command_offsets"].append(round(offset, 6))
                 st["first_pending"] = False
-            st["target"], st["target_at"] = cmd, time.monotonic()
+            st["target"], st["target_at"] = cmd, now
 
     def on_timeout(m):
         with lock:

@@ -264,6 +264,7 @@ async fn session(
     ];
     let mut announced_at: Option<tokio::time::Instant> = None;
     let mut last_image: Option<tokio::time::Instant> = None;
+    let mut mono16_said = false;
     let mut check = tokio::time::interval(MASTER_CHECK);
     check.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     while !stop.load(Ordering::Relaxed) {
@@ -302,6 +303,11 @@ async fn session(
                 };
                 let received_ns = monotonic_ns();
                 last_image = Some(tokio::time::Instant::now());
+                if img.encoding == "mono16" && !mono16_said {
+                    // Some drivers label 16-bit depth mono16: read as 16UC1 (millimetres).
+                    eprintln!("herb-camera: image encoding mono16 read as 16UC1 (depth in millimetres)");
+                    mono16_said = true;
+                }
                 lock(counters).images += 1;
                 let checked = intr
                     .ok_or_else(|| "no camera info yet".to_string())
