@@ -873,14 +873,15 @@ impl Job {
     }
 
     /// The fault for joint states that stopped: what the arm adapter says, if it said it
-    /// recently (within three of its periods); else the adapter is silent.
+    /// recently (within three of its periods; an adapter that says the robot can move while
+    /// no joint state comes: the robot is silent); else the adapter itself is silent.
     fn joint_fault(&self, now: u64) -> Fault {
         let said_recently =
             self.arm_at != 0 && now.saturating_sub(self.arm_at) < 3 * ARM_STATUS_PERIOD_NS;
-        if said_recently {
-            self.arm_blocker.fault()
-        } else {
-            Fault::JointStateTimeout
+        match self.arm_blocker {
+            _ if !said_recently => Fault::JointStateTimeout,
+            ArmBlocker::None => Fault::RobotSilent,
+            b => b.fault(),
         }
     }
 

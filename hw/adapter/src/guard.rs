@@ -9,9 +9,9 @@
 //!    master lost...), nothing is sent; when it can again, a command stamped before that moment
 //!    is refused. A setpoint herbd held through the interruption can never be replayed.
 //! 2. **Near the measured position.** Per joint, `|target - measured| <= bound`, with
-//!    `bound = speed limit x (periods / command rate) + tracking lag` (see [`GuardSettings`]):
+//!    `bound = speed limit x (periods / command rate + tracking lag)` (see [`GuardSettings`]):
 //!    the travel of a few command periods at the joint's speed limit plus how far a normally
-//!    tracking arm trails its command. A normal trajectory never comes near it; a jump to a
+//!    tracking arm trails its command (its lag, a time, at that speed). A normal trajectory never comes near it; a jump to a
 //!    setpoint from before a sag is refused.
 //!
 //! Refused commands are counted. A command refused for its distance means herbd and the arm
@@ -35,12 +35,12 @@ pub struct GuardSettings {
 }
 
 impl GuardSettings {
-    /// `bound_i = velocity_i x periods / rate_hz + lag_rad`: the travel of `periods` command
+    /// `bound_i = velocity_i x (periods / rate_hz + lag_s)`: the travel of `periods` command
     /// periods at the joint's speed limit (herbd's `[limits] velocity`, the same file) plus
-    /// the tracking lag of the arm.
-    pub fn from_limits(velocity: &[f64; DOF], rate_hz: f64, periods: f64, lag_rad: f64) -> Self {
+    /// how far the arm trails its command at that speed (`lag_s`).
+    pub fn from_limits(velocity: &[f64; DOF], rate_hz: f64, periods: f64, lag_s: f64) -> Self {
         Self {
-            bound_rad: velocity.map(|v| v * periods / rate_hz + lag_rad),
+            bound_rad: velocity.map(|v| v * (periods / rate_hz + lag_s)),
             max_measured_age_ns: 100_000_000,
         }
     }

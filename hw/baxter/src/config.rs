@@ -110,13 +110,13 @@ pub struct ArmSettings {
     /// Joint position speed ratio for `position` mode (0 to 1, latched on `speed_ratio`).
     pub speed_ratio: f64,
     /// The jump guard (`herb_adapter::guard`): a command's target may be at most
-    /// `speed limit x guard_periods / command_rate_hz + tracking_lag_rad` from the measured
+    /// `speed limit x (guard_periods / command_rate_hz + tracking_lag_s)` from the measured
     /// position, per joint; farther, it is refused and counted.
     pub guard_periods: f64,
-    /// How far the arm trails its command in normal motion (rad), part of the guard's bound.
+    /// How long the arm trails its command in normal motion (s), part of the guard's bound.
     /// The adapter's summary reports the largest offset it passed (`max_command_offset_rad`):
-    /// measure it on the cell and keep this above it.
-    pub tracking_lag_rad: f64,
+    /// measure it on the cell and keep `speed limit x tracking_lag_s` above it.
+    pub tracking_lag_s: f64,
 }
 
 /// `[gripper]`.
@@ -181,7 +181,7 @@ impl Default for ArmSettings {
             mode: Mode::Position,
             speed_ratio: 1.0,
             guard_periods: 3.0,
-            tracking_lag_rad: 0.12,
+            tracking_lag_s: 0.1,
         }
     }
 }
@@ -236,7 +236,7 @@ impl ConfigFile for BaxterConfig {
         in_range("arm.command_timeout_s", a.command_timeout_s, 0.01, 5.0)?;
         in_range("arm.speed_ratio", a.speed_ratio, 0.0, 1.0)?;
         in_range("arm.guard_periods", a.guard_periods, 1.0, 20.0)?;
-        in_range("arm.tracking_lag_rad", a.tracking_lag_rad, 0.0, 0.2)?;
+        in_range("arm.tracking_lag_s", a.tracking_lag_s, 0.0, 0.5)?;
         let g = &self.gripper;
         in_range("gripper.open_position", g.open_position, 0.0, 100.0)?;
         in_range("gripper.closed_position", g.closed_position, 0.0, 100.0)?;

@@ -120,7 +120,7 @@ pub fn run(
                 &velocity,
                 cfg.arm.command_rate_hz,
                 cfg.arm.guard_periods,
-                cfg.arm.tracking_lag_rad,
+                cfg.arm.tracking_lag_s,
             )),
             enabled_seen: false,
             refused_until: 0,

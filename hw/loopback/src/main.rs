@@ -81,9 +81,9 @@ struct Cli {
     /// Jump guard: command periods of travel at the speed limit allowed past the arm.
     #[arg(long, default_value_t = 3.0)]
     guard_periods: f64,
-    /// Jump guard: the tracking lag allowed on top (rad).
-    #[arg(long, default_value_t = 0.05)]
-    tracking_lag_rad: f64,
+    /// Jump guard: how long the arm may trail its command (s), on top of `--lag-s`.
+    #[arg(long, default_value_t = 0.02)]
+    tracking_lag_s: f64,
 }
 
 /// SIGUSR1 (disable) and SIGUSR2 (e-stop) toggles, counted by the handler.
@@ -399,10 +399,10 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             cli.guard_periods
         ));
     }
-    if !(cli.tracking_lag_rad.is_finite() && (0.0..=0.5).contains(&cli.tracking_lag_rad)) {
+    if !(cli.tracking_lag_s.is_finite() && (0.0..=0.5).contains(&cli.tracking_lag_s)) {
         return Err(format!(
-            "--tracking-lag-rad {} outside 0..=0.5",
-            cli.tracking_lag_rad
+            "--tracking-lag-s {} outside 0..=0.5",
+            cli.tracking_lag_s
         ));
     }
     let camera = CameraPort::open(&bus).map_err(|e| e.to_string())?;
@@ -444,8 +444,8 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         guard: JumpGuard::new(GuardSettings::from_limits(
             &cfg.limits.velocity,
             cli.rate_hz,
-            cli.guard_periods + cli.lag_s * cli.rate_hz,
-            cli.tracking_lag_rad,
+            cli.guard_periods,
+            cli.tracking_lag_s + cli.lag_s,
         )),
         measured_at: 0,
         refused_until: 0,
