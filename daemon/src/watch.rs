@@ -290,6 +290,28 @@ mod tests {
     }
 
     #[test]
+    fn between_jobs_the_view_says_why_the_robot_is_not_ready() {
+        let name = |t: u32| format!("type{t}");
+        let mut v = WatchView::new("herb");
+        let mut hb = status(StatusEvent::Heartbeat, 1000);
+        hb.job_id = 0;
+        hb.state = JobState::Idle as u32;
+        hb.fault = Fault::RobotDisabled as u32;
+        v.status(&hb, 1.0, "10:00:00", &name);
+        let text = v.render(1.1, &name);
+        assert!(
+            text.contains("fault: robot not ready: robot disabled;"),
+            "{text}"
+        );
+        hb.fault = Fault::None as u32;
+        v.status(&hb, 1.2, "10:00:00", &name);
+        assert!(
+            v.render(1.3, &name)
+                .contains("fault: none: ready for a job;")
+        );
+    }
+
+    #[test]
     fn the_view_shows_progress_loop_faults_and_a_lost_daemon() {
         let name = |t: u32| format!("type{t}");
         let mut v = WatchView::new("herb");

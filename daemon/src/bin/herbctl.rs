@@ -229,7 +229,7 @@ fn pack(
                 if r.validate() == Ok(RejectReason::NotReady) {
                     let why = Fault::from_code(r.detail).unwrap_or(Fault::JointStateTimeout);
                     if not_ready != Some(why) {
-                        eprintln!("herbctl: robot not ready: {}; waiting", why.describe());
+                        println!("robot not ready: {}; waiting", why.describe());
                         not_ready = Some(why);
                     }
                     std::thread::sleep(Duration::from_millis(200));
@@ -555,15 +555,17 @@ fn status(cli: &Cli, timeout: f64) -> Result<bool, String> {
         while let Ok(Some(s)) = sub.receive() {
             let s = s.payload();
             if s.validate().is_ok() && s.event == StatusEvent::Heartbeat as u32 {
+                let state = JobState::from_code(s.state).unwrap_or(JobState::Idle);
+                let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
+                // Between jobs the fault is why a job would be refused now.
+                let why = match (state, fault) {
+                    (_, Fault::None) => String::new(),
+                    (JobState::Idle, f) => format!(" (robot not ready: {})", f.describe()),
+                    (_, f) => format!(" ({})", f.describe()),
+                };
                 println!(
-                    "herbd: {:?}, job {}, {}/{} placed, {} cycles, {} deadline misses, fault {:?}",
-                    JobState::from_code(s.state).unwrap_or(JobState::Idle),
-                    s.job_id,
-                    s.objects_done,
-                    s.objects_total,
-                    s.cycles,
-                    s.deadline_misses,
-                    Fault::from_code(s.fault).unwrap_or(Fault::None)
+                    "herbd: {state:?}, job {}, {}/{} placed, {} cycles, {} deadline misses, fault {fault:?}{why}",
+                    s.job_id, s.objects_done, s.objects_total, s.cycles, s.deadline_misses,
                 );
                 return Ok(true);
             }

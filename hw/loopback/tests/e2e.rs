@@ -1142,3 +1142,58 @@ fn a_missed_grasp_is_retried_and_the_cell_goes_on() {
     assert_eq!(sim["missed_grasps"], 1, "{sim}");
     assert_eq!(sim["releases"], 3, "{sim}");
 }
+
+/// A disabled robot between jobs: `herbctl pack` says "robot not ready: robot disabled" within
+/// a second and waits; `herbctl status` shows the reason; enabled again, the job runs.
+#[test]
+fn a_job_for_a_disabled_robot_says_why_and_waits() {
+    let (dir, prefix, cfg) = setup("notready");
+    let cfg_s = cfg.to_str().unwrap();
+    let lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s],
+        &dir.join("loopback.log"),
+    );
+    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    // Ready first (herbd's heartbeat says so), then disabled.
+    let t0 = Instant::now();
+    loop {
+        let (_, text) = herbctl_output(&prefix, &["status"]);
+        if text.contains("fault None") || text.contains("fault: None") {
+            break;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "never ready: {text}"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    lb.signal(libc::SIGUSR1);
+    std::thread::sleep(Duration::from_millis(300));
+    let (_, text) = herbctl_output(&prefix, &["status"]);
+    assert!(text.contains("RobotDisabled"), "{text}");
+    let mut ctl = spawn(
+        &exe("herbctl"),
+        &[
+            "--prefix",
+            &prefix,
+            "pack",
+            "--objects",
+            "003",
+            "--timeout",
+            "120",
+        ],
+        &dir.join("herbctl.log"),
+    );
+    let asked = Instant::now();
+    let mut out = Follow::new(&mut ctl);
+    out.wait_for("robot not ready: robot disabled", Duration::from_secs(5));
+    let said_after = asked.elapsed();
+    assert!(
+        said_after < Duration::from_secs(1),
+        "said after {said_after:?}"
+    );
+    lb.signal(libc::SIGUSR1);
+    out.wait_for("placed 1/1", Duration::from_secs(120));
+    assert!(ctl.wait_for(Duration::from_secs(30)).success());
+}
