@@ -39,6 +39,8 @@ const HIST_SIGFIG: u8 = 3;
 const STATS_RING: usize = 4;
 /// Emptied statistics boxes handed to the loop at start.
 const STATS_SPARES: usize = 2;
+/// Statuses the log's ring holds (events, not heartbeats) while the writer catches up.
+const LOG_RING: usize = 4096;
 
 /// Loop statistics for one reporting interval, in preallocated histograms (ns).
 #[derive(Debug, Clone)]
@@ -100,6 +102,8 @@ pub struct Shared {
     pub stop: AtomicBool,
     /// Cycles run.
     pub cycles: AtomicU64,
+    /// Status events the log could not take (its ring was full: the writer fell behind).
+    pub log_dropped: AtomicU64,
 }
 
 /// The loop's IPC ports.
@@ -119,6 +123,9 @@ struct OutPorts {
     cmd: Pub<JointCommand>,
     grip: Pub<GripperCommand>,
     status: Pub<Status>,
+    /// Every status but heartbeats, to herbd's log writer (the reporter thread), which formats
+    /// and writes them off the loop; `None` until [`Controller::new`] links it.
+    log: Option<rtrb::Producer<Status>>,
 }
 
 impl Ports {
@@ -136,6 +143,7 @@ impl Ports {
                 cmd: bus.publisher(&s.joint_command())?,
                 grip: bus.publisher(&s.gripper_command())?,
                 status: bus.publisher(&s.status())?,
+                log: None,
             },
             _bus: bus,
         })
@@ -160,7 +168,7 @@ struct LoopCounters {
 struct Outbox<'a> {
     now: u64,
     seq: &'a mut u64,
-    ports: &'a OutPorts,
+    ports: &'a mut OutPorts,
     planner: &'a mut PlannerLink,
     decision_ns: &'a mut Histogram<u64>,
     counters: LoopCounters,
@@ -170,13 +178,15 @@ struct Outbox<'a> {
     digest: OutDigest,
     /// Planner requests handed over so far.
     sent: &'a mut u64,
+    /// Statuses the log ring could not take this cycle.
+    log_dropped: u64,
 }
 
 impl<'a> Outbox<'a> {
     fn new(
         now: u64,
         seq: &'a mut u64,
-        ports: &'a OutPorts,
+        ports: &'a mut OutPorts,
         planner: &'a mut PlannerLink,
         stats: &'a mut LoopStats,
         counters: LoopCounters,
@@ -193,6 +203,7 @@ impl<'a> Outbox<'a> {
             cancel: None,
             digest: OutDigest::new(),
             sent,
+            log_dropped: 0,
         }
     }
 
@@ -243,6 +254,12 @@ impl Effects for Outbox<'_> {
             self.decision_ns.saturating_record(s.decision_ns);
         }
         let _ = self.ports.status.send_copy(s);
+        if s.event != StatusEvent::Heartbeat as u32
+            && let Some(log) = &mut self.ports.log
+            && log.push(s).is_err()
+        {
+            self.log_dropped += 1;
+        }
     }
 
     fn joint(&mut self, c: &Setpoint) {
@@ -301,12 +318,14 @@ pub struct Controller {
     journaled: JournalRecord,
 }
 
-/// The reporter's ends of the statistics rings.
+/// The reporter's ends of the statistics rings, and of the log's.
 pub struct StatsLink {
     /// Full statistics from the loop.
     pub rx: rtrb::Consumer<Box<LoopStats>>,
     /// Emptied statistics back to the loop.
     pub tx: rtrb::Producer<Box<LoopStats>>,
+    /// Every status but heartbeats, in order, to be logged.
+    pub events: rtrb::Consumer<Status>,
 }
 
 impl Controller {
@@ -328,6 +347,10 @@ impl Controller {
         }
         let params = JobParams::from_config(cfg, catalog_len);
         let buffer = || Box::new(MotionPlan::with_capacity(samples));
+        // The log's ring: a few hundred events' headroom (a job makes a few per object).
+        let (log_tx, events) = rtrb::RingBuffer::new(LOG_RING);
+        let mut ports = ports;
+        ports.out.log = Some(log_tx);
         let c = Self {
             ports,
             planner,
@@ -347,7 +370,14 @@ impl Controller {
             journal: None,
             journaled: JournalRecord::NONE,
         };
-        (c, StatsLink { rx: r_rx, tx: r_tx })
+        (
+            c,
+            StatsLink {
+                rx: r_rx,
+                tx: r_tx,
+                events,
+            },
+        )
     }
 
     /// Records every input of the machine, and a digest of its outputs per cycle, to a run
@@ -396,7 +426,7 @@ impl Controller {
                 Outbox::new(
                     end,
                     &mut self.seq,
-                    &self.ports.out,
+                    &mut self.ports.out,
                     &mut self.planner,
                     &mut self.stats,
                     self.counters,
@@ -441,7 +471,7 @@ impl Controller {
             r.snapshot(self.sent, s);
         }
         let job = &mut self.job;
-        let p = &self.ports;
+        let p = &mut self.ports;
         let rec = &mut self.recorder;
         let mut log = |r: LoopRec| {
             if let Some(rec) = rec.as_mut() {
@@ -491,7 +521,7 @@ impl Controller {
         let mut fx = Outbox::new(
             now,
             &mut self.seq,
-            &p.out,
+            &mut p.out,
             &mut self.planner,
             &mut self.stats,
             self.counters,
@@ -531,6 +561,11 @@ impl Controller {
             stop,
             digest: fx.digest.finish(),
         });
+        if fx.log_dropped > 0 {
+            self.shared
+                .log_dropped
+                .fetch_add(fx.log_dropped, Ordering::Relaxed);
+        }
         if let Some(tx) = &mut self.journal {
             // A full ring (the writer is behind) is retried next cycle.
             let r = job.journal();

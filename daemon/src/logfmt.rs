@@ -28,16 +28,30 @@ pub fn log(event: &str, fields: &[(&str, &dyn Display)]) {
     emit(&line(event, fields));
 }
 
-/// Writes a formatted line to stderr: as is under journald, else after the UTC time.
+/// Writes a formatted line to stderr: as is under journald, else after the UTC time. A write
+/// that fails (stderr closed) is counted ([`failed_writes`]), never a panic.
 pub fn emit(line: &str) {
-    if std::env::var_os("JOURNAL_STREAM").is_some() {
-        eprintln!("{line}");
+    use std::io::Write;
+    let mut err = std::io::stderr().lock();
+    let r = if std::env::var_os("JOURNAL_STREAM").is_some() {
+        writeln!(err, "{line}")
     } else {
-        eprintln!(
+        writeln!(
+            err,
             "{} {line}",
             humantime::format_rfc3339_millis(std::time::SystemTime::now())
-        );
+        )
+    };
+    if r.is_err() {
+        FAILED.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     }
+}
+
+static FAILED: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// Lines [`emit`] could not write (stderr closed or failing).
+pub fn failed_writes() -> u64 {
+    FAILED.load(std::sync::atomic::Ordering::Relaxed)
 }
 
 /// `v` as a value: bare when it has no space, quote or `=`, else quoted and escaped.

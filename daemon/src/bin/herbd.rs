@@ -346,32 +346,35 @@ fn run(cli: Cli) -> Result<(), String> {
     // pinged only while the loop's cycle counter advances.
     let done = Arc::new(std::sync::atomic::AtomicBool::new(false));
     let reporter = {
-        let (shared, done, services) = (shared.clone(), done.clone(), services.clone());
+        let (shared, done) = (shared.clone(), done.clone());
         let notifier = notifier.clone();
         let run_for = cli.run_for;
         std::thread::Builder::new()
             .name("herbd-report".into())
             .spawn(move || {
                 let mut total = LoopStats::new();
-                let bus = Bus::open("herbd-report", &services).ok();
-                let sub = bus
-                    .as_ref()
-                    .and_then(|b| b.subscriber::<Status>(&services.status()).ok());
                 let t0 = std::time::Instant::now();
                 let mut last_cycles = 0;
-                while !done.load(Ordering::Relaxed) {
+                // Every event the loop sent, in order; once more after the loop ended, so that
+                // the last ones (`braked`, `shutdown`) are written before herbd exits.
+                let write_events = |events: &mut rtrb::Consumer<Status>| {
+                    while let Ok(s) = events.pop() {
+                        if let Some(line) = describe(&s) {
+                            logfmt::emit(&line);
+                        }
+                    }
+                };
+                loop {
+                    let ending = done.load(Ordering::Relaxed);
                     while let Ok(mut s) = stats_link.rx.pop() {
                         total.add(&s);
                         logfmt::emit(&stats_line(&s));
                         s.reset();
                         let _ = stats_link.tx.push(s);
                     }
-                    if let Some(sub) = &sub {
-                        while let Ok(Some(m)) = sub.receive() {
-                            if let Some(line) = describe(m.payload()) {
-                                logfmt::emit(&line);
-                            }
-                        }
+                    write_events(&mut stats_link.events);
+                    if ending {
+                        break;
                     }
                     let c = shared.cycles.load(Ordering::Relaxed);
                     if c > last_cycles {
@@ -400,6 +403,16 @@ fn run(cli: Cli) -> Result<(), String> {
     done.store(true, Ordering::Relaxed);
     let mut total = reporter.join().map_err(|_| "reporter thread panicked")?;
     total.add(&last);
+    let dropped = shared.log_dropped.load(Ordering::Relaxed);
+    if dropped > 0 {
+        logfmt::log(
+            "log_dropped",
+            &[
+                ("events", &dropped),
+                ("why", &"the log writer fell behind the loop"),
+            ],
+        );
+    }
     planner_stop.store(true, Ordering::Relaxed);
     let _ = planner_thread.join();
     journal_stop.store(true, Ordering::Relaxed);
@@ -428,7 +441,11 @@ fn run(cli: Cli) -> Result<(), String> {
     for (notice, n) in notifier.failures() {
         logfmt::log("notify_failures", &[("notice", &notice), ("failed", &n)]);
     }
-    let report = serde_json::json!({ "herbd_final": summary(&total) });
+    let mut report = serde_json::json!({ "herbd_final": summary(&total) });
+    report["herbd_final"]["log"] = serde_json::json!({
+        "events_dropped": dropped,
+        "lines_not_written": logfmt::failed_writes(),
+    });
     println!("{report}");
     if let Some(p) = &cli.stats_json {
         std::fs::write(p, format!("{report}\n"))

@@ -1197,3 +1197,136 @@ fn a_job_for_a_disabled_robot_says_why_and_waits() {
     out.wait_for("placed 1/1", Duration::from_secs(120));
     assert!(ctl.wait_for(Duration::from_secs(30)).success());
 }
+
+/// The log's name of a status event (herbd's `event=` key).
+fn log_name(ev: herb_ipc::StatusEvent) -> &'static str {
+    use herb_ipc::StatusEvent::*;
+    match ev {
+        Heartbeat => "heartbeat",
+        Accepted => "accepted",
+        Decided => "decided",
+        Placed => "placed",
+        Fault => "fault",
+        Braked => "braked",
+        Resumed => "resumed",
+        JobDone => "job_done",
+        JobFailed => "job_failed",
+        Shutdown => "shutdown",
+        JobCancelled => "job_cancelled",
+        Skipped => "skipped",
+    }
+}
+
+/// herbd stopped with SIGTERM 20 times, idle or mid-job: every run's log ends its events with
+/// `event=shutdown`, and the log's events are exactly the status stream's (heartbeats aside),
+/// in order: nothing lost, nothing added.
+#[test]
+fn every_event_reaches_the_log_before_herbd_exits_on_sigterm() {
+    let (dir, prefix, cfg) = setup("logs");
+    let cfg_s = cfg.to_str().unwrap();
+    let _lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s],
+        &dir.join("loopback.log"),
+    );
+    let services = herb_ipc::Services::new(&prefix).unwrap();
+    let bus = herb_ipc::bus::Bus::open("e2e-log-test", &services).unwrap();
+    let status = bus
+        .subscriber::<herb_ipc::Status>(&services.status())
+        .unwrap();
+    let mut with_shutdown = 0;
+    // The status stream's events (heartbeats aside), read often so that the subscriber stays
+    // connected to each new herbd's publisher.
+    let drain = |into: &mut Vec<String>, for_: Duration| {
+        let t0 = Instant::now();
+        loop {
+            while let Ok(Some(s)) = status.receive() {
+                let ev = herb_ipc::StatusEvent::from_code(s.payload().event).unwrap();
+                if ev != herb_ipc::StatusEvent::Heartbeat {
+                    into.push(log_name(ev).to_string());
+                }
+            }
+            if t0.elapsed() >= for_ {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    };
+    for run in 0..20 {
+        let log = dir.join(format!("herbd-{run}.log"));
+        // A job stopped mid-way would be taken up from the journal by the next herbd, whose
+        // first events come before this subscriber connects: each run starts without one.
+        let _ = std::fs::remove_file(dir.join("state/job.json"));
+        let mut streamed = Vec::new();
+        let mut hd = spawn(&exe("herbd"), &["--config", cfg_s], &log);
+        herb_testkit::wait_for_log(&log, "event=start", Duration::from_secs(30));
+        // Connected once a heartbeat came through.
+        let mut heartbeats = 0;
+        while heartbeats == 0 {
+            while let Ok(Some(s)) = status.receive() {
+                if s.payload().event == herb_ipc::StatusEvent::Heartbeat as u32 {
+                    heartbeats += 1;
+                }
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let mut ctl = None;
+        if run % 2 == 1 {
+            // Mid-job: the arm moving (a few tenths of a second after the job starts).
+            ctl = Some(pack_objects(&dir, &prefix, "003,005", 120, false));
+            let t0 = Instant::now();
+            while !streamed.iter().any(|e| e == "decided") {
+                drain(&mut streamed, Duration::from_millis(20));
+                assert!(
+                    t0.elapsed() < Duration::from_secs(60),
+                    "run {run}: no decision"
+                );
+            }
+            drain(&mut streamed, Duration::from_millis(300));
+        } else {
+            drain(&mut streamed, Duration::from_millis(200));
+        }
+        hd.signal(libc::SIGTERM);
+        let t0 = Instant::now();
+        while hd.0.try_wait().unwrap().is_none() {
+            drain(&mut streamed, Duration::from_millis(5));
+            assert!(
+                t0.elapsed() < Duration::from_secs(10),
+                "run {run}: herbd did not exit"
+            );
+        }
+        drain(&mut streamed, Duration::from_millis(50));
+        assert!(hd.wait_for(Duration::from_secs(1)).success(), "run {run}");
+        if let Some(mut c) = ctl {
+            let _ = c.wait_for(Duration::from_secs(10));
+        }
+        let text = std::fs::read_to_string(&log).unwrap();
+        let logged: Vec<String> = text
+            .lines()
+            .filter_map(|l| l.split("event=").nth(1))
+            .map(|r| r.split(' ').next().unwrap_or("").to_string())
+            .filter(|e| {
+                streamed.contains(e)
+                    || [
+                        "accepted",
+                        "decided",
+                        "placed",
+                        "fault",
+                        "braked",
+                        "resumed",
+                        "job_done",
+                        "job_failed",
+                        "shutdown",
+                        "job_cancelled",
+                        "skipped",
+                    ]
+                    .contains(&e.as_str())
+            })
+            .collect();
+        assert_eq!(logged, streamed, "run {run}:\n{text}");
+        if logged.last().map(String::as_str) == Some("shutdown") {
+            with_shutdown += 1;
+        }
+    }
+    assert_eq!(with_shutdown, 20);
+}
