@@ -465,6 +465,14 @@ impl Job {
                 Err((RejectReason::Busy, 0))
             } else if let Some(why) = self.not_ready(now) {
                 Err((RejectReason::NotReady, why as u32))
+            } else if let Some(g) = self.gs.filter(|g| g.holding == 1) {
+                // What the gripper holds is the truth: never start a job that would place it.
+                let known = (g.object_type != NO_OBJECT).then_some(g.object_type);
+                let believed = self.holding.then(|| self.current_type());
+                Err((
+                    RejectReason::Holding,
+                    known.or(believed).unwrap_or(NO_OBJECT),
+                ))
             } else {
                 Ok(())
             }
@@ -872,12 +880,14 @@ impl Job {
         }
     }
 
-    /// The fault for joint states that stopped: what the arm adapter says, if it said it
-    /// recently (within three of its periods; an adapter that says the robot can move while
-    /// no joint state comes: the robot is silent); else the adapter itself is silent.
+    /// The fault for joint states that stopped: what the arm adapter says, if it spoke after
+    /// the last joint state and recently (within three of its periods; an adapter that says
+    /// the robot can move while no joint state comes: the robot is silent); else the adapter
+    /// itself is silent (stopped, killed: its last word came before its last joint state).
     fn joint_fault(&self, now: u64) -> Fault {
-        let said_recently =
-            self.arm_at != 0 && now.saturating_sub(self.arm_at) < 3 * ARM_STATUS_PERIOD_NS;
+        let said_recently = self.arm_at != 0
+            && self.arm_at > self.js_at
+            && now.saturating_sub(self.arm_at) < 3 * ARM_STATUS_PERIOD_NS;
         match self.arm_blocker {
             _ if !said_recently => Fault::JointStateTimeout,
             ArmBlocker::None => Fault::RobotSilent,

@@ -623,7 +623,7 @@ impl Fault {
             Fault::RobotEStop => "robot e-stopped",
             Fault::RobotError => "robot in error",
             Fault::MasterLost => "ROS master lost",
-            Fault::RobotSilent => "robot silent (no state reaches the adapter)",
+            Fault::RobotSilent => "robot silent: no state reaches the adapter",
             Fault::MissedGrasp => "missed grasp",
             Fault::CommandRefused => "the adapter refused a command far from the arm",
         }
@@ -794,6 +794,11 @@ pub enum RejectReason {
     NotReady = 7,
     /// A cancel named a job that is not running (finished, never started, or another one).
     NoSuchJob = 8,
+    /// The gripper holds an object (a cancelled job's, or put there by hand): a job starts
+    /// only with an empty gripper, so that nothing but its own objects is ever placed.
+    /// `detail`: the held object's catalog type if known, else `NO_OBJECT`. Take it out (the
+    /// loopback: `herbctl reset`) and submit again.
+    Holding = 9,
 }
 
 impl RejectReason {
@@ -810,6 +815,7 @@ impl RejectReason {
             ShuttingDown,
             NotReady,
             NoSuchJob,
+            Holding,
         ]
         .get(c as usize)
         .copied()

@@ -271,6 +271,7 @@ class RejectReason(enum.IntEnum):
     ShuttingDown = 6
     NotReady = 7
     NoSuchJob = 8
+    Holding = 9
 
 
 #: Names of the success volume's bounds by ``SimObject.bound`` code (the contract's `SimBound`).

@@ -242,6 +242,16 @@ fn pack(
     };
     match reply.validate() {
         Ok(RejectReason::None) => eprintln!("herbctl: accepted"),
+        Ok(RejectReason::Holding) => {
+            let what = if reply.detail == herb_ipc::NO_OBJECT {
+                "an object".to_string()
+            } else {
+                name(catalog, reply.detail)
+            };
+            return Err(format!(
+                "rejected: the gripper holds {what}; take it out (the loopback: herbctl reset) and submit again"
+            ));
+        }
         Ok(r) => return Err(format!("rejected: {r:?} (detail {})", reply.detail)),
         Err(e) => return Err(format!("malformed reply: {e}")),
     }

@@ -2268,7 +2268,40 @@ fn an_abandoned_job_ends_failed_without_moving() {
     assert!(b.joints_since(mark).is_empty());
     assert_eq!(b.count(|o| matches!(o, Out::Plan(_))), 0);
     assert_eq!(b.job.journal(), JournalRecord::NONE);
-    // And the next job runs.
-    assert_eq!(b.submit(8, &[3]), (RejectReason::None, 0));
+    // The abandoned job's object is still in the gripper: the next job is refused until it is
+    // taken out, then runs.
+    assert_eq!(b.submit(8, &[3]), (RejectReason::Holding, NO_OBJECT));
+    b.holding = false;
+    b.closed = false;
+    b.ticks(2);
+    assert_eq!(b.submit(9, &[3]), (RejectReason::None, 0));
     b.until_event(5000, JobDone);
+}
+
+#[test]
+fn a_job_is_refused_while_the_gripper_holds_an_object_and_names_it() {
+    // Cancelled while carrying: the object stays in the gripper.
+    let mut r = Rig::started(&[4]);
+    r.until(3000, "close", is_close);
+    r.ticks(3);
+    assert!(r.job.holding);
+    r.job
+        .cancel_request(&CancelJobRequest::new(7), &mut r.fx);
+    r.until_event(5000, StatusEvent::JobCancelled);
+    assert!(r.holding, "still held");
+    // The gripper says what it holds when it knows: else herbd's belief, the cancelled job's
+    // current object (type 4).
+    assert_eq!(r.submit(8, &[5]), (RejectReason::Holding, 4));
+    r.holding = false;
+    r.closed = false;
+    r.ticks(2);
+    assert_eq!(r.submit(9, &[5]), (RejectReason::None, 0));
+    r.until_event(5000, StatusEvent::JobDone);
+    let placed: Vec<u32> = r
+        .statuses()
+        .iter()
+        .filter(|s| event(s) == StatusEvent::Placed)
+        .map(|s| s.object_type)
+        .collect();
+    assert_eq!(placed, vec![5], "only the new job's object");
 }

@@ -15,7 +15,7 @@
 //!   a frame is never stamped later than a release whose settle it does not show.
 //! - **Sim-only**: publishes a `SimOutcome` after every release (inside, tilt, compactness,
 //!   command counts, the releasing job) for tests, and empties the box on a `SimReset`
-//!   (`herbctl reset`) while nothing is held or settling.
+//!   (`herbctl reset`) while nothing is settling, taking a held object out of the gripper too.
 //! - **Robot state**, as a real arm's adapter reports it: publishes an `ArmStatus` every
 //!   100 ms and on each change. SIGUSR1 toggles a disable and SIGUSR2 an e-stop (released
 //!   enabled): while either holds, joint states are withheld, commands are not followed and
@@ -508,7 +508,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         }
         let types = sim.catalog.len();
         arm.drain_gripper_commands(types, |c, a| sim.gripper(c, a, &rel_tx));
-        // Empty the box on request, only while nothing is held or settling; the heightmap of
+        // Empty the box (and the gripper) on request, only while nothing is settling; the heightmap of
         // the empty box that follows is the confirmation.
         while let Ok(Some(r)) = reset_sub.receive() {
             // A request handed over from history (sent before this loopback started) is old.
@@ -516,12 +516,17 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             if r.validate().is_err() || now.saturating_sub(r.header.stamp_ns) > 1_000_000_000 {
                 continue;
             }
-            if sim.held.is_none() && sim.settling == 0 && rel_tx.send(ToWorld::Reset).is_ok() {
+            if sim.settling == 0 && rel_tx.send(ToWorld::Reset).is_ok() {
                 resets += 1;
                 sim.last_outcome = None;
+                // The gripper is emptied too (an operator takes the object out).
+                if sim.held.take().is_some() {
+                    sim.closed = false;
+                    eprintln!("herb-loopback: the held object was taken out of the gripper");
+                }
             } else {
                 resets_refused += 1;
-                eprintln!("herb-loopback: box reset refused: an object is held or settling");
+                eprintln!("herb-loopback: box reset refused: an object is settling");
             }
         }
         // The real time since the last measurement, read after the commands were taken (a

@@ -117,6 +117,7 @@ fn pack_shortest_episode_with(tag: &str, policy: &Path) {
     };
     let (session, n) = shortest_session(&root);
     let (dir, prefix, cfg) = setup_with(tag, policy.to_str().unwrap());
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
     let cfg_s = cfg.to_str().unwrap();
     let boxed = root.to_str().unwrap();
     let mut lb = spawn(
@@ -197,11 +198,13 @@ fn pack_shortest_episode_with(tag: &str, policy: &Path) {
     assert_eq!(sim["releases"], n as u64, "{sim}");
     assert_eq!(sim["world_error"], serde_json::Value::Null);
     eprintln!("episode {session} ({n} objects): {summary}\nherbd: {stats}\nloopback: {sim}");
+    claims.check();
 }
 
 #[test]
 fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
     let (dir, prefix, cfg) = setup("kill");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
     let cfg_s = cfg.to_str().unwrap();
     let lb_log = dir.join("loopback.log");
     let mut lb = spawn(&loopback_exe(), &["--config", cfg_s], &lb_log);
@@ -313,6 +316,7 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
     let (st, out) = herbctl_output(&prefix, &["replay", cut.to_str().unwrap()]);
     assert_eq!(st.code(), Some(3), "{out}");
     assert!(out.contains("incomplete"), "{out}");
+    claims.check();
 }
 
 /// Sends `req` to the pack-job server and returns the reply (waits for the server).
@@ -523,6 +527,7 @@ fn a_stalled_loopback_reports_real_speeds_and_nothing_is_rejected() {
 fn a_resume_while_holding_announces_no_second_decision() {
     use herb_ipc::{GripperState, Services, Status, StatusEvent};
     let (dir, prefix, cfg) = setup("holdresume");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
     let (lb, _hd) = start_cell(&dir, &cfg);
     let services = Services::new(&prefix).unwrap();
     let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
@@ -565,6 +570,7 @@ fn a_resume_while_holding_announces_no_second_decision() {
         vec![0, 1],
         "{decided:?}"
     );
+    claims.check();
 }
 
 /// herbd killed (SIGKILL: no last status can be sent) mid-job: herbctl notices the lost
@@ -687,6 +693,7 @@ fn joint_states_going_backwards_are_rejected_and_counted() {
 fn outcomes_carry_their_job_across_jobs() {
     use herb_ipc::{Services, SimOutcome, Status, StatusEvent};
     let (dir, prefix, cfg) = setup("jobids");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
     let (_lb, _hd) = start_cell(&dir, &cfg);
     let services = Services::new(&prefix).unwrap();
     let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
@@ -731,6 +738,7 @@ fn outcomes_carry_their_job_across_jobs() {
         vec![accepted[0], accepted[1]],
         "the late subscriber tells the earlier job's outcome from the new one"
     );
+    claims.check();
 }
 
 /// `herbctl reset` empties the loopback's box between jobs, so the next job starts in an empty
@@ -847,6 +855,7 @@ fn sigterm_mid_motion_brakes_reports_and_exits_zero() {
 fn a_job_cancelled_mid_motion_brakes_retreats_and_the_next_job_runs() {
     use herb_ipc::{JointState, Services};
     let (dir, prefix, cfg) = setup("cancel");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
     let (_lb, _hd) = start_cell(&dir, &cfg);
     let herbctl = |args: &[&str]| herbctl_output(&prefix, args);
     let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, false);
@@ -902,6 +911,7 @@ fn a_job_cancelled_mid_motion_brakes_retreats_and_the_next_job_runs() {
         next.wait_for(Duration::from_secs(150)).success(),
         "the next job runs"
     );
+    claims.check();
 }
 
 /// herbd killed with SIGKILL while it carries an object (issue 16, item 2). Restarted on the same
@@ -913,6 +923,7 @@ fn a_job_cancelled_mid_motion_brakes_retreats_and_the_next_job_runs() {
 fn a_job_survives_herbd_killed_mid_motion() {
     use herb_ipc::{Fault, GripperState, Services, SimOutcome, Status, StatusEvent};
     let (dir, prefix, cfg) = setup("crash");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
     let cfg_s = cfg.to_str().unwrap();
     let journal = dir.join("state").join(herb_daemon::journal::FILE);
     let (_lb, mut hd) = start_cell(&dir, &cfg);
@@ -1046,6 +1057,7 @@ fn a_job_survives_herbd_killed_mid_motion() {
         .filter(|n| n.starts_with("job.json.bad-"))
         .collect();
     assert_eq!(aside.len(), 1, "{aside:?}");
+    claims.check();
 }
 
 /// Reads the loopback's final summary after SIGTERM.
@@ -1063,6 +1075,7 @@ fn loopback_summary(mut lb: Proc) -> serde_json::Value {
 #[test]
 fn re_enabling_a_sagged_arm_never_jumps() {
     let (dir, prefix, cfg) = setup("reenable");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
     let cfg_s = cfg.to_str().unwrap();
     let lb = spawn(
         &loopback_exe(),
@@ -1103,6 +1116,7 @@ fn re_enabling_a_sagged_arm_never_jumps() {
         sim["commands_refused"], 0,
         "herbd sent nothing stale: {sim}"
     );
+    claims.check();
 }
 
 /// The first grasp closes on nothing: herbd reports `MissedGrasp`, opens, picks again at the
@@ -1110,6 +1124,7 @@ fn re_enabling_a_sagged_arm_never_jumps() {
 #[test]
 fn a_missed_grasp_is_retried_and_the_cell_goes_on() {
     let (dir, prefix, cfg) = setup("missed");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
     let cfg_s = cfg.to_str().unwrap();
     let lb = spawn(
         &loopback_exe(),
@@ -1141,6 +1156,7 @@ fn a_missed_grasp_is_retried_and_the_cell_goes_on() {
     let sim = loopback_summary(lb);
     assert_eq!(sim["missed_grasps"], 1, "{sim}");
     assert_eq!(sim["releases"], 3, "{sim}");
+    claims.check();
 }
 
 /// A disabled robot between jobs: `herbctl pack` says "robot not ready: robot disabled" within
@@ -1148,6 +1164,7 @@ fn a_missed_grasp_is_retried_and_the_cell_goes_on() {
 #[test]
 fn a_job_for_a_disabled_robot_says_why_and_waits() {
     let (dir, prefix, cfg) = setup("notready");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
     let cfg_s = cfg.to_str().unwrap();
     let lb = spawn(
         &loopback_exe(),
@@ -1196,6 +1213,7 @@ fn a_job_for_a_disabled_robot_says_why_and_waits() {
     lb.signal(libc::SIGUSR1);
     out.wait_for("placed 1/1", Duration::from_secs(120));
     assert!(ctl.wait_for(Duration::from_secs(30)).success());
+    claims.check();
 }
 
 /// The log's name of a status event (herbd's `event=` key).
@@ -1330,3 +1348,59 @@ fn every_event_reaches_the_log_before_herbd_exits_on_sigterm() {
     }
     assert_eq!(with_shutdown, 20);
 }
+
+/// Cancelled while the gripper holds the cracker box (type 1): the next job, for the tomato soup
+/// can (type 3), is refused `Holding` (never a placement of the held box claimed as the can);
+/// once the box is taken out (`herbctl reset` on the loopback), the job runs, and herbd's claims
+/// (each `Placed`, `JobDone`'s count) agree with what the simulated world saw released.
+#[test]
+fn a_job_after_a_cancel_while_holding_never_claims_what_it_did_not_place() {
+    let (dir, prefix, cfg) = setup("holding");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
+    let (_lb, _hd) = start_cell(&dir, &cfg);
+    let mut ctl = pack_objects(&dir, &prefix, "003", 120, false);
+    let mut out = Follow::new(&mut ctl);
+    out.wait_for("object  1/1", Duration::from_secs(60));
+    // Holding: the gripper state says so.
+    let services = herb_ipc::Services::new(&prefix).unwrap();
+    let bus = herb_ipc::bus::Bus::open("e2e-holding", &services).unwrap();
+    let gs = bus
+        .subscriber::<herb_ipc::GripperState>(&services.gripper_state())
+        .unwrap();
+    let t0 = Instant::now();
+    'held: loop {
+        while let Ok(Some(s)) = gs.receive() {
+            if s.payload().holding == 1 {
+                break 'held;
+            }
+        }
+        assert!(t0.elapsed() < Duration::from_secs(60), "never held");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    std::thread::sleep(Duration::from_millis(200)); // carrying
+    let (st, text) = herbctl_output(&prefix, &["cancel"]);
+    assert!(st.success(), "{text}");
+    out.wait_for("job cancelled", Duration::from_secs(20));
+    let _ = ctl.wait_for(Duration::from_secs(10));
+    // The next job is refused while the box is in the gripper.
+    let (st, text) = herbctl_output(&prefix, &["pack", "--objects", "005", "--timeout", "30"]);
+    assert!(!st.success(), "{text}");
+    assert!(
+        text.contains("the gripper holds 003 cracker box"),
+        "{text}"
+    );
+    // Taken out, the job runs and places the can.
+    let (st, text) = herbctl_output(&prefix, &["reset"]);
+    assert!(st.success(), "{text}");
+    let (st, text) = herbctl_output(
+        &prefix,
+        &["pack", "--objects", "005", "--timeout", "120", "--json"],
+    );
+    assert!(st.success(), "{text}");
+    let jobs = claims.check();
+    let placed: Vec<&JobRecordRef> = jobs.values().filter(|r| !r.claimed.is_empty()).collect();
+    assert_eq!(placed.len(), 1, "one job placed something: {jobs:?}");
+    assert_eq!(placed[0].claimed, vec![3], "the can, and only the can: {jobs:?}");
+}
+
+type JobRecordRef = herb_testkit::claims::JobRecord;

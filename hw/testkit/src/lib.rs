@@ -309,4 +309,5 @@ pub fn tmp(name: &str) -> PathBuf {
     std::fs::create_dir_all(&d).unwrap();
     d
 }
+pub mod claims;
 pub mod ros;
