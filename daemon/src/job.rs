@@ -34,8 +34,9 @@
 //! commanded. **While a job is faulted, no joint command is sent**, so nothing planned before an
 //! interruption can reach the robot after it. When every input has been fresh for
 //! `resume_after_s`, the job resumes from the configuration measured then: an object still held
-//! is placed, an object lost from the gripper (the adapter restarted) is picked again,
-//! otherwise the current object starts over.
+//! is placed; an object lost from the gripper (the adapter restarted) or decided but not yet
+//! grasped is picked and placed where it was decided (one decision and one `Decided` per
+//! object, whatever the faults and restarts); an object not decided yet is decided then.
 //!
 //! A grasp that does not hold within `gripper_action_s` is a missed grasp
 //! ([`Fault::MissedGrasp`]): the gripper opens, and the pick is tried again with the same
@@ -233,6 +234,8 @@ pub struct Job {
     placement: Option<Placement>,
     /// Missed grasps of the current object.
     missed: u32,
+    /// The current object's `Decided` was sent.
+    announced: bool,
     /// The job was taken up from the journal and has not resumed yet.
     recovered: bool,
     /// The job taken up from the journal is to be ended, not resumed.
@@ -380,6 +383,7 @@ impl Job {
             holding: false,
             placement: None,
             missed: 0,
+            announced: false,
             recovered: false,
             abandoning: false,
             fault: Fault::None,
@@ -555,6 +559,7 @@ impl Job {
         self.cancelling = false;
         self.holding = self.gs.is_some_and(|g| g.holding == 1);
         self.missed = 0;
+        self.announced = false;
         self.release_stamp = 0;
         let q = self.js.map(|j| j.position).unwrap_or_default();
         self.cmd = Setpoint::at_rest(q);
@@ -630,8 +635,11 @@ impl Job {
                     self.active = Some(plan);
                     self.phase = Phase::Streaming { seg: 0, cursor: 0 };
                     // A replan of a decided placement (after a resume while holding the
-                    // object) carries no new decision and is not announced again.
-                    if decided {
+                    // object, a missed grasp) carries no new decision; a new decision of an
+                    // object already announced (it was lost) is not announced again: its
+                    // `Placed` carries the pose.
+                    if decided && !self.announced {
+                        self.announced = true;
                         self.emit(fx, StatusEvent::Decided, ty, pose, dns);
                     }
                 } else {
@@ -778,6 +786,7 @@ impl Job {
         self.last_heartbeat = s.last_heartbeat;
         self.limit_holds = s.limit_holds;
         self.stopping = s.stopping;
+        self.announced = false;
         self.arm_blocker = ArmBlocker::from_code(s.arm.0).unwrap_or(ArmBlocker::None);
         self.arm_at = s.arm.1;
         self.arm_order = InOrder::with_last(s.arm.2);
@@ -860,6 +869,8 @@ impl Job {
         self.done = (r.done as usize).min(self.index);
         self.holding = r.holding;
         self.placement = r.placement;
+        // A placement in the journal was announced before the crash.
+        self.announced = r.placement.is_some_and(|p| p.index as usize == self.index);
         self.recovered = true;
         self.release_stamp = 0;
         self.fault = Fault::Restarted;
@@ -1151,6 +1162,7 @@ impl Job {
                     self.done += 1;
                     self.emit(fx, StatusEvent::Placed, ty, pose, dns);
                     self.index += 1;
+                    self.announced = false;
                     self.missed = 0;
                     self.placement = None;
                 }
@@ -1201,6 +1213,7 @@ impl Job {
         // Given up: skipped with its reason, the job goes on.
         self.emit(fx, StatusEvent::Skipped, self.current_type(), [0.0; 4], 0);
         self.index += 1;
+        self.announced = false;
         self.missed = 0;
         self.placement = None;
         if self.index >= self.count {
@@ -1315,6 +1328,12 @@ impl Job {
             self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
             self.holding = false;
         }
+        // The current object's decided placement, if any: a resume does not decide again.
+        let decided = self.placement.filter(|p| p.index as usize == self.index);
+        if held && !self.holding && decided.is_some() {
+            // The grasp closed while the job was halted: the current object is in the gripper.
+            self.holding = true;
+        }
         self.grip_cmd = if self.holding {
             GripperAction::Close
         } else {
@@ -1327,8 +1346,13 @@ impl Job {
         };
         if self.holding {
             self.request_plan(fx, true, now);
+        } else if decided.is_some() {
+            // Halted before the grasp, or the object was lost from the gripper: pick it (again)
+            // and place it where it was decided (nothing was released since); one decision,
+            // announced once.
+            self.request_repick(fx, now);
         } else {
-            // Start the object over on a heightmap taken after the resume.
+            // Not decided yet: decide on a heightmap taken after the resume.
             self.release_stamp = self.release_stamp.max(now);
             self.phase = Phase::WaitHeightmap { since: now };
         }
@@ -1354,6 +1378,7 @@ impl Job {
                 self.done += 1;
                 self.emit(fx, StatusEvent::Placed, self.current_type(), p.pose, 0);
                 self.index += 1;
+                self.announced = false;
                 self.placement = None;
             }
             // In the gripper (perhaps closed just before the crash): placed where decided.

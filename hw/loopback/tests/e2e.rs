@@ -1385,10 +1385,7 @@ fn a_job_after_a_cancel_while_holding_never_claims_what_it_did_not_place() {
     // The next job is refused while the box is in the gripper.
     let (st, text) = herbctl_output(&prefix, &["pack", "--objects", "005", "--timeout", "30"]);
     assert!(!st.success(), "{text}");
-    assert!(
-        text.contains("the gripper holds 003 cracker box"),
-        "{text}"
-    );
+    assert!(text.contains("the gripper holds 003 cracker box"), "{text}");
     // Taken out, the job runs and places the can.
     let (st, text) = herbctl_output(&prefix, &["reset"]);
     assert!(st.success(), "{text}");
@@ -1400,7 +1397,11 @@ fn a_job_after_a_cancel_while_holding_never_claims_what_it_did_not_place() {
     let jobs = claims.check();
     let placed: Vec<&JobRecordRef> = jobs.values().filter(|r| !r.claimed.is_empty()).collect();
     assert_eq!(placed.len(), 1, "one job placed something: {jobs:?}");
-    assert_eq!(placed[0].claimed, vec![3], "the can, and only the can: {jobs:?}");
+    assert_eq!(
+        placed[0].claimed,
+        vec![3],
+        "the can, and only the can: {jobs:?}"
+    );
 }
 
 type JobRecordRef = herb_testkit::claims::JobRecord;

@@ -41,7 +41,9 @@ impl Claims {
         let thread = std::thread::spawn(move || {
             let services = Services::new(&prefix).expect("prefix");
             let bus = Bus::open("e2e-claims", &services).expect("bus");
-            let status = bus.subscriber::<Status>(&services.status()).expect("status");
+            let status = bus
+                .subscriber::<Status>(&services.status())
+                .expect("status");
             let outcomes = bus
                 .subscriber::<SimOutcome>(&services.sim_outcome())
                 .expect("outcomes");
