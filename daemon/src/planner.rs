@@ -108,13 +108,7 @@ impl Worker {
     fn refresh_frame(&mut self, after: u64, wait: Duration) -> bool {
         let t0 = Instant::now();
         loop {
-            while let Ok(Some(s)) = self.hm_sub.receive() {
-                if s.payload().validate().is_ok() {
-                    self.latest = Some(s);
-                } else {
-                    self.rejected_frames.fetch_add(1, Ordering::Relaxed);
-                }
-            }
+            self.drain_frames();
             let fresh = self
                 .latest
                 .as_ref()
@@ -127,6 +121,18 @@ impl Worker {
         self.latest
             .as_ref()
             .is_some_and(|s| s.payload().header.stamp_ns > after)
+    }
+
+    /// Receives every frame that arrived, checking every cell of each (on receipt, whether or
+    /// not a decision needs it): a bad frame is dropped and counted, the newest good one kept.
+    fn drain_frames(&mut self) {
+        while let Ok(Some(s)) = self.hm_sub.receive() {
+            if s.payload().validate().is_ok() {
+                self.latest = Some(s);
+            } else {
+                self.rejected_frames.fetch_add(1, Ordering::Relaxed);
+            }
+        }
     }
 
     /// Serves one request: the frame it needs (a plan that decides waits for one newer than
@@ -450,6 +456,8 @@ pub fn spawn(
                         crate::logfmt::log("bug", &[("what", &"planner response ring full")]);
                     }
                 }
+                // Frames are checked as they come, not only when one is decided on.
+                w.drain_frames();
                 std::thread::park_timeout(IDLE_PARK);
             }
         })

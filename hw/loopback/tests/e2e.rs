@@ -1405,3 +1405,43 @@ fn a_job_after_a_cancel_while_holding_never_claims_what_it_did_not_place() {
 }
 
 type JobRecordRef = herb_testkit::claims::JobRecord;
+
+/// Thirty frames with a bad cell (NaN, infinite, 5 m above the floor, 1 m below it), sent while
+/// herbd is idle (no decision needs them; no other camera): each is checked on receipt and
+/// counted in `rejected_inputs`, and nothing else is.
+#[test]
+fn bad_heightmap_cells_are_counted_on_receipt_outside_any_decision() {
+    use herb_adapter::{CameraPort, Heightmap};
+    use herb_ipc::{Services, Status, monotonic_ns};
+    let (dir, prefix, cfg) = setup("badcells");
+    let _hd = spawn(
+        &exe("herbd"),
+        &["--config", cfg.to_str().unwrap()],
+        &dir.join("herbd.log"),
+    );
+    herb_testkit::wait_for_log(&dir.join("herbd.log"), "event=start", Duration::from_secs(30));
+    let services = Services::new(&prefix).unwrap();
+    let bus = herb_ipc::bus::Bus::open("e2e-badcells", &services).unwrap();
+    let status = bus.subscriber::<Status>(&services.status()).unwrap();
+    let before = rejected_inputs(&status, |_| true);
+    let camera = CameraPort::open(&bus).unwrap();
+    let spec = herb_sim::GridSpec::for_box(herb_sim::ObsLayout::CELL_M).unwrap();
+    let bad = [f32::NAN, f32::INFINITY, 5.0, -1.0];
+    for k in 0..30u64 {
+        let mut cells = vec![0.01f32; spec.len()];
+        cells[(k as usize * 997) % spec.len()] = bad[k as usize % bad.len()];
+        let frame = Heightmap {
+            stamp_ns: monotonic_ns(),
+            nx: spec.nx as u32,
+            ny: spec.ny as u32,
+            cell_m: spec.cell,
+            objects: 0,
+            cells: &cells,
+        };
+        camera.publish(k + 1, &frame).expect("published");
+        // Frames at the planner's pace or slower (its queue keeps the newest two).
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let counted = rejected_inputs(&status, |n| n >= before + 30);
+    assert_eq!(counted - before, 30, "every bad frame counted, nothing else");
+}
