@@ -52,6 +52,10 @@ enum Cmd {
         /// (as each object is decided, and again after a missed grasp).
         #[arg(long)]
         operator: bool,
+        /// When herbd goes silent, wait this long (s) for it to come back with the job (a
+        /// restarted herbd takes an unfinished job up from its journal); 0 gives up at once.
+        #[arg(long, default_value_t = 60.0)]
+        reconnect: f64,
     },
     /// Empty the simulated box (the loopback; a real cell's box is emptied by hand). Refused
     /// while herbd runs a job.
@@ -183,8 +187,11 @@ fn pack(
     ids: &[String],
     picture: &Option<PathBuf>,
     timeout: f64,
-    (json, operator): (bool, bool),
+    (json, operator, reconnect): (bool, bool, f64),
 ) -> Result<bool, String> {
+    if !(reconnect.is_finite() && (0.0..=3600.0).contains(&reconnect)) {
+        return Err(format!("--reconnect {reconnect} outside 0..=3600 s"));
+    }
     let (objects, what) = objects_of(cli, session, ids, catalog)?;
     let (bus, services, status, frames) = listen(cli)?;
     let outcomes = bus
@@ -274,13 +281,31 @@ fn pack(
         }
     };
     let mut heard = Instant::now();
+    // herbd went silent at this time (waiting for it to come back with the job).
+    let mut lost_since: Option<Instant> = None;
+    // A heartbeat of a herbd that came back without the job, and when.
+    let mut back_without: Option<Instant> = None;
     while ok.is_none() {
         if Instant::now() > deadline {
             return Err(format!(
                 "timed out after {timeout} s; {placed}/{total} placed"
             ));
         }
-        if heard.elapsed() > DAEMON_LOST_AFTER {
+        if heard.elapsed() > DAEMON_LOST_AFTER && lost_since.is_none() && reconnect > 0.0 {
+            println!(
+                "herbd lost (no status for {:.1} s): waiting up to {reconnect} s for it to come back with job {job_id} (its journal resumes the job)",
+                heard.elapsed().as_secs_f64()
+            );
+            lost_since = Some(Instant::now());
+        }
+        // Back, but idle: its journal did not have the job (none configured, or abandoned).
+        if back_without.is_some_and(|t| t.elapsed() > Duration::from_secs(3)) {
+            return Err(format!(
+                "herbd came back without job {job_id} (no job journal, or the job was abandoned); {placed}/{total} placed"
+            ));
+        }
+        let waited_out = lost_since.is_none_or(|t| t.elapsed().as_secs_f64() > reconnect);
+        if heard.elapsed() > DAEMON_LOST_AFTER && waited_out {
             let at = last.map_or(String::from("no status yet"), |s| {
                 format!(
                     "object {}/{total} ({}), state {:?}",
@@ -296,9 +321,23 @@ fn pack(
         }
         while let Ok(Some(s)) = status.receive() {
             let s = *s.payload();
-            if s.validate().is_err() || s.job_id != job_id {
+            if s.validate().is_err() {
                 continue;
             }
+            if s.job_id != job_id {
+                // A herbd heartbeating again after it was lost, without the job.
+                if lost_since.is_some()
+                    && back_without.is_none()
+                    && s.event == StatusEvent::Heartbeat as u32
+                {
+                    back_without = Some(Instant::now());
+                }
+                continue;
+            }
+            if lost_since.take().is_some() {
+                println!("herbd back: job {job_id} goes on");
+            }
+            back_without = None;
             heard = Instant::now();
             last = Some(s);
             total = s.objects_total;
@@ -967,6 +1006,7 @@ fn main() -> ExitCode {
             timeout,
             json,
             operator,
+            reconnect,
         } => pack(
             &cli,
             &catalog,
@@ -974,7 +1014,7 @@ fn main() -> ExitCode {
             objects,
             picture,
             *timeout,
-            (*json, *operator),
+            (*json, *operator, *reconnect),
         ),
         Cmd::Status { timeout } => status(&cli, *timeout),
         Cmd::CalibrateCell {

@@ -580,15 +580,25 @@ fn a_resume_while_holding_announces_no_second_decision() {
 fn a_killed_daemon_is_reported_lost_by_the_client() {
     let (dir, prefix, cfg) = setup("lost");
     let (_lb, hd) = start_cell(&dir, &cfg);
-    let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, false);
+    let mut ctl = spawn(
+        &exe("herbctl"),
+        &[
+            "--prefix", &prefix, "pack", "--objects", "003,005", "--timeout", "120",
+            "--reconnect", "2",
+        ],
+        &dir.join("herbctl.log"),
+    );
     let mut ctl_out = Follow::new(&mut ctl);
     ctl_out.wait_for("object  1/2", Duration::from_secs(60));
     hd.signal(libc::SIGKILL);
     let t0 = Instant::now();
+    ctl_out.wait_for("herbd lost", Duration::from_secs(3));
+    assert!(t0.elapsed() < Duration::from_secs(1), "noticed after {:?}", t0.elapsed());
+    // No herbd comes back within the 2 s it waits: it gives up.
     let st = ctl.wait_for(Duration::from_secs(10));
     let took = t0.elapsed();
     assert!(!st.success(), "the job did not finish");
-    assert!(took < Duration::from_secs(3), "noticed after {took:?}");
+    assert!(took < Duration::from_secs(4), "gave up after {took:?}");
     let err = std::fs::read_to_string(dir.join("herbctl.log")).unwrap();
     assert!(err.contains("daemon lost"), "{err}");
     assert!(
@@ -1444,4 +1454,37 @@ fn bad_heightmap_cells_are_counted_on_receipt_outside_any_decision() {
     }
     let counted = rejected_inputs(&status, |n| n >= before + 30);
     assert_eq!(counted - before, 30, "every bad frame counted, nothing else");
+}
+
+/// herbd SIGKILLed mid-job and restarted on its journal: the `herbctl pack` that submitted the
+/// job says herbd was lost, waits, sees it back with the same job, and follows it to its end
+/// (exit 0, every object placed), the claims agreeing with the world.
+#[test]
+fn herbctl_follows_a_job_across_a_daemon_crash_and_restart() {
+    let (dir, prefix, cfg) = setup("follow");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
+    let cfg_s = cfg.to_str().unwrap();
+    let (_lb, mut hd) = start_cell(&dir, &cfg);
+    let mut ctl = spawn(
+        &exe("herbctl"),
+        &[
+            "--prefix", &prefix, "pack", "--objects", "003,005", "--timeout", "240", "--json",
+        ],
+        &dir.join("herbctl.log"),
+    );
+    let mut out = Follow::new(&mut ctl);
+    out.wait_for("object  1/2", Duration::from_secs(60));
+    std::thread::sleep(Duration::from_millis(600));
+    hd.signal(libc::SIGKILL);
+    let _ = hd.wait_for(Duration::from_secs(5));
+    out.wait_for("herbd lost", Duration::from_secs(3));
+    std::thread::sleep(Duration::from_secs(1));
+    let _hd2 = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd2.log"));
+    out.wait_for("herbd back", Duration::from_secs(30));
+    out.wait_for("placed 2/2", Duration::from_secs(120));
+    let st = ctl.wait_for(Duration::from_secs(30));
+    let summary = out.last_json().expect("herbctl's JSON summary");
+    assert!(st.success(), "{summary}");
+    assert_eq!(summary["placed"], 2, "{summary}");
+    claims.check();
 }
