@@ -43,7 +43,8 @@ class Rejected(Exception):
 
 
 class DaemonLost(Exception):
-    """No status from herbd for ``LOST_AFTER_S``: it stopped or crashed."""
+    """No status from herbd for ``LOST_AFTER_S`` and it did not come back with the job within
+    the reconnect window (or it came back without it): it stopped or crashed."""
 
 
 @dataclasses.dataclass
@@ -189,26 +190,35 @@ class Herb:
                 continue
             raise Rejected(reason, r.detail)
 
-    def statuses(self, job_id: int, timeout_s: float = 900.0) -> Iterator[Status]:
+    def statuses(self, job_id: int, timeout_s: float = 900.0,
+                 reconnect_s: float = 60.0) -> Iterator[Status]:
         """Yields the job's statuses (copies; heartbeats included) as they come, up to its
-        end. Raises ``DaemonLost`` when herbd falls silent, ``TimeoutError`` after
-        ``timeout_s``."""
+        end. When herbd falls silent, waits up to ``reconnect_s`` for it to come back with the
+        job (a restarted herbd takes an unfinished job up from its journal) and goes on.
+        Raises ``DaemonLost`` when it does not (or comes back without the job),
+        ``TimeoutError`` after ``timeout_s``."""
         deadline = time.monotonic() + timeout_s
         heard = time.monotonic()
         while True:
             now = time.monotonic()
             if now > deadline:
                 raise TimeoutError(f"job {job_id} not ended after {timeout_s} s")
-            if now - heard > LOST_AFTER_S:
+            if now - heard > LOST_AFTER_S + reconnect_s:
                 raise DaemonLost(f"no status from herbd for {now - heard:.1f} s (job {job_id})")
             while (sample := self._status.receive()) is not None:
                 s = Status.from_buffer_copy(sample.payload().contents)
                 sample.delete()
                 if s.header.version != PROTOCOL_VERSION:
                     continue
-                heard = time.monotonic()
+                lost = time.monotonic() - heard > LOST_AFTER_S
                 if s.job_id != job_id:
+                    if lost and s.event == StatusEvent.Heartbeat:
+                        raise DaemonLost(
+                            f"herbd came back without job {job_id} (no journal, or abandoned)"
+                        )
+                    heard = time.monotonic()
                     continue
+                heard = time.monotonic()
                 yield s
                 if s.event in END_EVENTS:
                     return

@@ -8,6 +8,8 @@ The binaries come from ``$HERB_BIN_DIR`` (default ``target/debug``, which ``carg
 
 import os
 import subprocess
+import sys
+import threading
 import time
 from pathlib import Path
 
@@ -104,3 +106,76 @@ def test_a_bad_job_is_refused_with_its_reason(cell):
     hm = herb.heightmap(timeout_s=10.0)
     hm.release()
     assert time.monotonic() - t0 < 10.0
+
+
+def test_a_flood_of_requests_from_many_processes_is_answered_and_the_cell_still_serves(cell):
+    """Four processes send 300 bad requests each as fast as they can: every one gets an answer
+    with its reason, and a good job runs afterwards."""
+    herb, logs = cell
+    script = (
+        "import sys; from herb_client import Herb, Rejected, RejectReason\n"
+        "h = Herb(sys.argv[1], name='flood-' + sys.argv[2], timeout_s=30.0)\n"
+        "n = 0\n"
+        "for _ in range(300):\n"
+        "    try:\n"
+        "        h.submit([9999], timeout_s=30.0)\n"
+        "    except Rejected as e:\n"
+        "        assert e.reason == RejectReason.UnknownObject, e\n"
+        "        n += 1\n"
+        "print(n)\n"
+    )
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", script, herb.prefix, str(k)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for k in range(4)
+    ]
+    for p in procs:
+        out, err = p.communicate(timeout=300)
+        assert p.returncode == 0, err
+        assert out.strip() == "300", (out, err)
+    ids = catalog_ids(REPO / "models" / "objects.toml")
+    result = herb.pack([ids.index("011")], timeout_s=300.0)
+    assert result.ok, (logs / "herbd.log").read_text()
+
+
+def test_a_client_started_before_herbd_waits_for_it(tmp_path):
+    """The client opens the services only once herbd created them (it never creates them with
+    other settings): started first, it connects when herbd and the loopback come up."""
+    prefix = f"pyearly{os.getpid()}"
+    opened = {}
+
+    def connect():
+        opened["herb"] = Herb(prefix, name="early", timeout_s=60.0)
+
+    t = threading.Thread(target=connect)
+    t.start()
+    time.sleep(1.0)
+    assert "herb" not in opened, "nothing to connect to yet"
+    procs = []
+    try:
+        for exe in ("herb-loopback", "herbd"):
+            log = open(tmp_path / f"{exe}.log", "w")
+            procs.append(
+                subprocess.Popen(
+                    [str(BIN / exe), "--prefix", prefix],
+                    cwd=REPO,
+                    stdout=subprocess.DEVNULL,
+                    stderr=log,
+                )
+            )
+        t.join(timeout=60)
+        herb = opened["herb"]
+        ids = catalog_ids(REPO / "models" / "objects.toml")
+        result = herb.pack([ids.index("003")], timeout_s=300.0)
+        assert result.ok, (tmp_path / "herbd.log").read_text()
+    finally:
+        for proc in reversed(procs):
+            proc.terminate()
+            try:
+                proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.kill()
