@@ -58,7 +58,50 @@ pub struct Qos {
     pub subscriber_max_buffer_size: usize,
     /// Samples a subscriber may hold at once.
     pub subscriber_max_borrowed_samples: usize,
+    /// Processes (iceoryx2 nodes) the service takes at most.
+    pub max_nodes: usize,
+    /// A full subscriber queue drops its oldest sample (never blocks the publisher).
+    pub safe_overflow: bool,
 }
+
+/// Processes a service takes at most (iceoryx2's default, set explicitly).
+pub const MAX_NODES: usize = 20;
+
+/// The settings of a request-response service (pack job, cancel job), which every process
+/// opening it must request alike. They are iceoryx2 0.10's defaults, set explicitly so that
+/// the contract states them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RequestQos {
+    /// Clients at most.
+    pub max_clients: usize,
+    /// Servers at most (one daemon per prefix).
+    pub max_servers: usize,
+    /// Processes at most.
+    pub max_nodes: usize,
+    /// Requests a client may have awaiting a response.
+    pub max_active_requests_per_client: usize,
+    /// Responses a pending request buffers.
+    pub max_response_buffer_size: usize,
+    /// Requests a client may loan at once.
+    pub max_loaned_requests: usize,
+    /// Responses a client may hold at once per pending request.
+    pub max_borrowed_responses_per_pending_response: usize,
+    /// A full server queue drops the oldest request; a full response buffer the oldest
+    /// response.
+    pub safe_overflow: bool,
+}
+
+/// The settings of both request-response services.
+pub const REQUEST_QOS: RequestQos = RequestQos {
+    max_clients: REQUEST_MAX_CLIENTS,
+    max_servers: 1,
+    max_nodes: MAX_NODES,
+    max_active_requests_per_client: 4,
+    max_response_buffer_size: 2,
+    max_loaned_requests: 2,
+    max_borrowed_responses_per_pending_response: 2,
+    safe_overflow: true,
+};
 
 /// The QoS of the publish-subscribe service whose name ends in `leaf` (a [`Services`] name).
 ///
@@ -92,6 +135,8 @@ pub fn qos(leaf: &str) -> Qos {
         history_size: 1,
         subscriber_max_buffer_size: depth,
         subscriber_max_borrowed_samples: 2,
+        max_nodes: MAX_NODES,
+        safe_overflow: true,
     }
 }
 
@@ -183,7 +228,8 @@ impl Bus {
             .history_size(q.history_size)
             .subscriber_max_buffer_size(q.subscriber_max_buffer_size)
             .subscriber_max_borrowed_samples(q.subscriber_max_borrowed_samples)
-            .enable_safe_overflow(true)
+            .max_nodes(q.max_nodes)
+            .enable_safe_overflow(q.safe_overflow)
             .open_or_create()
             .map_err(|e| err(name, e))
     }
@@ -215,11 +261,21 @@ impl Bus {
         BusError,
     > {
         let sn: ServiceName = name.try_into().map_err(|e| err(name, e))?;
+        let q = REQUEST_QOS;
         self.node
             .service_builder(&sn)
             .request_response::<Q, R>()
-            .max_clients(REQUEST_MAX_CLIENTS)
-            .max_servers(1) // one daemon per prefix
+            .max_clients(q.max_clients)
+            .max_servers(q.max_servers) // one daemon per prefix
+            .max_nodes(q.max_nodes)
+            .max_active_requests_per_client(q.max_active_requests_per_client)
+            .max_response_buffer_size(q.max_response_buffer_size)
+            .max_loaned_requests(q.max_loaned_requests)
+            .max_borrowed_responses_per_pending_response(
+                q.max_borrowed_responses_per_pending_response,
+            )
+            .enable_safe_overflow_for_requests(q.safe_overflow)
+            .enable_safe_overflow_for_responses(q.safe_overflow)
             .open_or_create()
             .map_err(|e| err(name, e))
     }

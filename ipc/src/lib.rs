@@ -46,6 +46,8 @@ pub const MAX_FUTURE_STAMP_NS: u64 = 1_000_000;
 pub const GRIPPER_REPEAT_NS: u64 = 100_000_000;
 /// `herbd` publishes a [`StatusEvent::Heartbeat`] this often (ns).
 pub const HEARTBEAT_PERIOD_NS: u64 = 100_000_000;
+/// The range of a heightmap's cell side (m) a frame may carry.
+pub const CELL_M_RANGE: (f32, f32) = (0.0005, 0.02);
 /// An arm adapter publishes its [`ArmStatus`] at least this often (ns).
 pub const ARM_STATUS_PERIOD_NS: u64 = 100_000_000;
 
@@ -491,7 +493,12 @@ impl HeightmapFrame {
         if self.nx == 0 || self.ny == 0 || n > HEIGHTMAP_MAX_CELLS as u64 {
             return Err(Invalid::new("nx*ny", Reason::BadLength));
         }
-        within("cell_m", &[self.cell_m], 0.0005, 0.02)
+        within(
+            "cell_m",
+            &[self.cell_m],
+            CELL_M_RANGE.0 as f64,
+            CELL_M_RANGE.1 as f64,
+        )
     }
 
     /// [`Self::validate_meta`] plus every used cell finite and within [`HEIGHT_RANGE_M`].

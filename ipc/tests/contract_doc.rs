@@ -3,7 +3,7 @@
 //! match the file. `HERB_UPDATE_CONTRACT=1 cargo test -p herb-ipc --test contract_doc` rewrites
 //! the blocks after a deliberate change of the wire.
 
-use herb_ipc::bus::{REQUEST_MAX_CLIENTS, qos};
+use herb_ipc::bus::{REQUEST_QOS, qos};
 use herb_ipc::*;
 use std::fmt::Write;
 use std::mem::{align_of, offset_of, size_of};
@@ -243,15 +243,15 @@ fn codes() -> String {
 
 fn constants() -> String {
     format!(
-        "| constant | value |\n| --- | --- |\n| `PROTOCOL_VERSION` | {PROTOCOL_VERSION} |\n| `DOF` | {DOF} |\n| `HEIGHTMAP_MAX_CELLS` | {HEIGHTMAP_MAX_CELLS} |\n| `MAX_JOB_OBJECTS` | {MAX_JOB_OBJECTS} |\n| `NO_OBJECT` | {NO_OBJECT} (0x{NO_OBJECT:X}) |\n| `HEIGHT_RANGE_M` | {} .. {} m |\n| `MAX_JOINT_ABS_RAD` | {MAX_JOINT_ABS_RAD} rad |\n| `MAX_JOINT_SPEED` | {MAX_JOINT_SPEED} rad/s |\n| `MAX_FUTURE_STAMP_NS` | {MAX_FUTURE_STAMP_NS} ns |\n| `GRIPPER_REPEAT_NS` | {GRIPPER_REPEAT_NS} ns |\n| `HEARTBEAT_PERIOD_NS` | {HEARTBEAT_PERIOD_NS} ns |\n| `ARM_STATUS_PERIOD_NS` | {ARM_STATUS_PERIOD_NS} ns |\n",
-        HEIGHT_RANGE_M.0, HEIGHT_RANGE_M.1
+        "| constant | value |\n| --- | --- |\n| `PROTOCOL_VERSION` | {PROTOCOL_VERSION} |\n| `DOF` | {DOF} |\n| `HEIGHTMAP_MAX_CELLS` | {HEIGHTMAP_MAX_CELLS} |\n| `MAX_JOB_OBJECTS` | {MAX_JOB_OBJECTS} |\n| `NO_OBJECT` | {NO_OBJECT} (0x{NO_OBJECT:X}) |\n| `HEIGHT_RANGE_M` | {} .. {} m |\n| `MAX_JOINT_ABS_RAD` | {MAX_JOINT_ABS_RAD} rad |\n| `MAX_JOINT_SPEED` | {MAX_JOINT_SPEED} rad/s |\n| `MAX_FUTURE_STAMP_NS` | {MAX_FUTURE_STAMP_NS} ns |\n| `GRIPPER_REPEAT_NS` | {GRIPPER_REPEAT_NS} ns |\n| `HEARTBEAT_PERIOD_NS` | {HEARTBEAT_PERIOD_NS} ns |\n| `ARM_STATUS_PERIOD_NS` | {ARM_STATUS_PERIOD_NS} ns |\n| `CELL_M_RANGE` | {} .. {} m |\n",
+        HEIGHT_RANGE_M.0, HEIGHT_RANGE_M.1, CELL_M_RANGE.0, CELL_M_RANGE.1
     )
 }
 
 fn services() -> String {
     let sv = Services::new("herb").unwrap();
     let mut s = String::from(
-        "| service (prefix `herb`) | pattern | payload | publisher(s) | subscribers | max publishers | max subscribers | history | queue per subscriber | borrowed per subscriber |\n| --- | --- | --- | --- | --- | ---: | ---: | ---: | ---: | ---: |\n",
+        "| service (prefix `herb`) | pattern | payload | publisher(s) | subscribers | max publishers | max subscribers | history | queue per subscriber | borrowed per subscriber | max nodes | safe overflow |\n| --- | --- | --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | --- |\n",
     );
     for (name, payload, from, to) in [
         (sv.joint_state(), "JointState", "arm adapter", "herbd"),
@@ -292,30 +292,41 @@ fn services() -> String {
         let q = qos(&name);
         writeln!(
             s,
-            "| `{name}` | publish-subscribe | `{payload}` | {from} | {to} | {} | {} | {} | {} | {} |",
+            "| `{name}` | publish-subscribe | `{payload}` | {from} | {to} | {} | {} | {} | {} | {} | {} | {} |",
             q.max_publishers,
             q.max_subscribers,
             q.history_size,
             q.subscriber_max_buffer_size,
-            q.subscriber_max_borrowed_samples
+            q.subscriber_max_borrowed_samples,
+            q.max_nodes,
+            if q.safe_overflow { "yes" } else { "no" }
         )
         .unwrap();
     }
     writeln!(
         s,
-        "| `{}` | request-response | `PackJobRequest` -> `PackJobReply` | clients | herbd (the one server) | - | - | - | - | - |",
+        "| `{}` | request-response | `PackJobRequest` -> `PackJobReply` | clients | herbd (the one server) | - | - | - | - | - | - | - |",
         sv.pack_job()
     )
     .unwrap();
     writeln!(
         s,
-        "| `{}` | request-response | `CancelJobRequest` -> `CancelJobReply` | clients | herbd (the one server) | - | - | - | - | - |",
+        "| `{}` | request-response | `CancelJobRequest` -> `CancelJobReply` | clients | herbd (the one server) | - | - | - | - | - | - | - |",
         sv.cancel_job()
     )
     .unwrap();
+    let q = REQUEST_QOS;
     writeln!(
         s,
-        "\nEach request-response service takes at most {REQUEST_MAX_CLIENTS} clients and 1 server."
+        "\nEach request-response service: at most {} clients, {} server, {} nodes; {} active requests per client, a response buffer of {}, {} loaned requests, {} borrowed responses per pending response; safe overflow for requests and responses: {}.",
+        q.max_clients,
+        q.max_servers,
+        q.max_nodes,
+        q.max_active_requests_per_client,
+        q.max_response_buffer_size,
+        q.max_loaned_requests,
+        q.max_borrowed_responses_per_pending_response,
+        if q.safe_overflow { "yes" } else { "no" }
     )
     .unwrap();
     s

@@ -583,8 +583,15 @@ fn a_killed_daemon_is_reported_lost_by_the_client() {
     let mut ctl = spawn(
         &exe("herbctl"),
         &[
-            "--prefix", &prefix, "pack", "--objects", "003,005", "--timeout", "120",
-            "--reconnect", "2",
+            "--prefix",
+            &prefix,
+            "pack",
+            "--objects",
+            "003,005",
+            "--timeout",
+            "120",
+            "--reconnect",
+            "2",
         ],
         &dir.join("herbctl.log"),
     );
@@ -593,7 +600,11 @@ fn a_killed_daemon_is_reported_lost_by_the_client() {
     hd.signal(libc::SIGKILL);
     let t0 = Instant::now();
     ctl_out.wait_for("herbd lost", Duration::from_secs(3));
-    assert!(t0.elapsed() < Duration::from_secs(1), "noticed after {:?}", t0.elapsed());
+    assert!(
+        t0.elapsed() < Duration::from_secs(1),
+        "noticed after {:?}",
+        t0.elapsed()
+    );
     // No herbd comes back within the 2 s it waits: it gives up.
     let st = ctl.wait_for(Duration::from_secs(10));
     let took = t0.elapsed();
@@ -1429,7 +1440,11 @@ fn bad_heightmap_cells_are_counted_on_receipt_outside_any_decision() {
         &["--config", cfg.to_str().unwrap()],
         &dir.join("herbd.log"),
     );
-    herb_testkit::wait_for_log(&dir.join("herbd.log"), "event=start", Duration::from_secs(30));
+    herb_testkit::wait_for_log(
+        &dir.join("herbd.log"),
+        "event=start",
+        Duration::from_secs(30),
+    );
     let services = Services::new(&prefix).unwrap();
     let bus = herb_ipc::bus::Bus::open("e2e-badcells", &services).unwrap();
     let status = bus.subscriber::<Status>(&services.status()).unwrap();
@@ -1453,7 +1468,11 @@ fn bad_heightmap_cells_are_counted_on_receipt_outside_any_decision() {
         std::thread::sleep(Duration::from_millis(50));
     }
     let counted = rejected_inputs(&status, |n| n >= before + 30);
-    assert_eq!(counted - before, 30, "every bad frame counted, nothing else");
+    assert_eq!(
+        counted - before,
+        30,
+        "every bad frame counted, nothing else"
+    );
 }
 
 /// herbd SIGKILLed mid-job and restarted on its journal: the `herbctl pack` that submitted the
@@ -1468,7 +1487,14 @@ fn herbctl_follows_a_job_across_a_daemon_crash_and_restart() {
     let mut ctl = spawn(
         &exe("herbctl"),
         &[
-            "--prefix", &prefix, "pack", "--objects", "003,005", "--timeout", "240", "--json",
+            "--prefix",
+            &prefix,
+            "pack",
+            "--objects",
+            "003,005",
+            "--timeout",
+            "240",
+            "--json",
         ],
         &dir.join("herbctl.log"),
     );
