@@ -378,3 +378,45 @@ fn the_contract_document_matches_the_types() {
         stale.join("\n")
     );
 }
+
+/// The first column of the hand-written table whose header row starts with `| {first} |`.
+fn first_column(doc: &str, first: &str) -> Vec<String> {
+    let head = format!("| {first} |");
+    let mut rows = doc.lines().skip_while(|l| !l.starts_with(&head)).skip(2);
+    let mut out = Vec::new();
+    for l in rows.by_ref() {
+        if !l.starts_with('|') {
+            break;
+        }
+        out.push(l.split('|').nth(1).unwrap_or("").trim().to_string());
+    }
+    out
+}
+
+/// The hand-written tables name every code: each `RejectReason` has its `detail`, each
+/// `Fault` what herbd does.
+#[test]
+fn the_reasons_and_faults_tables_name_every_code() {
+    let doc = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("CONTRACT.md"))
+        .unwrap();
+    let reasons = first_column(&doc, "reason");
+    assert_eq!(reasons.len(), 10, "{reasons:?}");
+    for c in 0..64 {
+        if let Some(r) = RejectReason::from_code(c) {
+            let name = format!("`{r:?}`");
+            assert!(reasons.contains(&name), "{name} missing from the reasons table");
+        }
+    }
+    let faults = first_column(&doc, "fault");
+    assert!(faults.len() >= 10, "{faults:?}");
+    let faults = faults.join(", ");
+    for c in 0..64 {
+        if let Some(f) = Fault::from_code(c) {
+            if f == Fault::None {
+                continue;
+            }
+            let name = format!("`{f:?}`");
+            assert!(faults.contains(&name), "{name} missing from the faults table");
+        }
+    }
+}
