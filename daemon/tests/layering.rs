@@ -16,6 +16,23 @@ use serde_json::Value;
 
 /// (package, crates it must never reach, directly or transitively).
 const RULES: &[(&str, &[&str])] = &[
+    // The domain core: no physics engine, no pictures, no learned policies, no IPC.
+    (
+        "herb-core",
+        &[
+            "rapier3d",
+            "plotters",
+            "tract-onnx",
+            "iceoryx2",
+            "ruckig",
+            "herb-sim",
+            "herb-ipc",
+            "herb-robot",
+            "herb-adapter",
+            "herb-decide",
+            "herb-daemon",
+        ],
+    ),
     (
         "herb-sim",
         &[
@@ -54,9 +71,13 @@ const RULES: &[(&str, &[&str])] = &[
         ],
     ),
     ("herb-loopback", ROBOT_SIDE_NEVER),
+    // The real cell's adapters link neither the physics engine, the learned policies' runtime
+    // nor the pictures.
     (
         "herb-baxter",
         &[
+            "rapier3d",
+            "plotters",
             "tract-onnx",
             "herb-decide",
             "herb-daemon",
@@ -68,6 +89,9 @@ const RULES: &[(&str, &[&str])] = &[
     (
         "herb-camera",
         &[
+            "rapier3d",
+            "plotters",
+            "herb-sim",
             "tract-onnx",
             "herb-decide",
             "herb-daemon",

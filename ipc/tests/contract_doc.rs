@@ -397,14 +397,17 @@ fn first_column(doc: &str, first: &str) -> Vec<String> {
 /// `Fault` what herbd does.
 #[test]
 fn the_reasons_and_faults_tables_name_every_code() {
-    let doc = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("CONTRACT.md"))
-        .unwrap();
+    let doc =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("CONTRACT.md")).unwrap();
     let reasons = first_column(&doc, "reason");
     assert_eq!(reasons.len(), 10, "{reasons:?}");
     for c in 0..64 {
         if let Some(r) = RejectReason::from_code(c) {
             let name = format!("`{r:?}`");
-            assert!(reasons.contains(&name), "{name} missing from the reasons table");
+            assert!(
+                reasons.contains(&name),
+                "{name} missing from the reasons table"
+            );
         }
     }
     let faults = first_column(&doc, "fault");
@@ -416,7 +419,10 @@ fn the_reasons_and_faults_tables_name_every_code() {
                 continue;
             }
             let name = format!("`{f:?}`");
-            assert!(faults.contains(&name), "{name} missing from the faults table");
+            assert!(
+                faults.contains(&name),
+                "{name} missing from the faults table"
+            );
         }
     }
 }

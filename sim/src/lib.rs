@@ -8,31 +8,26 @@
 //! Frames and units: SI, right-handed, z up; the box frame B (see [`frames`]) is used
 //! everywhere. The BoxED Unity frame is converted once, in [`frames::unity_place_to_box`].
 //!
-//! Shared definitions that training, evaluation and the daemon must agree on live here, once:
-//! the object catalog ([`catalog`]), the heightmap grid ([`heightmap`]), the observation layout
-//! ([`observation`]) and the z estimate ([`zestimate`]).
+//! Shared definitions that training, evaluation and the daemon must agree on (the object
+//! catalog, the heightmap grid, the observation layout, the z estimate, the placement lattice)
+//! live in `herb-core`, without a physics engine, and are re-exported here under their old
+//! paths.
 #![warn(missing_docs)]
 
 pub mod boxed;
-pub mod catalog;
 pub mod env;
-pub mod error;
 pub mod eval;
-pub mod features;
-pub mod frames;
-pub mod heightmap;
-pub mod hull;
-pub mod image;
-pub mod lattice;
-pub mod mesh;
-pub mod observation;
-pub mod paths;
 #[cfg(feature = "picture")]
 pub mod picture;
 pub mod reserve;
 pub mod teacher;
 pub mod world;
-pub mod zestimate;
+
+// The domain core (no physics engine), re-exported under its old paths.
+pub use herb_core::{
+    catalog, error, features, frames, heightmap, hull, image, lattice, mesh, observation, paths,
+    zestimate,
+};
 
 pub use catalog::{Catalog, ObjectShape, ObjectSpec, SharedCatalog, TypeIdx};
 

@@ -28,8 +28,7 @@ use crate::zestimate::{ZScratch, estimate_z_rotated};
 use rapier3d::math::{Pose, Rotation, Vector};
 use rapier3d::prelude::*;
 
-/// The default widening of the success volume for contact penetration (m).
-pub const INSIDE_TOLERANCE_M: f32 = 0.01;
+pub use crate::frames::INSIDE_TOLERANCE_M;
 
 /// Settings of the packing world. Defaults are the values used for training and evaluation.
 #[derive(Debug, Clone, PartialEq)]

@@ -12,7 +12,7 @@
 //!    ambiguity is settled by how the camera is mounted.
 
 use crate::project::{Depth, Intrinsics};
-use herb_sim::frames::BOX_HEIGHT;
+use herb_core::frames::BOX_HEIGHT;
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
 /// Points within this distance of a plane are its inliers (m).

@@ -123,7 +123,7 @@ impl Default for DepthLimits {
 impl Default for HeightmapSettings {
     fn default() -> Self {
         Self {
-            cell_m: herb_sim::ObsLayout::CELL_M,
+            cell_m: herb_core::ObsLayout::CELL_M,
             floor_threshold_m: 0.003,
             fill_radius_cells: 6,
             median_frames: 1,
@@ -149,7 +149,7 @@ impl CameraConfig {
             max_depth: self.depth.max_m,
             floor_threshold: self.heightmap.floor_threshold_m,
             fill_radius: self.heightmap.fill_radius_cells,
-            max_height: herb_sim::heightmap::HEIGHT_RANGE_M.1,
+            max_height: herb_core::heightmap::HEIGHT_RANGE_M.1,
         }
     }
 }
@@ -178,7 +178,7 @@ impl ConfigFile for CameraConfig {
         in_range("depth.max_m", self.depth.max_m, self.depth.min_m, 10.0)?;
         in_range("depth.max_age_s", self.depth.max_age_s, 0.01, 10.0)?;
         let h = &self.heightmap;
-        herb_sim::heightmap::GridSpec::for_box(h.cell_m)
+        herb_core::heightmap::GridSpec::for_box(h.cell_m)
             .map_err(|e| format!("heightmap.cell_m: {e}"))?;
         in_range(
             "heightmap.floor_threshold_m",

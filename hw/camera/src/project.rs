@@ -8,8 +8,8 @@
 //! that near, with the highest seen cell of the whole frame. A placement is never planned into a
 //! hole the camera could not see; the count of filled cells is reported with every frame.
 
-use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y};
-use herb_sim::heightmap::GridSpec;
+use herb_core::frames::{BOX_HALF_X, BOX_HALF_Y};
+use herb_core::heightmap::GridSpec;
 use nalgebra::{Isometry3, Point3};
 
 /// Pinhole intrinsics of the depth image (from `sensor_msgs/CameraInfo`'s K).

@@ -6,9 +6,9 @@
 
 use herb_camera::calibrate::fit_pose;
 use herb_camera::project::{Depth, Intrinsics, Params, Projector};
-use herb_sim::ObsLayout;
-use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, BOX_WALL_THICKNESS};
-use herb_sim::heightmap::GridSpec;
+use herb_core::ObsLayout;
+use herb_core::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, BOX_WALL_THICKNESS};
+use herb_core::heightmap::GridSpec;
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
 const W: u32 = 640;

@@ -3,10 +3,10 @@
 //! through a tilted pinhole camera) and herb-camera; the test reads the published heightmaps
 //! over iceoryx2 and compares them with the truth on the cells the camera saw.
 
+use herb_core::ObsLayout;
+use herb_core::heightmap::GridSpec;
 use herb_ipc::bus::Bus;
 use herb_ipc::{HeightmapFrame, Services};
-use herb_sim::ObsLayout;
-use herb_sim::heightmap::GridSpec;
 use herb_testkit::ros::{Camera, RosWorld, ros_available};
 use herb_testkit::{config, last_json, lines, tmp};
 use std::time::{Duration, Instant};

@@ -1,7 +1,7 @@
 //! Mesh loading (OBJ through `tobj`).
 
 use crate::error::{Result, SimError};
-use rapier3d::math::Vector;
+use parry3d::math::Vector;
 use std::path::Path;
 
 /// All vertex positions of an OBJ file (every object and group), in file units.

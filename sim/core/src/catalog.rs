@@ -17,14 +17,14 @@
 use crate::error::{Result, SimError};
 use crate::hull::{hull_volume, quad_faced_hull, sphere_directions};
 use crate::paths::MeshSource;
-use rapier3d::math::{Rotation, Vector};
-use rapier3d::prelude::SharedShape;
+use parry3d::math::{Rotation, Vector};
+use parry3d::shape::SharedShape;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 /// The catalog shipped with the repository, compiled in so binaries run from anywhere.
-pub const BUILTIN_CATALOG: &str = include_str!("../../models/objects.toml");
+pub const BUILTIN_CATALOG: &str = include_str!("../../../models/objects.toml");
 
 /// Index of an object type in the catalog (dense, 0-based, in file order).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]

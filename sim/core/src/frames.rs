@@ -7,7 +7,7 @@
 //! The BoxED data is Unity (left-handed, y up). [`unity_place_to_box`] is the only place where
 //! it is converted; everything downstream of the loader works in B.
 
-use rapier3d::math::{Mat3, Rotation, Vector};
+use parry3d::math::{Mat3, Rotation, Vector};
 
 /// Inner half-length of the box along B x (m).
 pub const BOX_HALF_X: f32 = 0.17306;
@@ -22,6 +22,9 @@ pub const BOX_WALL_THICKNESS: f32 = 0.0157;
 pub const SUCCESS_MARGIN_Z: f32 = 0.13;
 /// Top of the success volume (m): rim plus margin.
 pub const SUCCESS_TOP_Z: f32 = BOX_HEIGHT + SUCCESS_MARGIN_Z;
+
+/// The default widening of the success volume for contact penetration (m).
+pub const INSIDE_TOLERANCE_M: f32 = 0.01;
 
 /// Unity world axes to B axes (B x = world -z, B y = world +x, B z = world +y); det = -1.
 const M_UNITY_TO_B: [[f32; 3]; 3] = [[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];

@@ -44,7 +44,7 @@ use crate::catalog::{Catalog, ObjectShape, TypeIdx};
 use crate::error::{Result, SimError};
 use crate::frames::{BOX_HALF_X, BOX_HALF_Y};
 use crate::heightmap::{DepthTest, GridSpec, Heightmap, Window, raster_hull};
-use rapier3d::math::Vector;
+use parry3d::math::Vector;
 
 /// The observation layout (see the module docs). A namespace of constants and functions.
 #[derive(Debug, Clone, Copy)]

@@ -3,7 +3,7 @@
 //! knows nothing of the catalog file or of meshes on disk ([`crate::mesh`] reads those,
 //! [`crate::catalog`] uses both).
 
-use rapier3d::math::{Rotation, Vector};
+use parry3d::math::{Rotation, Vector};
 
 /// Number of sampling directions used to reduce a hull (plus the 26 axis and diagonal ones).
 pub const SUPPORT_DIRECTIONS: usize = 160;
@@ -141,8 +141,17 @@ pub fn hull_volume(vertices: &[Vector], triangles: &[[u32; 3]]) -> f32 {
     let six_v: f64 = triangles
         .iter()
         .map(|t| {
-            let [a, b, c] = t.map(|i| vertices[i as usize].as_dvec3());
-            a.dot(b.cross(c))
+            // In f64: a . (b x c).
+            let [a, b, c] = t.map(|i| {
+                let v = vertices[i as usize];
+                [v.x as f64, v.y as f64, v.z as f64]
+            });
+            let cross = [
+                b[1] * c[2] - b[2] * c[1],
+                b[2] * c[0] - b[0] * c[2],
+                b[0] * c[1] - b[1] * c[0],
+            ];
+            a[0] * cross[0] + a[1] * cross[1] + a[2] * cross[2]
         })
         .sum();
     (six_v / 6.0).abs() as f32

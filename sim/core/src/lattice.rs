@@ -52,7 +52,7 @@ use crate::catalog::{Catalog, ObjectShape, TypeIdx};
 use crate::frames::{BOX_HALF_X, BOX_HALF_Y, SUCCESS_TOP_Z};
 use crate::heightmap::{GridSpec, Heightmap};
 use crate::zestimate::{ZScratch, bottom_footprint, pool_footprint, rest_height, support_fraction};
-use rapier3d::math::{Rotation, Vector};
+use parry3d::math::{Rotation, Vector};
 use std::f32::consts::{FRAC_PI_2, PI};
 
 /// Side of a lattice cell (m).
@@ -65,8 +65,8 @@ pub const YAWS: [f32; 4] = [0.0, FRAC_PI_2, PI, -FRAC_PI_2];
 pub const NUM_YAWS: usize = YAWS.len();
 /// The height limit (m): a feasible placement's estimated top is at most the success volume's
 /// top, [`SUCCESS_TOP_Z`] widened by the world's contact tolerance
-/// ([`crate::world::INSIDE_TOLERANCE_M`]): resting as estimated, it would count as inside.
-pub const HEIGHT_LIMIT_M: f32 = SUCCESS_TOP_Z + crate::world::INSIDE_TOLERANCE_M;
+/// ([`crate::frames::INSIDE_TOLERANCE_M`]): resting as estimated, it would count as inside.
+pub const HEIGHT_LIMIT_M: f32 = SUCCESS_TOP_Z + crate::frames::INSIDE_TOLERANCE_M;
 /// A footprint cell counts as supported when its bottom is within this of the surface (m).
 pub const SUPPORT_TOL_M: f32 = 0.005;
 /// Tolerance of the inside-the-walls test (m), as the BLBF heuristic.

@@ -35,7 +35,7 @@ use crate::catalog::{Catalog, TypeIdx};
 use crate::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT};
 use crate::heightmap::Heightmap;
 use crate::lattice::{Lattice, MAX_CANDIDATES, NUM_YAWS, Placement};
-use rapier3d::math::Rotation;
+use parry3d::math::Rotation;
 
 /// Heights are divided by this (m): the observation's height scale.
 pub const HEIGHT_SCALE_M: f32 = crate::observation::ObsLayout::HEIGHT_SCALE_M;

@@ -13,7 +13,7 @@
 
 use crate::error::{Result, SimError};
 use crate::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT};
-use rapier3d::math::Vector;
+use parry3d::math::Vector;
 
 /// Height reported for points outside the grid (the walls' top, m).
 pub const OUTSIDE_HEIGHT: f32 = BOX_HEIGHT;

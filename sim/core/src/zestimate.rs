@@ -9,7 +9,7 @@
 
 use crate::catalog::ObjectShape;
 use crate::heightmap::{DepthTest, GridSpec, Heightmap, Window, raster_hull};
-use rapier3d::math::{Rotation, Vector};
+use parry3d::math::{Rotation, Vector};
 
 /// Reusable buffers, so repeated estimates do not allocate once warmed up. After
 /// [`bottom_footprint`] it holds the object's bottom surface under its footprint.

@@ -27,7 +27,7 @@ pub enum MeshSource {
 pub const INSTALLED_BOXED: &str = "/opt/herb/boxed";
 
 fn workspace_default() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/boxed")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/boxed")
 }
 
 /// The BoxED root: explicit, else `HERB_BOXED`, else the defaults; `None` if none exists.
