@@ -7,7 +7,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 DURATION=${1:-65}
 shift || true
-cargo build --release -p herb-daemon -p herb-loopback --bins
+cargo build --release -p herb-daemon -p herbctl -p herb-loopback --bins
 mkdir -p results
 P=bench$$
 target/release/herb-loopback --prefix "$P" > /dev/null 2> results/loop-bench-loopback.log &

@@ -8,7 +8,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 SESSION=${1:-p1_s1}
 shift || true
-cargo build --release -p herb-daemon -p herb-loopback --bins
+cargo build --release -p herb-daemon -p herbctl -p herb-loopback --bins
 mkdir -p results
 P=demo$$
 target/release/herb-loopback --prefix "$P" > results/demo-loopback.json 2> results/demo-loopback.log &

@@ -12,7 +12,7 @@ cd "$(dirname "$0")/.."
 DURATION=${SOAK_S:-1005}
 JOBS=${SOAK_JOBS:-0}
 OUT=${SOAK_OUT:-runs/soak-$(date -u +%Y%m%dT%H%M%SZ)}
-cargo build --release -p herb-daemon -p herb-loopback --bins
+cargo build --release -p herb-daemon -p herbctl -p herb-loopback --bins
 mkdir -p "$OUT"
 P=soak$$
 target/release/herb-loopback --prefix "$P" > /dev/null 2> "$OUT/soak-loopback.log" &

@@ -59,6 +59,8 @@ const RULES: &[(&str, &[&str])] = &[
             "herb-daemon",
         ],
     ),
+    // herbd: no pictures (herbctl, its own crate, draws them).
+    ("herb-daemon", &["plotters"]),
     ("herb-robot", ROBOT_SIDE_NEVER),
     (
         "herb-adapter",

@@ -110,7 +110,7 @@ fn herbd(cfg: &Path, dir: &Path, extra: &[&str]) -> Proc {
 /// `herbctl` under `prefix` with `args` (a `pack` of objects or a session), JSON summary.
 fn pack(prefix: &str, args: &[&str], dir: &Path) -> Proc {
     spawn(
-        &exe("herbctl", "herb-daemon"),
+        &exe("herbctl", "herbctl"),
         &[
             &["--prefix", prefix][..],
             args,

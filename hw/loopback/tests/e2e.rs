@@ -18,7 +18,12 @@ fn loopback_exe() -> PathBuf {
 
 /// `herbd` / `herbctl` (built when this package is tested alone).
 fn exe(name: &str) -> PathBuf {
-    herb_testkit::exe(name, "herb-daemon")
+    let package = if name == "herbctl" {
+        "herbctl"
+    } else {
+        "herb-daemon"
+    };
+    herb_testkit::exe(name, package)
 }
 
 /// `herbctl pack --objects <objects>` under `prefix`, logging to `dir/herbctl.log`.
@@ -957,7 +962,23 @@ fn a_job_survives_herbd_killed_mid_motion() {
     let outcomes = bus
         .subscriber::<SimOutcome>(&services.sim_outcome())
         .unwrap();
-    let mut ctl = pack_objects(&dir, &prefix, "003,005,011", 300, false);
+    // This client gives up when herbd is lost (the test follows the restarted job itself;
+    // herbctl_follows_a_job_across_a_daemon_crash_and_restart has herbctl wait for it).
+    let mut ctl = spawn(
+        &exe("herbctl"),
+        &[
+            "--prefix",
+            &prefix,
+            "pack",
+            "--objects",
+            "003,005,011",
+            "--timeout",
+            "300",
+            "--reconnect",
+            "0",
+        ],
+        &dir.join("herbctl.log"),
+    );
     let mut events: Vec<Status> = Vec::new();
     let mut released: Vec<SimOutcome> = Vec::new();
     let drain = |events: &mut Vec<Status>, released: &mut Vec<SimOutcome>| {
