@@ -36,6 +36,7 @@ const RULES: &[(&str, &[&str])] = &[
     (
         "herb-sim",
         &[
+            "plotters",
             "iceoryx2",
             "ruckig",
             "tract-onnx",

@@ -17,8 +17,6 @@
 pub mod boxed;
 pub mod env;
 pub mod eval;
-#[cfg(feature = "picture")]
-pub mod picture;
 pub mod reserve;
 pub mod teacher;
 pub mod world;

@@ -9,7 +9,7 @@ use herb_ipc::{
     CancelJobRequest, Fault, Header, HeightmapFrame, JobState, PackJobRequest, RejectReason,
     Services, SimOutcome, SimReset, Status, StatusEvent, monotonic_ns,
 };
-use herb_sim::picture::{PictureObject, write_pack_picture};
+use herb_picture::{PictureObject, write_pack_picture};
 use herb_sim::{Catalog, GridSpec, Heightmap, TypeIdx, boxed, paths};
 use std::path::PathBuf;
 use std::process::ExitCode;

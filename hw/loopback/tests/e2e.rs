@@ -354,6 +354,7 @@ fn submit(
 fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
     use herb_ipc::{JointCommand, JointState, PackJobRequest, RejectReason, Services, Status};
     let (dir, prefix, cfg) = setup("bad");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
     let (_lb, _hd) = start_cell(&dir, &cfg);
     let services = Services::new(&prefix).unwrap();
     let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
@@ -423,6 +424,7 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
     let want = 8 + not_ready;
     let counted = rejected_inputs(&status, |n| n >= want);
     assert_eq!(counted, want, "rejections counted");
+    claims.check();
 }
 
 /// Heightmap frames with a valid header and grid but a NaN cell, injected by a second publisher
@@ -436,6 +438,7 @@ fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
     let (dir, prefix, cfg) = setup("nanframe");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
     let (_lb, _hd) = start_cell(&dir, &cfg);
     let services = Services::new(&prefix).unwrap();
     let stop = Arc::new(AtomicBool::new(false));
@@ -489,6 +492,7 @@ fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
     assert!(sent > 10, "the injector sent {sent} frames");
     let counted = rejected_inputs(&status, |n| n > 0);
     assert!(counted > 0, "bad frames counted in rejected_inputs");
+    claims.check();
 }
 
 /// The loopback stalled mid-motion (SIGSTOP for 50 ms, six times; herbd's joint-state timeout
@@ -499,6 +503,7 @@ fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
 fn a_stalled_loopback_reports_real_speeds_and_nothing_is_rejected() {
     use herb_ipc::{Services, Status};
     let (dir, prefix, cfg) = setup("stall");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
     let (lb, _hd) = start_cell(&dir, &cfg);
     let services = Services::new(&prefix).unwrap();
     let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
@@ -522,6 +527,7 @@ fn a_stalled_loopback_reports_real_speeds_and_nothing_is_rejected() {
         before,
         "herbd rejected its adapter's joint states"
     );
+    claims.check();
 }
 
 /// The loopback stalled for 300 ms while the gripper holds an object (joint-state timeout,
@@ -660,6 +666,7 @@ fn a_second_daemon_on_a_prefix_in_use_refuses_to_start() {
 fn joint_states_going_backwards_are_rejected_and_counted() {
     use herb_ipc::{Header, JointState, Services, Status, StatusEvent, monotonic_ns};
     let (dir, prefix, cfg) = setup("order");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
     let cfg_s = cfg.to_str().unwrap();
     let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
     let services = Services::new(&prefix).unwrap();
@@ -710,6 +717,7 @@ fn joint_states_going_backwards_are_rejected_and_counted() {
         .unwrap(); // stamp backwards
     let after = rejected_after(&arm, &mut next);
     assert_eq!(after - before, 2, "two out-of-order states refused");
+    claims.check();
 }
 
 /// Two jobs one after the other: every simulated outcome carries the job that released the
@@ -773,6 +781,7 @@ fn outcomes_carry_their_job_across_jobs() {
 fn the_box_is_reset_between_jobs_and_not_during_one() {
     use herb_ipc::{Services, SimOutcome};
     let (dir, prefix, cfg) = setup("reset");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
     let cfg_s = cfg.to_str().unwrap();
     let _lb = spawn(
         &loopback_exe(),
@@ -847,11 +856,13 @@ fn the_box_is_reset_between_jobs_and_not_during_one() {
             .expect("a decision count");
     }
     assert_eq!(decisions, 3, "the two jobs' decisions, each in one segment");
+    claims.check();
 }
 
 #[test]
 fn sigterm_mid_motion_brakes_reports_and_exits_zero() {
     let (dir, prefix, cfg) = setup("sigterm");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
     let (_lb, mut hd) = start_cell(&dir, &cfg);
     let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, false);
     let mut ctl_out = Follow::new(&mut ctl);
@@ -872,6 +883,7 @@ fn sigterm_mid_motion_brakes_reports_and_exits_zero() {
         Some(1),
         "the job did not finish"
     );
+    claims.check();
 }
 
 /// `herbctl cancel` mid-motion (issue 18, item 7): the arm brakes and retreats, the job ends

@@ -1,7 +1,7 @@
 //! Table I plots: compactness per step and a histogram of objects packed, per method.
 //!
 //! Text needs a TrueType font, read at run time from `$HERB_FONT` or the DejaVu Sans path of
-//! Debian/Ubuntu (`fonts-dejavu-core`): `herb_sim::picture::register_font`.
+//! Debian/Ubuntu (`fonts-dejavu-core`): `herb_picture::register_font`.
 
 use herb_sim::eval::EpisodeResult;
 use plotters::prelude::*;
@@ -11,7 +11,7 @@ type Results = [(String, Vec<Result<EpisodeResult, String>>)];
 
 /// Writes `compactness_per_step.png` and `objects_packed.png` into `dir`.
 pub fn write_plots(dir: &Path, results: &Results) -> Result<Vec<PathBuf>, String> {
-    herb_sim::picture::register_font()?;
+    herb_picture::register_font()?;
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let a = dir.join("compactness_per_step.png");
     compactness_per_step(&a, results).map_err(|e| format!("{}: {e}", a.display()))?;

@@ -6,8 +6,10 @@
 //! Text needs a TrueType font, read at run time from `$HERB_FONT` or the DejaVu Sans path of
 //! Debian/Ubuntu (`fonts-dejavu-core`): [`register_font`], shared with the Table I plots.
 
-use crate::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, SUCCESS_TOP_Z};
-use crate::heightmap::Heightmap;
+#![warn(missing_docs)]
+
+use herb_core::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, SUCCESS_TOP_Z};
+use herb_core::heightmap::Heightmap;
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -222,7 +224,7 @@ mod tests {
 
     #[test]
     fn a_pack_picture_is_drawn_with_an_object_outside() {
-        use crate::heightmap::GridSpec;
+        use herb_core::heightmap::GridSpec;
         let spec = GridSpec::for_box(0.005).unwrap();
         let mut hm = Heightmap::new(spec);
         for (i, v) in hm.data_mut().iter_mut().enumerate() {
