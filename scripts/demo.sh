@@ -1,19 +1,21 @@
 #!/usr/bin/env bash
 # The main job: builds the release binaries, starts herb-loopback (simulated Baxter, gripper and
-# camera) and herbd (the controller), packs one BoxED episode (default p1_s1) with the shipped
-# policy, prints progress, writes results/pack.png (the final heightmap of the box), and stops
-# both processes (SIGTERM: herbd brakes, reports and exits 0).
+# camera) and herbd (the controller, placing with its configured method: BLBF by default), packs
+# one BoxED episode (default p1_s1), prints progress, draws the final pack, and stops both
+# processes (SIGTERM: herbd brakes, reports and exits 0). Everything it writes goes into a run
+# folder (DEMO_OUT, default runs/demo-<time>), never over committed files.
 # Usage: scripts/demo.sh [SESSION] [herbctl pack options...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SESSION=${1:-p1_s1}
 shift || true
 cargo build --release -p herb-daemon -p herbctl -p herb-loopback --bins
-mkdir -p results
+OUT=${DEMO_OUT:-runs/demo-$(date -u +%Y%m%dT%H%M%SZ)}
+mkdir -p "$OUT"
 P=demo$$
-target/release/herb-loopback --prefix "$P" > results/demo-loopback.json 2> results/demo-loopback.log &
+target/release/herb-loopback --prefix "$P" > "$OUT/demo-loopback.json" 2> "$OUT/demo-loopback.log" &
 LB=$!
-target/release/herbd --prefix "$P" > results/demo-herbd.json 2> results/demo-herbd.log &
+target/release/herbd --prefix "$P" > "$OUT/demo-herbd.json" 2> "$OUT/demo-herbd.log" &
 HD=$!
 stop() {
   kill -TERM "$HD" 2>/dev/null || true
@@ -23,12 +25,12 @@ stop() {
 }
 trap stop EXIT
 set +e
-target/release/herbctl --prefix "$P" pack --session "$SESSION" --picture results/pack.png "$@"
+target/release/herbctl --prefix "$P" pack --session "$SESSION" --picture "$OUT/pack.png" "$@"
 RC=$?
 set -e
 stop
 trap - EXIT
-echo "herbd:    $(tail -1 results/demo-herbd.json)"
-echo "loopback: $(tail -1 results/demo-loopback.json)"
-echo "logs: results/demo-herbd.log, results/demo-loopback.log"
+echo "herbd:    $(tail -1 "$OUT/demo-herbd.json")"
+echo "loopback: $(tail -1 "$OUT/demo-loopback.json")"
+echo "picture and logs: $OUT/"
 exit $RC
