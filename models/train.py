@@ -4,7 +4,7 @@
     python models/train.py --config models/configs/cs06.toml --out runs/cs06          # start
     python models/train.py --config models/configs/cs06.toml --out runs/cs06 --resume # go on
 
-The recipe of issue 13 (the continuous-action recipe it replaces is ``models/continuous/``).
+The current recipe (the continuous-action recipe it replaces is ``models/continuous/``).
 A policy here does not regress a placement: for each decision, Rust (``herb_sim.features``)
 lists up to 64 feasible candidate placements of the next object from the placement lattice
 (``herb_sim`` ``sim/src/lattice.rs``), each described by a row of features, plus a context

@@ -96,7 +96,7 @@ def main():
     ap.add_argument("--reward", default="cs0.6", help="reward mode (does not change the episodes)")
     ap.add_argument("--sequence", default=herb_sim.HERB_ORDER, choices=["beam3", "beam3-start", "random"],
                     help="object order of the episodes (default HERB's, beam3-start: Algorithm 1 as written; "
-                         "beam3: each search rooted at the last object chosen, HERB's order until issue 13)")
+                         "beam3: each search rooted at the last object chosen, HERB's earlier order)")
     ap.add_argument("--boxed", default=None)
     a = ap.parse_args()
     if not 1 <= a.episodes <= 4096:

@@ -1,4 +1,4 @@
-//! Contract constants defined on both sides of the IPC boundary agree (issue 14, item 4): the
+//! Contract constants defined on both sides of the IPC boundary agree: the
 //! wire's copies in `herb_ipc` and their sources in the simulation and the robot code.
 
 use herb_robot::kinematics::{DOF, LEFT_ARM};

@@ -1,4 +1,4 @@
-//! The workspace's dependency rules (issue 14, item 1), checked on the graph cargo resolves.
+//! The workspace's dependency rules, checked on the graph cargo resolves.
 //!
 //! Dependencies point one way: the simulation, the decision core, the CLI and the bindings never
 //! reach IPC, real-time motion or the daemon; the robot side (loopback, adapters, robot crate)

@@ -1,4 +1,4 @@
-//! Invalid payloads change nothing herbd does (proptest; issue 16, item 3). Two job state
+//! Invalid payloads change nothing herbd does (proptest). Two job state
 //! machines (`herb_daemon::job::Job`, what herbd's loop runs) are driven by the same script to
 //! the middle of a job, with the arm moving; one of them is then handed a payload built from
 //! arbitrary bytes (a joint state, gripper state, heightmap, pack-job or cancel request) that

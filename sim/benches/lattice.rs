@@ -1,4 +1,4 @@
-//! Placement-lattice benchmark (issue 13): the cost per decision of the geometry planes
+//! Placement-lattice benchmark: the cost per decision of the geometry planes
 //! (`Lattice::compute`: pooling, footprints, rest height, top, flags and support over 28 x 19
 //! positions x 4 yaws) and of the candidates (`Lattice::candidates`: selection, refinement and
 //! tight variants), on one core.

@@ -1,4 +1,4 @@
-//! Packing-world benchmarks (issue 2): placements per second on one core (z estimate,
+//! Packing-world benchmarks: placements per second on one core (z estimate,
 //! release, settle, inside and compactness scan, heightmap render), heightmap render time, and
 //! memory per world.
 //!

@@ -1,4 +1,4 @@
-"""The Python client against a real herbd and herb-loopback (issue 16, item 5): a job is
+"""The Python client against a real herbd and herb-loopback: a job is
 submitted and followed to its end, a heightmap is read as a numpy view into shared memory (no
 copy, read-only), and a bad job is refused with herbd's reason.
 

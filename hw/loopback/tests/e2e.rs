@@ -253,7 +253,7 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
         "{summary}"
     );
 
-    // The run log (issue 14, item 5): replayed offline, bit for bit, brake, fault and resume
+    // The run log: replayed offline, bit for bit, brake, fault and resume
     // included; object 1 explained.
     hd.signal(libc::SIGTERM);
     assert!(hd.wait_for(Duration::from_secs(10)).success());
@@ -397,7 +397,7 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
     assert_eq!(reason(ok), (RejectReason::None, 0));
     // Now that the adapter and herbd publish (herbd heard the adapter), no second process may
     // speak for the arm or command it: the robot services take one publisher each, so a rogue
-    // one is refused (issue 18, item 2).
+    // one is refused.
     assert!(
         bus.publisher::<JointState>(&services.joint_state())
             .is_err()
@@ -411,7 +411,7 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
         reason(submit(&client, PackJobRequest::new(8, &[1]))).0,
         RejectReason::Busy
     );
-    // A bad job while busy is answered with what is wrong with it, not Busy (issue 18, 6).
+    // A bad job while busy is answered with what is wrong with it, not Busy.
     let mut old = PackJobRequest::new(9, &[1]);
     old.header.version = 0;
     assert_eq!(reason(submit(&client, old)).0, RejectReason::Malformed);
@@ -429,7 +429,7 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
 
 /// Heightmap frames with a valid header and grid but a NaN cell, injected by a second publisher
 /// every 20 ms between the camera's frames, are dropped and counted; herbd decides on the
-/// camera's good frames and the job completes (issue 18, item 3: they used to fail the job with
+/// camera's good frames and the job completes (they used to fail the job with
 /// a `Decision` fault, uncounted).
 #[test]
 fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
@@ -497,7 +497,7 @@ fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
 
 /// The loopback stalled mid-motion (SIGSTOP for 50 ms, six times; herbd's joint-state timeout
 /// is 100 ms): its next joint state reports the speed over the real elapsed time, so herbd
-/// rejects none of its own adapter's states (issue 18, item 5: the speed was the distance over
+/// rejects none of its own adapter's states (the speed was the distance over
 /// a nominal 1 ms, above the 20 rad/s the wire allows).
 #[test]
 fn a_stalled_loopback_reports_real_speeds_and_nothing_is_rejected() {
@@ -532,7 +532,7 @@ fn a_stalled_loopback_reports_real_speeds_and_nothing_is_rejected() {
 
 /// The loopback stalled for 300 ms while the gripper holds an object (joint-state timeout,
 /// brake, resume with the object still held): the placement is replanned, not decided again,
-/// so every object is announced `Decided` once, with its decision time (issue 18, item 6: the
+/// so every object is announced `Decided` once, with its decision time (the
 /// replan was announced as a second `Decided` with `decision_ns` 0).
 #[test]
 fn a_resume_while_holding_announces_no_second_decision() {
@@ -586,7 +586,7 @@ fn a_resume_while_holding_announces_no_second_decision() {
 
 /// herbd killed (SIGKILL: no last status can be sent) mid-job: herbctl notices the lost
 /// heartbeat within a second and says "daemon lost" with the job's last known progress, instead
-/// of waiting for its own timeout (issue 18, item 4).
+/// of waiting for its own timeout.
 #[test]
 fn a_killed_daemon_is_reported_lost_by_the_client() {
     let (dir, prefix, cfg) = setup("lost");
@@ -630,7 +630,7 @@ fn a_killed_daemon_is_reported_lost_by_the_client() {
 }
 
 /// A second herbd on a prefix in use exits non-zero naming the running one, and the first goes
-/// on serving (issue 18, item 1: both used to answer jobs and drive the same arm).
+/// on serving (both used to answer jobs and drive the same arm).
 #[test]
 fn a_second_daemon_on_a_prefix_in_use_refuses_to_start() {
     let (dir, prefix, cfg) = setup("second");
@@ -661,7 +661,7 @@ fn a_second_daemon_on_a_prefix_in_use_refuses_to_start() {
 }
 
 /// Joint states from the arm's publisher whose sequence or stamp goes backwards are refused and
-/// counted, not acted on (issue 18, item 2). The test process plays the arm's adapter.
+/// counted, not acted on. The test process plays the arm's adapter.
 #[test]
 fn joint_states_going_backwards_are_rejected_and_counted() {
     use herb_ipc::{Header, JointState, Services, Status, StatusEvent, monotonic_ns};
@@ -722,7 +722,7 @@ fn joint_states_going_backwards_are_rejected_and_counted() {
 
 /// Two jobs one after the other: every simulated outcome carries the job that released the
 /// object, and a subscriber joining afterwards gets the last one from history with the second
-/// job's id, so nobody mistakes an earlier job's outcome for their own (issue 18, item 6).
+/// job's id, so nobody mistakes an earlier job's outcome for their own.
 #[test]
 fn outcomes_carry_their_job_across_jobs() {
     use herb_ipc::{Services, SimOutcome, Status, StatusEvent};
@@ -776,7 +776,7 @@ fn outcomes_carry_their_job_across_jobs() {
 }
 
 /// `herbctl reset` empties the loopback's box between jobs, so the next job starts in an empty
-/// box, and is refused while a job runs (issue 18, item 7: a second job was packed on top).
+/// box, and is refused while a job runs (a second job was packed on top).
 #[test]
 fn the_box_is_reset_between_jobs_and_not_during_one() {
     use herb_ipc::{Services, SimOutcome};
@@ -886,7 +886,7 @@ fn sigterm_mid_motion_brakes_reports_and_exits_zero() {
     claims.check();
 }
 
-/// `herbctl cancel` mid-motion (issue 18, item 7): the arm brakes and retreats, the job ends
+/// `herbctl cancel` mid-motion: the arm brakes and retreats, the job ends
 /// `JobCancelled` (herbctl cancel exits 0; the client that submitted it sees the end and exits
 /// 1), the arm then stands still, and the next job runs.
 #[test]
@@ -952,7 +952,7 @@ fn a_job_cancelled_mid_motion_brakes_retreats_and_the_next_job_runs() {
     claims.check();
 }
 
-/// herbd killed with SIGKILL while it carries an object (issue 16, item 2). Restarted on the same
+/// herbd killed with SIGKILL while it carries an object. Restarted on the same
 /// state directory, it reports the unfinished job from its journal, waits for fresh inputs,
 /// places the held object where it was decided and completes the job: every object is released
 /// into the box exactly once, and the journal is gone at the end. A corrupt journal is then

@@ -2,8 +2,8 @@
 //! `herb_decide::Decider::decide` call (heightmap check and copy, observation when the policy
 //! reads one, policy inference, action check, z estimate; `sim/decide/src/decider.rs`), for
 //! each ONNX network in `$HERB_BENCH_MODELS` (default `target/onnx-bench`, written by
-//! `python3 models/make_fixtures.py --bench target/onnx-bench`; candidate-contract policies,
-//! issue 13, include the placement lattice and features in their decision), plus the BLBF
+//! `python3 models/make_fixtures.py --bench target/onnx-bench`; candidate-contract policies
+//! include the placement lattice and features in their decision), plus the BLBF
 //! baseline.
 //!
 //! `cargo bench -p herb-decide --bench decision`. Every timed decision is recorded in a

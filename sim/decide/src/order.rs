@@ -31,7 +31,7 @@ pub enum Order {
 impl Order {
     /// HERB's order: Beam-3 as Algorithm 1 writes it ([`Order::Beam3Start`]), herbd's planner,
     /// the HERB rows of Table I and the training environments order episodes with it. The
-    /// reading rooted at the last object chosen ([`Order::Beam3`], HERB's order until issue 13)
+    /// reading rooted at the last object chosen ([`Order::Beam3`], HERB's earlier order)
     /// stays available for comparison (`models/README.md`, "HERB's Beam-3 read as Algorithm 1
     /// writes it").
     pub const HERB: Order = Self::Beam3Start;

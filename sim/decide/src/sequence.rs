@@ -34,7 +34,7 @@
 //! episodes it puts large objects much earlier (rank correlation of volume with earliness 0.87
 //! against 0.37, the humans' own orders 0.63; `examples/order_sizes.rs`), as the paper says
 //! its Beam-3 does, and in it the box runs out of room far less often. HERB uses the literal
-//! reading since issue 13 ([`crate::Order::HERB`]; `models/README.md`, "HERB's Beam-3 read as
+//! reading ([`crate::Order::HERB`]; `models/README.md`, "HERB's Beam-3 read as
 //! Algorithm 1 writes it"); [`beam3`] was HERB's order before and stays for comparison.
 //!
 //! Ties (equal probabilities) are broken by the lexicographically smallest sequence of type

@@ -135,7 +135,7 @@ def test_expert_actions_of_an_ended_episode_are_invalid():
 
 
 def test_episodes_default_to_herbs_order():
-    # HERB orders with Beam-3 as Algorithm 1 writes it (issue 13); the bindings default to it.
+    # HERB orders with Beam-3 as Algorithm 1 writes it; the bindings default to it.
     assert herb_sim.HERB_ORDER == "beam3-start"
 
     def second_objects(**kw):
