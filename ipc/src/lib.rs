@@ -1,4 +1,4 @@
-//! HERB's IPC contract (`../shared/DESIGN.md`, "Processes and IPC"): every payload exchanged
+//! HERB's IPC contract (`ipc/CONTRACT.md`; processes: `ARCHITECTURE.md`): every payload exchanged
 //! between `herbd`, the hardware adapters and the clients, the service names, and one
 //! validation function per payload. Nothing else lives here.
 //!

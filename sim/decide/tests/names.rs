@@ -50,7 +50,7 @@ fn policies_are_blbf_or_a_model_path() {
 
 #[test]
 fn herb_orders_with_beam3_as_algorithm_1_writes_it() {
-    // Issue 13: HERB's Beam-3 is the literal reading (every search from <start>).
+    // HERB's Beam-3 is Algorithm 1 read literally: every search starts from <start>.
     assert_eq!(Order::HERB, Order::Beam3Start);
     assert_eq!(Method::Herb.order(None), Some(Order::HERB));
 }
