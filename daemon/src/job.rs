@@ -896,14 +896,17 @@ impl Job {
     /// the robot can move while no joint state comes: the robot is silent); else the adapter
     /// itself is silent (stopped, killed: its last word came before its last joint state).
     fn joint_fault(&self, now: u64) -> Fault {
-        let said_recently = self.arm_at != 0
-            && self.arm_at > self.js_at
-            && now.saturating_sub(self.arm_at) < 3 * ARM_STATUS_PERIOD_NS;
+        let said_recently = self.arm_status_fresh(now) && self.arm_at > self.js_at;
         match self.arm_blocker {
             _ if !said_recently => Fault::JointStateTimeout,
             ArmBlocker::None => Fault::RobotSilent,
             b => b.fault(),
         }
+    }
+
+    /// The arm adapter spoke within three of its status periods.
+    fn arm_status_fresh(&self, now: u64) -> bool {
+        self.arm_at != 0 && now.saturating_sub(self.arm_at) < 3 * ARM_STATUS_PERIOD_NS
     }
 
     fn stale_input(&self, now: u64) -> Option<Fault> {
@@ -1114,8 +1117,8 @@ impl Job {
                     // changed: an e-stop became a disable): say it once.
                     // (An adapter that says "ready" while its first joint state is on the way
                     // changes nothing.)
-                    let ready_said = self.arm_blocker == ArmBlocker::None
-                        && now.saturating_sub(self.arm_at) < 3 * ARM_STATUS_PERIOD_NS;
+                    let ready_said =
+                        self.arm_blocker == ArmBlocker::None && self.arm_status_fresh(now);
                     if arm_unseen(why) && arm_unseen(self.fault) && why != self.fault && !ready_said
                     {
                         self.fault = why;

@@ -111,6 +111,8 @@ pub struct ArmPorts {
     gripper_state: Pub<GripperState>,
     arm_status: Pub<ArmStatus>,
     arm_status_seq: u64,
+    /// The blocker last published and when.
+    arm_status_said: Option<(ArmBlocker, u64)>,
     /// Joint commands.
     pub joint: Counters,
     /// Gripper commands.
@@ -137,6 +139,7 @@ impl ArmPorts {
             gripper_state: bus.publisher(&s.gripper_state())?,
             arm_status: bus.publisher(&s.arm_status())?,
             arm_status_seq: 0,
+            arm_status_said: None,
             joint: Counters::default(),
             gripper: Counters::default(),
         })
@@ -193,10 +196,18 @@ impl ArmPorts {
         let _ = self.gripper_state.send_copy(s);
     }
 
-    /// Publishes the adapter's state (best effort), stamped now: why it withholds joint state,
-    /// if it does, and how many commands its guard refused. Call it every
-    /// [`herb_ipc::ARM_STATUS_PERIOD_NS`] and when the blocker changes.
-    pub fn publish_arm_status(&mut self, blocker: ArmBlocker, commands_refused: u64) {
+    /// Reports the adapter's state at `now_ns`, called every cycle: published (best effort,
+    /// stamped now) at once when `blocker` changed, else every
+    /// [`herb_ipc::ARM_STATUS_PERIOD_NS`]: why it withholds joint state, if it does, and how
+    /// many commands its guard refused.
+    pub fn report_arm_status(&mut self, blocker: ArmBlocker, commands_refused: u64, now_ns: u64) {
+        let due = self.arm_status_said.is_none_or(|(said, at)| {
+            said != blocker || now_ns.saturating_sub(at) >= herb_ipc::ARM_STATUS_PERIOD_NS
+        });
+        if !due {
+            return;
+        }
+        self.arm_status_said = Some((blocker, now_ns));
         self.arm_status_seq += 1;
         let _ = self.arm_status.send_copy(ArmStatus {
             header: Header::now(self.arm_status_seq),

@@ -7,10 +7,7 @@ use herb_baxter::bridge::HerbdCommand;
 use herb_baxter::config::{BaxterConfig, HerbdView};
 use herb_baxter::ros::{self, Shared, lock};
 use herb_ipc::bus::Bus;
-use herb_ipc::{
-    ARM_STATUS_PERIOD_NS, ArmBlocker, GripperState, Header, JointState, NO_OBJECT, Services,
-    monotonic_ns,
-};
+use herb_ipc::{ArmBlocker, GripperState, Header, JointState, NO_OBJECT, Services, monotonic_ns};
 use herb_robot::config_file::ConfigFile;
 use herb_robot::rt::{set_timer_slack, sleep_until};
 use std::path::PathBuf;
@@ -107,8 +104,6 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
     let mut next = monotonic_ns() + period;
     let (mut joint_seen, mut grip_seen, mut seq) = (0u64, 0u64, 0u64);
     let (mut withheld, mut max_excess) = (0u64, 0.0f64);
-    // The adapter's state to herbd: at once on a change, else every ARM_STATUS_PERIOD_NS.
-    let (mut status_said, mut status_at) = (None::<ArmBlocker>, 0u64);
     // A joint state's ROS receipt to its publication to herbd.
     let mut state_latency = ros::latency();
     while !stop.load(Ordering::Relaxed) {
@@ -147,11 +142,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             }
             (s.joint, s.grip, s.blocker, s.counters.commands_refused)
         };
-        let said = blocker.unwrap_or(ArmBlocker::None);
-        if status_said != Some(said) || now.saturating_sub(status_at) >= ARM_STATUS_PERIOD_NS {
-            arm.publish_arm_status(said, refused);
-            (status_said, status_at) = (Some(said), now);
-        }
+        arm.report_arm_status(blocker.unwrap_or(ArmBlocker::None), refused, now);
         if let Some((n, m)) = joint
             && n != joint_seen
         {

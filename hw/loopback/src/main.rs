@@ -32,9 +32,9 @@ use herb_adapter::guard::{GuardSettings, JumpGuard, REFUSAL_HOLD_NS, Refusal};
 use herb_adapter::{ArmPorts, CameraPort, Heightmap};
 use herb_ipc::bus::Bus;
 use herb_ipc::{
-    ARM_STATUS_PERIOD_NS, ArmBlocker, GripperAction, GripperCommand, GripperState, Header,
-    JointCommand, JointState, MAX_JOB_OBJECTS, NO_OBJECT, SIM_BOUNDS, Services, SimObject,
-    SimOutcome, SimReset, monotonic_ns,
+    ArmBlocker, GripperAction, GripperCommand, GripperState, Header, JointCommand, JointState,
+    MAX_JOB_OBJECTS, NO_OBJECT, SIM_BOUNDS, Services, SimObject, SimOutcome, SimReset,
+    monotonic_ns,
 };
 use herb_loopback::config::{ConfigFile, LoopbackConfig};
 use herb_robot::cell::CellConfig;
@@ -456,7 +456,6 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
     };
     sim.guard.set_ready(true, monotonic_ns());
     let mut toggles_seen = [0u32; 2];
-    let (mut status_said, mut status_at) = (None::<ArmBlocker>, 0u64);
     eprintln!(
         "herb-loopback: prefix {:?}, {} Hz, {} objects ({})",
         cfg.ipc_prefix,
@@ -495,10 +494,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             None if refusing => ArmBlocker::CommandRefused,
             None => ArmBlocker::None,
         };
-        if Some(said) != status_said || now.saturating_sub(status_at) >= ARM_STATUS_PERIOD_NS {
-            arm.publish_arm_status(said, sim.guard.refused);
-            (status_said, status_at) = (Some(said), now);
-        }
+        arm.report_arm_status(said, sim.guard.refused, now);
         let (lower, upper) = (sim.lower, sim.upper);
         if sim.blocker.is_some() {
             // No power: nothing is followed (commands are still drained and counted).
