@@ -2,7 +2,7 @@
 //! `herb_decide::Decider::decide` call (heightmap check and copy, observation when the policy
 //! reads one, policy inference, action check, z estimate; `sim/decide/src/decider.rs`), for
 //! each ONNX network in `$HERB_BENCH_MODELS` (default `target/onnx-bench`, written by
-//! `python3 models/make_fixtures.py --bench target/onnx-bench`; candidate-contract policies
+//! `python3 training/make_fixtures.py --bench target/onnx-bench`; candidate-contract policies
 //! include the placement lattice and features in their decision), plus the BLBF
 //! baseline.
 //!
@@ -114,7 +114,7 @@ fn benches(c: &mut Criterion) {
     files.sort();
     if files.is_empty() {
         eprintln!(
-            "no ONNX networks in {}: run `python3 models/make_fixtures.py --bench {}` (pip install onnx numpy)",
+            "no ONNX networks in {}: run `python3 training/make_fixtures.py --bench {}` (pip install onnx numpy)",
             dir.display(),
             dir.display()
         );

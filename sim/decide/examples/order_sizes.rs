@@ -1,5 +1,5 @@
 //! How early each object order puts the large objects, over the 263 BoxED episodes (a
-//! diagnostic, `models/README.md`): per episode, the rank correlation between an
+//! diagnostic, `docs/research-log.md`): per episode, the rank correlation between an
 //! object's position and its volume (1: largest first, -1: smallest first, 0: no relation) and
 //! the share of the episode's volume in its first third, averaged over the episodes.
 //!

@@ -1,7 +1,7 @@
 //! The candidate policy (`herb_decide::candidate`): contract checks at load, decisions that
 //! stay inside the walls, "no feasible placement" on a full box, and the policy factory.
 //! Uses the export fixture `models/fixtures/candidates-smoke.onnx` (a candidate network after
-//! a minute of `models/train.py`; a fixture, not a policy).
+//! a minute of `training/train.py`; a fixture, not a policy).
 
 mod common;
 

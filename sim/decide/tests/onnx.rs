@@ -1,6 +1,6 @@
 //! The ONNX policy: contract check, numerics against the ONNX reference evaluator, bad files,
 //! and decisions that stay finite and in range. The models are FIXTURES with fixed random
-//! weights (models/make_fixtures.py), not trained policies.
+//! weights (training/make_fixtures.py), not trained policies.
 
 use herb_decide::policy::{DecisionInput, Policy};
 use herb_decide::{DecideError, OnnxPolicy};

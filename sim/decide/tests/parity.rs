@@ -1,11 +1,11 @@
 //! Parity of tract with PyTorch on exported actors, of both policy contracts: every shipped
 //! policy (`models/policy-*.onnx`), the behaviour-cloning models of Table I (`models/bc-*.onnx`)
-//! and the export fixtures `models/fixtures/sac-smoke.onnx` (an
-//! actor of the observation contract after one minute of CPU training by
-//! `models/continuous/train.py`) and `models/fixtures/candidates-smoke.onnx` (a candidate
-//! policy after a minute of `models/train.py`): tests of the export paths, not policies. Each
-//! comes with inputs from the environment and PyTorch's outputs for them (`<name>.parity.bin`,
-//! little-endian f32, and `<name>.parity.json`); tract must agree within 1e-4.
+//! and the export fixtures `models/fixtures/sac-smoke.onnx` (an actor of the observation
+//! contract after one minute of CPU training by the first, continuous-action recipe, now in git
+//! history) and `models/fixtures/candidates-smoke.onnx` (a candidate policy after a minute of
+//! `training/train.py`): tests of the export paths, not policies. Each comes with inputs from
+//! the environment and PyTorch's outputs for them (`<name>.parity.bin`, little-endian f32, and
+//! `<name>.parity.json`); tract must agree within 1e-4.
 
 use herb_decide::{CandidatePolicy, OnnxPolicy};
 use herb_sim::ObsLayout;

@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
 """Validation of exported policies on training-distribution episodes, not on BoxED.
 
-    python models/validate.py --policy runs/cs09/policy.onnx --policy runs/cs09-bc/policy.onnx
-    python models/validate.py --rule blbf --rule lattice-blbf --rule lookahead --k 8
+    python training/validate.py --policy models/policy-cs06.onnx --policy models/policy-cs09.onnx
+    python training/validate.py --rule blbf --rule lattice-blbf --rule lookahead --k 8
 
 Each policy (or rule) packs the same ``--episodes`` episodes sampled as in training
-(``herb_sim``: 10 to 25 random catalog objects, HERB's order ``beam3-start`` unless
+(``herb_sim``: 10 to 25 random catalog objects, HERB's order ``beam3`` unless
 ``--sequence`` says otherwise, seed ``--seed``), acting deterministically through onnxruntime
 on the shipped ONNX contract. Prints success rate and mean objects packed per policy. Used to
 choose between training runs without looking at the BoxED test episodes (Table I). Needs
@@ -29,7 +29,7 @@ def onnx_actor(path):
     """The policy at `path` through onnxruntime: ``("obs", f)`` with f from observations
     [N, 2, 224, 224] to actions [N, 3] (the observation contract), or ``("candidates", f)``
     with f from (context, candidates, mask) to candidate indices [N] (the candidate
-    contract, ``models/train.py``)."""
+    contract, ``training/train.py``)."""
     import onnxruntime as ort
 
     try:
@@ -94,9 +94,10 @@ def main():
     ap.add_argument("--episodes", type=int, default=256)
     ap.add_argument("--seed", type=int, default=777)
     ap.add_argument("--reward", default="cs0.6", help="reward mode (does not change the episodes)")
-    ap.add_argument("--sequence", default=herb_sim.HERB_ORDER, choices=["beam3", "beam3-start", "random"],
-                    help="object order of the episodes (default HERB's, beam3-start: Algorithm 1 as written; "
-                         "beam3: each search rooted at the last object chosen, HERB's earlier order)")
+    ap.add_argument("--sequence", default=herb_sim.HERB_ORDER, choices=["beam3", "beam3-last", "beam3-start", "random"],
+                    help="object order of the episodes (default HERB's, beam3: Algorithm 1 as written; "
+                         "beam3-last: each search rooted at the last object chosen, HERB's earlier order; "
+                         "beam3-start: old name of beam3, kept for one release)")
     ap.add_argument("--boxed", default=None)
     a = ap.parse_args()
     if not 1 <= a.episodes <= 4096:

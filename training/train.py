@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
 """Discrete SAC over the placement lattice's candidates, with the lookahead teacher's prior data.
 
-    python models/train.py --config models/configs/cs06.toml --out runs/cs06          # start
-    python models/train.py --config models/configs/cs06.toml --out runs/cs06 --resume # go on
+    python training/train.py --config training/configs/cs06-start.toml --out runs/cs06-start          # start
+    python training/train.py --config training/configs/cs06-start.toml --out runs/cs06-start --resume # go on
 
-The current recipe (the continuous-action recipe it replaces is ``models/continuous/``).
+The shipped recipe (training/README.md; the continuous-action recipe it replaced is in git
+history, docs/research-log.md).
 A policy here does not regress a placement: for each decision, Rust (``herb_sim.features``)
 lists up to 64 feasible candidate placements of the next object from the placement lattice
 (``herb_sim`` ``sim/src/lattice.rs``), each described by a row of features, plus a context

@@ -7,8 +7,8 @@ tanh) so that the loading, contract check and inference paths can be tested and 
 the trained SAC policy exists.
 
     pip install onnx==1.23.2 numpy
-    python3 models/make_fixtures.py                  # models/fixtures/*.onnx (committed, small)
-    python3 models/make_fixtures.py --bench DIR      # benchmark networks into DIR (large, not committed)
+    python3 training/make_fixtures.py                # models/fixtures/*.onnx (committed, small)
+    python3 training/make_fixtures.py --bench DIR    # benchmark networks into DIR (large, not committed)
 
 Deterministic: the same command writes byte-identical files.
 """
@@ -77,6 +77,7 @@ def build(name, pool, convs, fcs, seed=0, in_name=herb_sim.INPUT_NAME, in_shape=
         inputs=[helper.make_tensor_value_info(in_name, TensorProto.FLOAT, in_shape)],
         outputs=[helper.make_tensor_value_info(out_name, TensorProto.FLOAT, [1, n_out])],
         initializer=inits)
+    # The producer name keeps the script's first path so the committed fixtures stay byte-identical.
     model = helper.make_model(graph, producer_name="herb models/make_fixtures.py",
                               opset_imports=[helper.make_opsetid("", OPSET)])
     model.ir_version = IR_VERSION
@@ -126,7 +127,7 @@ def main():
             onnx.save(build(name, **spec), path)
             print(f"wrote {path} ({os.path.getsize(path) / 1e6:.1f} MB)")
         return
-    out = os.path.join(os.path.dirname(os.path.abspath(__file__)), "fixtures")
+    out = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "models", "fixtures")
     os.makedirs(out, exist_ok=True)
     expected = {}
     for name, spec in FIXTURES.items():

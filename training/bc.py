@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Behaviour cloning of the humans' placements: the BC-MSE and BC-MDN rows of Table I.
 
-    python models/bc.py --out runs/bc [--minutes 3] [--threads 2] [--seed 0]
+    python training/bc.py --out runs/bc [--minutes 3] [--threads 2] [--seed 0]
 
 Data: ``herb_sim.human_demonstrations()``: for every object of the 263 BoxED sessions, the
 observation of the humans' own scene before it (earlier objects at their recorded poses, the
@@ -10,8 +10,9 @@ contract's action (x / BOX_HALF_X, y / BOX_HALF_Y, theta / pi).
 
 Targets, as in the paper: x and y in (-1, 1) and theta as (sin, cos).
 
-- **BC-MSE**: the herblite56 network (the SAC recipe's extractor and MLP) regressing
-  (x, y, sin, cos) with a squared-error loss; x and y through tanh.
+- **BC-MSE**: the herblite56 network (the first, continuous-action recipe's extractor and
+  MLP, defined below) regressing (x, y, sin, cos) with a squared-error loss; x and y through
+  tanh.
 - **BC-MDN**: the same network with a mixture density head (Bishop 1994): K = 5 Gaussian
   components with diagonal covariance over (x, y, sin, cos), trained by negative
   log-likelihood. Deployed action: the mean of the most probable component.
@@ -35,7 +36,6 @@ import argparse
 import json
 import math
 import os
-import sys
 import time
 import warnings
 
@@ -46,8 +46,34 @@ import torch.nn.functional as F
 
 import herb_sim
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "continuous"))
-from train import CONTRACT, extractor, mlp  # noqa: E402  (the SAC recipe's network parts)
+# The observation contract herbd and herb-sim eval load (herb_decide::load_policy).
+CONTRACT = dict(input=herb_sim.INPUT_NAME, input_shape=list(herb_sim.MODEL_INPUT_SHAPE),
+                output=herb_sim.OUTPUT_NAME, output_shape=list(herb_sim.MODEL_OUTPUT_SHAPE))
+
+
+def extractor(pool):
+    """Convolutional features of a pooled observation; returns (module, feature count). The
+    first recipe's SAC extractors (pool 2: herbnet112, pool 4: herblite56), layer for layer."""
+    if pool == 2:
+        convs = [nn.Conv2d(2, 16, 8, stride=4), nn.ReLU(), nn.Conv2d(16, 32, 4, stride=2), nn.ReLU()]
+        side = 10
+        last = nn.Conv2d(32, 32, 3, stride=1)
+    else:
+        convs = [nn.Conv2d(2, 16, 5, stride=2), nn.ReLU(), nn.Conv2d(16, 32, 3, stride=2), nn.ReLU()]
+        side = 5
+        last = nn.Conv2d(32, 32, 3, stride=2)
+    return nn.Sequential(*convs, last, nn.ReLU(), nn.Flatten()), 32 * side * side
+
+
+def mlp(n_in, n_out):
+    """The first recipe's MLP: three hidden layers of 256."""
+    return nn.Sequential(
+        nn.Linear(n_in, 256), nn.ReLU(),
+        nn.Linear(256, 256), nn.ReLU(),
+        nn.Linear(256, 256), nn.ReLU(),
+        nn.Linear(256, n_out),
+    )
+
 
 POOL = 4  # herblite56
 K = 5  # MDN components

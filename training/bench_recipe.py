@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
-"""Throughput of the lattice recipe (models/train.py) on this machine: discrete-SAC updates per
+"""Throughput of the lattice recipe (training/train.py) on this machine: discrete-SAC updates per
 second (batch of the config, real network sizes, random data of the right shapes), and
 environment steps per second with candidates computed and a random candidate chosen
 (16 environments, mesh hulls, the config's episodes), p50/p99 per call.
 
-    python models/bench_recipe.py --config models/configs/cs06.toml [--seconds 30] [--threads 2]
+    python training/bench_recipe.py --config training/configs/cs06-start.toml [--seconds 30] [--threads 2]
 """
 
 import argparse

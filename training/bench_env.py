@@ -1,7 +1,8 @@
 """Environment throughput: vectorised steps per second (total and per core) of
-herb_sim.HerbVectorEnv with random actions, mesh hulls, Beam-3 episodes, CS0.6 reward.
+herb_sim.HerbVectorEnv with random actions, mesh hulls, CS0.6 reward, Beam-3 episodes in the
+order its figures were measured in (beam3-last, docs/benchmarks.md).
 
-Usage: python models/bench_env.py [--envs 16] [--threads N] [--steps 200] [--no-meshes]
+Usage: python training/bench_env.py [--envs 16] [--threads N] [--steps 200] [--no-meshes]
 Prints one JSON line. Needs the herb_sim extension (scripts/test.sh builds it into .venv).
 """
 
@@ -24,7 +25,7 @@ def main():
     ap.add_argument("--boxed", default=None)
     a = ap.parse_args()
     v = herb_sim.HerbVectorEnv(
-        a.envs, reward="cs0.6", sequence="beam3", seed=0, threads=a.threads,
+        a.envs, reward="cs0.6", sequence="beam3-last", seed=0, threads=a.threads,
         meshes=not a.no_meshes, boxed=a.boxed,
     )
     v.reset(seed=0)
