@@ -1,5 +1,5 @@
 //! Why the humans' recorded packs score below the paper's 84.41 %: the `human-recorded` row of
-//! Table I under variants of the check (a diagnostic, its figures are in the README).
+//! Table I under variants of the check (a diagnostic, its figures are in docs/table1.md, note 3).
 //!
 //!     cargo run --release -p herb-sim --example recorded_check [-- <boxed folder>]
 //!
