@@ -71,7 +71,8 @@ impl Default for Timeouts {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ModelsConfig {
-    /// `blbf` (the PackIt SO(2) baseline) or the path of an ONNX policy.
+    /// `blbf` (the PackIt SO(2) baseline), a shipped policy (`cs06`, `cs09`: the file
+    /// `policy-<name>.onnx` in the sequence model's folder) or the path of an ONNX policy.
     pub policy: PolicySpec,
     /// The sequence model (Beam-3 transition counts).
     pub sequence: PathBuf,
@@ -80,6 +81,27 @@ pub struct ModelsConfig {
     pub boxed: Option<PathBuf>,
     /// Gap above the estimated resting height at release (m).
     pub clearance_m: f64,
+}
+
+impl ModelsConfig {
+    /// The policy with a shipped policy's name turned into its file, which sits beside the
+    /// sequence model (the models folder).
+    pub fn resolved_policy(&self) -> PolicySpec {
+        let dir = self
+            .sequence
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .unwrap_or(std::path::Path::new("."));
+        self.policy.resolved(dir)
+    }
+
+    /// The policy's ONNX file (resolved as [`ModelsConfig::resolved_policy`]); `None` for BLBF.
+    pub fn policy_file(&self) -> Option<PathBuf> {
+        match self.resolved_policy() {
+            PolicySpec::Onnx(p) => Some(p),
+            _ => None,
+        }
+    }
 }
 
 impl Default for ModelsConfig {
@@ -377,5 +399,15 @@ mod tests {
         let c = Config::from_toml("[models]\npolicy = \"m/p.onnx\"\n", "x").unwrap();
         assert_eq!(c.models.policy, PolicySpec::Onnx("m/p.onnx".into()));
         assert_eq!(c.models.policy.to_string(), "m/p.onnx");
+        let c = Config::from_toml(
+            "[models]\npolicy = \"cs06\"\nsequence = \"/opt/herb/models/sequence.json\"\n",
+            "x",
+        )
+        .unwrap();
+        assert_eq!(
+            c.models.policy_file(),
+            Some("/opt/herb/models/policy-cs06.onnx".into())
+        );
+        assert_eq!(c.models.policy.to_string(), "cs06");
     }
 }

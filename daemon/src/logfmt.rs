@@ -6,7 +6,7 @@
 //!
 //! `event` always comes first; keys are lowercase `snake_case`; a value with a space, a quote
 //! or an `=` is written in double quotes with `\"` and `\\` escaped. The events and their keys
-//! are listed in the README ("herbd's log"). Lines are formatted off the loop (reporter,
+//! are listed in `docs/hardening.md` ("herbd's log"). Lines are formatted off the loop (reporter,
 //! journal writer, start and end), never in a cycle. Under journald (which stamps each line
 //! itself: `$JOURNAL_STREAM` is set) a line is written as is; otherwise it starts with the UTC
 //! time, e.g. `2026-11-26T05:40:00.123Z herbd: event=...`.

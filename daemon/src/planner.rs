@@ -155,8 +155,8 @@ impl Worker {
 impl PlannerCore {
     /// Loads the sequence model and the policy named by `cfg` for `catalog`.
     pub fn new(cfg: &Config, catalog: SharedCatalog) -> Result<Self, String> {
-        let policy =
-            herb_decide::load_policy(&cfg.models.policy, &catalog).map_err(|e| e.to_string())?;
+        let policy = herb_decide::load_policy(&cfg.models.resolved_policy(), &catalog)
+            .map_err(|e| e.to_string())?;
         Self::with_policy(cfg, catalog, policy)
     }
 

@@ -432,11 +432,11 @@ pub fn header_for(
     let mut c = cfg.clone();
     c.record.dir = None;
     c.models.sequence = abs(&cfg.models.sequence)?;
-    let policy = match &cfg.models.policy {
-        PolicySpec::Blbf => 0,
-        PolicySpec::Onnx(p) => {
-            c.models.policy = PolicySpec::Onnx(abs(p)?);
-            file(p)?
+    let policy = match cfg.models.policy_file() {
+        None => 0,
+        Some(p) => {
+            c.models.policy = PolicySpec::Onnx(abs(&p)?);
+            file(&p)?
         }
     };
     c.models.boxed = herb_sim::paths::boxed_root(cfg.models.boxed.as_deref())

@@ -160,8 +160,8 @@ fn rebuild(log: &Log, opts: &ReplayOptions) -> Result<(Config, PlannerCore), Str
         ));
     }
     let file = |p: &std::path::Path| std::fs::read(p).map(|b| crate::digest::of(&b));
-    if let herb_decide::PolicySpec::Onnx(p) = &cfg.models.policy
-        && file(p).ok() != Some(h.policy)
+    if let Some(p) = cfg.models.policy_file()
+        && file(&p).ok() != Some(h.policy)
     {
         differ.push(format!("the policy {} differs from the run's", p.display()));
     }

@@ -204,7 +204,7 @@ fn jobs_are_ordered_with_herbs_beam3_and_recovered_ones_kept_as_given() {
         .order(&catalog, Some(&model), &types, 0)
         .unwrap());
     // The job tells the two readings apart, so the check below says which one herbd uses.
-    let other = ids(Order::Beam3
+    let other = ids(Order::Beam3Last
         .order(&catalog, Some(&model), &types, 0)
         .unwrap());
     assert_ne!(herb, other);

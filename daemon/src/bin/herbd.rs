@@ -86,6 +86,7 @@ fn config(cli: &Cli) -> Result<Config, String> {
     if let Some(v) = &cli.record {
         c.record.dir = Some(v.clone());
     }
+    c.models.policy = c.models.resolved_policy();
     c.validate().map_err(|e| format!("configuration: {e}"))?;
     Ok(c)
 }

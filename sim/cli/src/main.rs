@@ -31,10 +31,32 @@ fn method_parser(
         .map(|s| s.parse::<Method>().expect("a listed name"))
 }
 
-/// A clap parser accepting the names of [`Order::ALL`].
+/// A clap parser accepting the names of [`Order::ALL`] and the aliases [`Order::ALIASES`].
 fn order_parser() -> impl clap::builder::TypedValueParser<Value = Order> {
-    PossibleValuesParser::new(Order::ALL.map(|o| o.name()))
-        .map(|s| s.parse::<Order>().expect("a listed name"))
+    let names = Order::ALL
+        .map(|o| o.name())
+        .into_iter()
+        .chain(Order::ALIASES.map(|(alias, _)| alias));
+    PossibleValuesParser::new(names).map(|s| s.parse::<Order>().expect("a listed name"))
+}
+
+/// One row of `herb-sim eval`: a method and, when given as `METHOD@ORDER`, its object order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Row {
+    method: Method,
+    order: Option<Order>,
+}
+
+/// Parses `METHOD` or `METHOD@ORDER`.
+fn parse_row(s: &str) -> Result<Row, String> {
+    let (method, order) = match s.split_once('@') {
+        Some((m, o)) => (m, Some(o.parse::<Order>()?)),
+        None => (s, None),
+    };
+    Ok(Row {
+        method: method.parse()?,
+        order,
+    })
 }
 
 #[derive(Parser)]
@@ -85,19 +107,23 @@ enum Cmd {
 /// Arguments of `herb-sim eval`.
 #[derive(Args)]
 struct EvalArgs {
-    /// Method (repeat for several rows).
-    #[arg(long, value_parser = method_parser(&Method::ALL))]
-    method: Vec<Method>,
-    /// Object order for herb and blbf (defaults: HERB's, beam3-start, for herb and the
-    /// lookahead rules, largest for the BLBF rules); the replays and random use the human order.
-    #[arg(long, value_parser = order_parser())]
-    sequence: Option<Order>,
+    /// Method, optionally with its row's object order as `METHOD@ORDER` (e.g. `blbf@beam3`);
+    /// repeat for several rows. Methods: herb, blbf, human, human-pose, random,
+    /// human-recorded, packit-so3, bc-mse, bc-mdn, lattice-blbf, lookahead, lattice-reserve,
+    /// geo-lookahead.
+    #[arg(long, value_parser = parse_row)]
+    method: Vec<Row>,
+    /// Object order of the rows without `@ORDER` (defaults: HERB's, `beam3`, for herb and the
+    /// lookahead rules, largest for the BLBF rules); the replays use the human order. The old
+    /// flag name `--sequence` is an alias for one release.
+    #[arg(long, alias = "sequence", value_parser = order_parser())]
+    order: Option<Order>,
     /// The ONNX placement policy for herb (repeat for one herb row per policy, labelled by
     /// file stem).
     #[arg(long)]
     policy: Vec<PathBuf>,
     /// The folder of the behaviour-cloning models for bc-mse and bc-mdn
-    /// (`bc-<kind>-heldout-{even,odd}.onnx`, written by `models/bc.py`).
+    /// (`bc-<kind>-heldout-{even,odd}.onnx`, written by `training/bc.py`).
     #[arg(long, default_value = "models")]
     bc_models: PathBuf,
     /// The sequence model for Beam-3.
@@ -117,9 +143,10 @@ struct EvalArgs {
     /// Base seed (episode i uses seed + i).
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Worker threads.
-    #[arg(long, default_value_t = 2)]
-    jobs: usize,
+    /// Worker threads (episodes run in parallel). The old flag name `--jobs` is an alias for
+    /// one release.
+    #[arg(long, alias = "jobs", default_value_t = 2)]
+    threads: usize,
     /// Only the first N episodes.
     #[arg(long)]
     limit: Option<usize>,
@@ -323,11 +350,11 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
         episodes.truncate(n);
     }
     // The sequence model, when any row orders its objects by Beam-3.
-    let model = if a
-        .method
-        .iter()
-        .any(|m| m.order(a.sequence).is_some_and(|o| o.uses_sequence_model()))
-    {
+    let model = if a.method.iter().any(|r| {
+        r.method
+            .order(r.order.or(a.order))
+            .is_some_and(|o| o.uses_sequence_model())
+    }) {
         Some(SequenceModel::load(&a.sequence_model, &catalog)?)
     } else {
         None
@@ -339,16 +366,17 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
     let mut csv_text = String::from(
         "method,sequence,episode,objects,packed,success,placements,stable,final_compactness,physics_steps,latency_mean_ms\n",
     );
-    // One run per (method, policy): herb once per policy, the others once.
-    let runs: Vec<(Method, Option<&Path>)> = a
+    // One run per (row, policy): herb once per policy, the others once.
+    let runs: Vec<(Row, Option<&Path>)> = a
         .method
         .iter()
-        .flat_map(|&m| match m {
-            Method::Herb => a.policy.iter().map(|p| (m, Some(p.as_path()))).collect(),
-            _ => vec![(m, None)],
+        .flat_map(|&r| match r.method {
+            Method::Herb => a.policy.iter().map(|p| (r, Some(p.as_path()))).collect(),
+            _ => vec![(r, None)],
         })
         .collect();
-    for (m, policy) in runs {
+    for (row, policy) in runs {
+        let m = row.method;
         let t = Instant::now();
         let name = match (m, policy) {
             (_, Some(p)) => format!(
@@ -363,11 +391,11 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
             Some(_) => name.clone(),
             None => m.label().to_string(),
         };
-        let (label, seq_name, results) = match (m.replay(), m.order(a.sequence)) {
+        let (label, seq_name, results) = match (m.replay(), m.order(row.order.or(a.order))) {
             (Some(sm), _) => (
                 shown.clone(),
                 "human",
-                eval::run_all(&catalog, &cfg, &episodes, sm, a.seed, a.jobs)?,
+                eval::run_all(&catalog, &cfg, &episodes, sm, a.seed, a.threads)?,
             ),
             (None, mode) => {
                 let mode = mode.expect("every method without a replay has an order");
@@ -383,7 +411,7 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
                         mode,
                         model.as_ref(),
                         a.seed,
-                        a.jobs,
+                        a.threads,
                     )?,
                     _ if m == Method::PackitSo3 => run_packit_so3_method(
                         &catalog,
@@ -392,7 +420,7 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
                         mode,
                         model.as_ref(),
                         a.seed,
-                        a.jobs,
+                        a.threads,
                     )?,
                     Some(rule) => run_lattice_method(
                         &catalog,
@@ -402,7 +430,7 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
                         mode,
                         model.as_ref(),
                         a.seed,
-                        a.jobs,
+                        a.threads,
                     )?,
                     None => run_policy_method(
                         &catalog,
@@ -413,7 +441,7 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
                         model.as_ref(),
                         policy,
                         a.seed,
-                        a.jobs,
+                        a.threads,
                     )?,
                 };
                 // The table names the teacher's k; the CSV keeps the method's name.
@@ -442,7 +470,7 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
             placements,
             secs,
             placements as f64 / secs,
-            a.jobs
+            a.threads
         );
         csv_text.push_str(&csv_rows(&name, seq_name, &results));
         rows.push(eval::summarize(&label, &results));
@@ -530,17 +558,23 @@ fn check_eval_args(a: &EvalArgs) -> AnyResult<()> {
     if a.method.is_empty() {
         return Err("give at least one --method (see herb-sim eval --help)".into());
     }
-    if a.method.contains(&Method::Herb) && a.policy.is_empty() {
+    let has = |m: Method| a.method.iter().any(|r| r.method == m);
+    if has(Method::Herb) && a.policy.is_empty() {
         return Err("herb needs --policy <model.onnx> (e.g. models/policy-cs06.onnx)".into());
     }
-    if !a.policy.is_empty() && !a.method.contains(&Method::Herb) {
+    if !a.policy.is_empty() && !has(Method::Herb) {
         return Err("--policy is used by --method herb only".into());
     }
-    if a.sequence.is_some() && a.method.iter().any(|m| m.replay().is_some()) {
-        return Err(
-            "--sequence applies to herb, blbf and the lattice rules only (replays and random use the human order)"
-                .into(),
-        );
+    let replay_with_order = a
+        .method
+        .iter()
+        .find(|r| r.method.replay().is_some() && (r.order.is_some() || a.order.is_some()));
+    if let Some(r) = replay_with_order {
+        return Err(format!(
+            "{}: a replay keeps the human order (--order and @ORDER apply to the deciding methods only)",
+            r.method
+        )
+        .into());
     }
     if !(1..=herb_sim::lattice::MAX_CANDIDATES).contains(&a.lookahead_k) {
         return Err(format!(
@@ -662,7 +696,7 @@ fn run_bc_method(
     // Load once up front: a missing or bad model is one clear error, not one per episode.
     for f in &files {
         herb_decide::load_policy(&PolicySpec::Onnx(f.clone()), catalog)
-            .map_err(|e| format!("{}: {e} (train with models/bc.py)", m.name()))?;
+            .map_err(|e| format!("{}: {e} (train with training/bc.py)", m.name()))?;
     }
     let make = || -> Result<_, String> {
         let mut deciders = Vec::new();

@@ -97,7 +97,7 @@ fn one_herb_row_per_policy() {
     let row = |name: &str| {
         table
             .lines()
-            .find(|l| l.starts_with(&format!("| herb {name} (beam3-start) (ours) |")))
+            .find(|l| l.starts_with(&format!("| herb {name} (beam3) (ours) |")))
             .unwrap_or_else(|| panic!("no row for {name} in\n{table}"))
             .split('|')
             .skip(2)
@@ -149,9 +149,9 @@ fn the_lookahead_horizon_names_its_row_and_refuses_zero() {
         ],
     );
     assert!(
-        table.lines().any(
-            |l| l.starts_with("| lookahead (teacher, k = 2, horizon 1) (beam3-start) (ours) |")
-        ),
+        table
+            .lines()
+            .any(|l| l.starts_with("| lookahead (teacher, k = 2, horizon 1) (beam3) (ours) |")),
         "{table}"
     );
     std::fs::remove_dir_all(&dir).ok();

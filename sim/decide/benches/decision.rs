@@ -3,12 +3,13 @@
 //! reads one, policy inference, action check, z estimate; `sim/decide/src/decider.rs`), for
 //! each ONNX network in `$HERB_BENCH_MODELS` (default `target/onnx-bench`, written by
 //! `python3 training/make_fixtures.py --bench target/onnx-bench`; candidate-contract policies
-//! include the placement lattice and features in their decision), plus the BLBF
-//! baseline.
+//! include the placement lattice and features in their decision), after the shipped policies
+//! (`models/policy-cs06.onnx`, `models/policy-cs09.onnx`), plus the BLBF baseline.
 //!
 //! `cargo bench -p herb-decide --bench decision`. Every timed decision is recorded in a
 //! histogram; p50/p99 are printed with the network's FLOPs (2 x FMA, tract's cost model) and
-//! file size. The networks have fixed random weights: latency does not depend on the values.
+//! file size. The sized networks have fixed random weights: latency does not depend on the
+//! values.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use hdrhistogram::Histogram;
@@ -119,7 +120,10 @@ fn benches(c: &mut Criterion) {
             dir.display()
         );
     }
-    for f in files {
+    // The shipped policies (`models/policy-*.onnx`) always, then the sized networks.
+    let models = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../models");
+    let shipped = herb_decide::Shipped::ALL.map(|s| models.join(s.file_name()));
+    for f in shipped.into_iter().chain(files) {
         let name = f
             .file_stem()
             .and_then(|s| s.to_str())

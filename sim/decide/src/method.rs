@@ -27,10 +27,10 @@ pub enum Method {
     /// The PackIt heuristic with its rotation search over the 24 axis-aligned orientations
     /// ([`crate::PackitSo3`]), largest first (default order).
     PackitSo3,
-    /// Behaviour cloning with a squared-error loss (`models/bc.py`), human order, each
+    /// Behaviour cloning with a squared-error loss (`training/bc.py`), human order, each
     /// participant scored by the model trained without them.
     BcMse,
-    /// Behaviour cloning with a mixture density network (`models/bc.py`), human order, each
+    /// Behaviour cloning with a mixture density network (`training/bc.py`), human order, each
     /// participant scored by the model trained without them.
     BcMdn,
     /// The BLBF rule restricted to the placement lattice (largest first by default).
@@ -123,7 +123,7 @@ impl Method {
 
     /// The two ONNX files of a behaviour-cloning method in `dir`: the model that scores the even
     /// participants (trained on the odd ones) and the one that scores the odd participants
-    /// (`models/bc.py` writes them); `None` for the other methods.
+    /// (`training/bc.py` writes them); `None` for the other methods.
     pub fn bc_models(&self, dir: &std::path::Path) -> Option<[std::path::PathBuf; 2]> {
         let kind = match self {
             Self::BcMse => "mse",

@@ -2,7 +2,7 @@
 //! model, or one of the reference orders of Table I.
 
 use crate::error::{DecideError, Result};
-use crate::sequence::{SequenceModel, beam3, beam3_from_start};
+use crate::sequence::{SequenceModel, beam3, beam3_last};
 use herb_sim::{Catalog, TypeIdx};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
@@ -14,12 +14,13 @@ pub type BeamSearch = fn(&SequenceModel, &[TypeIdx]) -> Result<Vec<TypeIdx>>;
 /// How the objects of an episode are ordered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Order {
-    /// Beam-3 over the human transition model, each search rooted at the last object chosen
-    /// ([`beam3`]).
+    /// HERB's order: Beam-3 over the human transition model as Algorithm 1 writes it, every
+    /// search rooted at `<start>` ([`beam3`]). Name `beam3` (alias `beam3-start`, its name
+    /// before, kept for one release).
     Beam3,
-    /// Beam-3 as Algorithm 1 writes it, every search rooted at `<start>`
-    /// ([`beam3_from_start`]).
-    Beam3Start,
+    /// The other reading of Beam-3, each search rooted at the last object chosen
+    /// ([`beam3_last`]); HERB's order before, kept for comparison. Name `beam3-last`.
+    Beam3Last,
     /// The human order.
     Human,
     /// Largest hull volume first (ties: catalog order).
@@ -29,28 +30,29 @@ pub enum Order {
 }
 
 impl Order {
-    /// HERB's order: Beam-3 as Algorithm 1 writes it ([`Order::Beam3Start`]), herbd's planner,
-    /// the HERB rows of Table I and the training environments order episodes with it. The
-    /// reading rooted at the last object chosen ([`Order::Beam3`], HERB's earlier order)
-    /// stays available for comparison (`models/README.md`, "HERB's Beam-3 read as Algorithm 1
-    /// writes it").
-    pub const HERB: Order = Self::Beam3Start;
+    /// HERB's order ([`Order::Beam3`]): herbd's planner, the HERB rows of Table I and the
+    /// training environments order episodes with it.
+    pub const HERB: Order = Self::Beam3;
 
     /// Every order.
     pub const ALL: [Order; 5] = [
         Self::Beam3,
-        Self::Beam3Start,
+        Self::Beam3Last,
         Self::Human,
         Self::Largest,
         Self::Random,
     ];
 
-    /// The Beam-3 reading of this order ([`beam3`] or [`beam3_from_start`]), `None` for the
+    /// Old names still accepted, with the order they name: `beam3-start` is [`Order::Beam3`]
+    /// (HERB's order was named so before it took the name `beam3`). Kept for one release.
+    pub const ALIASES: [(&'static str, Order); 1] = [("beam3-start", Self::Beam3)];
+
+    /// The Beam-3 reading of this order ([`beam3_last`] or [`beam3`]), `None` for the
     /// orders that do not use the sequence model.
     pub fn beam_search(&self) -> Option<BeamSearch> {
         match self {
+            Self::Beam3Last => Some(beam3_last),
             Self::Beam3 => Some(beam3),
-            Self::Beam3Start => Some(beam3_from_start),
             Self::Human | Self::Largest | Self::Random => None,
         }
     }
@@ -60,11 +62,12 @@ impl Order {
         self.beam_search().is_some()
     }
 
-    /// Name used on the command line, in the bindings and in tables.
+    /// Name used on the command line, in the bindings and in tables. Parsing also accepts the
+    /// alias [`Order::ALIASES`].
     pub fn name(&self) -> &'static str {
         match self {
             Self::Beam3 => "beam3",
-            Self::Beam3Start => "beam3-start",
+            Self::Beam3Last => "beam3-last",
             Self::Human => "human",
             Self::Largest => "largest",
             Self::Random => "random",
@@ -90,7 +93,7 @@ impl Order {
             return search(m, objects);
         }
         match self {
-            Self::Beam3 | Self::Beam3Start => unreachable!("ordered by beam_search above"),
+            Self::Beam3Last | Self::Beam3 => unreachable!("ordered by beam_search above"),
             Self::Human => Ok(objects.to_vec()),
             Self::Largest => {
                 let mut v = objects.to_vec();
@@ -122,7 +125,10 @@ impl std::str::FromStr for Order {
     type Err = String;
 
     fn from_str(s: &str) -> std::result::Result<Self, String> {
-        parse_name("order", s, &Self::ALL, Self::name)
+        match Self::ALIASES.iter().find(|(alias, _)| *alias == s) {
+            Some(&(_, order)) => Ok(order),
+            None => parse_name("order", s, &Self::ALL, Self::name),
+        }
     }
 }
 

@@ -27,15 +27,15 @@
 //! keeps a parent next to its children; read literally the root beam would be re-expanded
 //! forever (`has_expansion` never becomes false), so an extended beam is replaced by its
 //! children, as in beam search; (2) the pseudo-code restarts every search from `<start>`,
-//! which would ignore every object already chosen; [`beam3`] roots each search at the last
+//! which would ignore every object already chosen; [`beam3_last`] roots each search at the last
 //! object chosen (at `<start>` only for the first), which is what a Markov chain of transitions
-//! is for. The literal reading is [`beam3_from_start`] (`Order::Beam3Start`): each next object
+//! is for. The literal reading is [`beam3`] (`Order::Beam3`): each next object
 //! is the first of the best sequence from `<start>` among the objects left. On the 263 BoxED
 //! episodes it puts large objects much earlier (rank correlation of volume with earliness 0.87
 //! against 0.37, the humans' own orders 0.63; `examples/order_sizes.rs`), as the paper says
 //! its Beam-3 does, and in it the box runs out of room far less often. HERB uses the literal
-//! reading ([`crate::Order::HERB`]; `models/README.md`, "HERB's Beam-3 read as
-//! Algorithm 1 writes it"); [`beam3`] was HERB's order before and stays for comparison.
+//! reading ([`crate::Order::HERB`]; `docs/research-log.md`, "HERB's Beam-3 read as
+//! Algorithm 1 writes it"); [`beam3_last`] was HERB's order before and stays for comparison.
 //!
 //! Ties (equal probabilities) are broken by the lexicographically smallest sequence of type
 //! indices, so the result is deterministic. Repeated types are one branch per distinct type
@@ -358,9 +358,10 @@ impl Beam {
     }
 }
 
-/// Orders `objects` with Beam-3 (see the module docs). Errors on an empty list or a type
+/// Orders `objects` with Beam-3 rooted at the last object chosen (`Order::Beam3Last`; see the
+/// module docs). Errors on an empty list or a type
 /// outside the model.
-pub fn beam3(model: &SequenceModel, objects: &[TypeIdx]) -> Result<Vec<TypeIdx>> {
+pub fn beam3_last(model: &SequenceModel, objects: &[TypeIdx]) -> Result<Vec<TypeIdx>> {
     order(model, objects, |m, state, remaining| {
         next_by_beam(m, state, remaining)
     })
@@ -369,10 +370,10 @@ pub fn beam3(model: &SequenceModel, objects: &[TypeIdx]) -> Result<Vec<TypeIdx>>
 /// Beam-3 as Algorithm 1's pseudo-code writes it: every search starts from `<start>`, so each
 /// next object is the first of the most probable three-object sequence a human would begin
 /// with among the objects left (the object chosen last is not the root). Same beams, width,
-/// ties and fallback as [`beam3`], which roots each search at the last object chosen (the
+/// ties and fallback as [`beam3_last`], which roots each search at the last object chosen (the
 /// module docs give both readings). This reading puts large objects earlier, as the paper says
-/// its Beam-3 does: `Order::Beam3Start`.
-pub fn beam3_from_start(model: &SequenceModel, objects: &[TypeIdx]) -> Result<Vec<TypeIdx>> {
+/// its Beam-3 does: `Order::Beam3`.
+pub fn beam3(model: &SequenceModel, objects: &[TypeIdx]) -> Result<Vec<TypeIdx>> {
     order(model, objects, |m, _last, remaining| {
         next_by_beam(m, State::Start, remaining)
     })

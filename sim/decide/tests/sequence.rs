@@ -1,6 +1,6 @@
 //! Beam-3 (HERB paper, Algorithm 1) on hand-built chains, and the fitted model.
 
-use herb_decide::sequence::{self, SequenceModel, State, beam3, beam3_from_start, greedy};
+use herb_decide::sequence::{self, SequenceModel, State, beam3, beam3_last, greedy};
 use herb_sim::paths::MeshSource;
 use herb_sim::{Catalog, TypeIdx};
 
@@ -57,10 +57,10 @@ fn algorithm_1_worked_example_beats_greedy() {
             (cc, b, 0.2),
         ],
     );
-    assert_eq!(beam3(&m, &[a, b, cc]).unwrap(), vec![b, a, cc]);
+    assert_eq!(beam3_last(&m, &[a, b, cc]).unwrap(), vec![b, a, cc]);
     assert_eq!(greedy(&m, &[a, b, cc]).unwrap(), vec![a, cc, b]);
     // The input order does not matter.
-    assert_eq!(beam3(&m, &[cc, a, b]).unwrap(), vec![b, a, cc]);
+    assert_eq!(beam3_last(&m, &[cc, a, b]).unwrap(), vec![b, a, cc]);
 }
 
 /// The two readings of Algorithm 1, by hand. start: A 0.5, C 0.3, B 0.2. A->B 1, B->C 1,
@@ -68,8 +68,8 @@ fn algorithm_1_worked_example_beats_greedy() {
 ///
 /// First search (from start, both readings): [A .5, C .3, B .2] -> [AB .5, CA .3, BC .2] ->
 /// [ABC .5, CAB .3, BCA .2] -> A.
-/// Rooted at the last object (`beam3`), from A with {B, C} left: [B 1] -> [BC 1] -> B, then C.
-/// Rooted at start (`beam3_from_start`), {B, C} left: [C .3, B .2]; C cannot go on (A is
+/// Rooted at the last object (`beam3_last`), from A with {B, C} left: [B 1] -> [BC 1] -> B, then C.
+/// Rooted at start (`beam3`), {B, C} left: [C .3, B .2]; C cannot go on (A is
 /// used) and is carried, B goes on to BC .2 -> [C .3, BC .2]; nothing extends -> C, then B.
 #[test]
 fn algorithm_1_read_literally_restarts_every_search_from_start() {
@@ -80,9 +80,9 @@ fn algorithm_1_read_literally_restarts_every_search_from_start() {
         &[(a, 0.5), (cc, 0.3), (b, 0.2)],
         &[(a, b, 1.0), (b, cc, 1.0), (cc, a, 1.0)],
     );
-    assert_eq!(beam3(&m, &[a, b, cc]).unwrap(), vec![a, b, cc]);
-    assert_eq!(beam3_from_start(&m, &[a, b, cc]).unwrap(), vec![a, cc, b]);
-    assert_eq!(beam3_from_start(&m, &[b, cc, a]).unwrap(), vec![a, cc, b]);
+    assert_eq!(beam3_last(&m, &[a, b, cc]).unwrap(), vec![a, b, cc]);
+    assert_eq!(beam3(&m, &[a, b, cc]).unwrap(), vec![a, cc, b]);
+    assert_eq!(beam3(&m, &[b, cc, a]).unwrap(), vec![a, cc, b]);
 }
 
 /// Beam width 5 prunes: a path whose prefix falls out of the top 5 is never completed, even if
@@ -105,7 +105,7 @@ fn the_beam_width_prunes_low_prefixes() {
         }
     }
     let m = chain(&c, &start, &trans);
-    let order = beam3(&m, &t).unwrap();
+    let order = beam3_last(&m, &t).unwrap();
     // Unpruned, t[6] first would win (0.1 * 1 * 0.1 = 0.01 > 0.15 * 0.1 * 0.1 = 0.0015).
     assert_ne!(order[0], t[6], "{order:?}");
     // Ties between the six equal starts go to the smallest index sequence.
@@ -120,20 +120,20 @@ fn repeated_types_unseen_types_one_object_and_empty() {
     let m = chain(&c, &[(a, 1.0)], &[(a, a, 0.5), (a, b, 0.5), (b, a, 1.0)]);
     // Repeats: two A and one B. From start only A; then A->A .5 or A->B .5: beams of 3 are
     // A A B (.25 * 1... ) vs A B A (.5 * 1): A B A wins.
-    assert_eq!(beam3(&m, &[a, b, a]).unwrap(), vec![a, b, a]);
+    assert_eq!(beam3_last(&m, &[a, b, a]).unwrap(), vec![a, b, a]);
     // A type never seen: nothing reaches it, so it comes by the fallback when nothing else is
     // reachable, here last.
-    assert_eq!(beam3(&m, &[unseen, a]).unwrap(), vec![a, unseen]);
+    assert_eq!(beam3_last(&m, &[unseen, a]).unwrap(), vec![a, unseen]);
     // Only unseen types: the fallback order (start probability, then volume, then index).
     let big = c.by_id("003").unwrap(); // cracker box, bigger than the toothpaste
     let m0 = chain(&c, &[], &[]);
-    assert_eq!(beam3(&m0, &[unseen, big]).unwrap(), vec![big, unseen]);
-    assert_eq!(beam3(&m, &[b]).unwrap(), vec![b]);
+    assert_eq!(beam3_last(&m0, &[unseen, big]).unwrap(), vec![big, unseen]);
+    assert_eq!(beam3_last(&m, &[b]).unwrap(), vec![b]);
     assert!(matches!(
-        beam3(&m, &[]),
+        beam3_last(&m, &[]),
         Err(herb_decide::DecideError::EmptyObjectList)
     ));
-    assert!(beam3(&m, &[TypeIdx(999)]).is_err());
+    assert!(beam3_last(&m, &[TypeIdx(999)]).is_err());
 }
 
 #[test]
@@ -151,8 +151,8 @@ fn planning_is_deterministic_under_ties() {
     let m = chain(&c, &start, &trans);
     let mut shuffled = types.clone();
     shuffled.reverse();
-    let o1 = beam3(&m, &shuffled).unwrap();
-    let o2 = beam3(&m, &types).unwrap();
+    let o1 = beam3_last(&m, &shuffled).unwrap();
+    let o2 = beam3_last(&m, &types).unwrap();
     assert_eq!(o1, o2);
     assert_eq!(o1, types);
 }

@@ -224,9 +224,9 @@ impl VecEnv {
 #[pymethods]
 impl VecEnv {
     /// `num_envs` environments. `reward`: `simple`, `c` or `cs<alpha>`; `sequence`:
-    /// `beam3-start` (HERB's order, Algorithm 1 read literally,
-    /// `herb_decide::sequence::beam3_from_start`; the default, `HERB_ORDER`), `beam3` (each
-    /// search rooted at the last object chosen) or `random`; `boxed`: the BoxED folder
+    /// `beam3` (HERB's order, Algorithm 1 read literally, `herb_decide::sequence::beam3`;
+    /// the default, `HERB_ORDER`; alias `beam3-start`), `beam3-last` (each search rooted at
+    /// the last object chosen) or `random`; `boxed`: the BoxED folder
     /// (meshes; default `HERB_BOXED` or ../shared/boxed, primitives without it);
     /// `meshes=False` forces primitives; `sequence_model`: the transition counts (default
     /// `models/sequence.json` in the working directory, else in the checkout the extension was
@@ -259,10 +259,10 @@ impl VecEnv {
         // Sampled episodes have no human order to keep and no reason to go largest first.
         let sequence = sequence.unwrap_or(Order::HERB.name());
         let order = match sequence.parse::<Order>() {
-            Ok(o @ (Order::Beam3 | Order::Beam3Start | Order::Random)) => o,
+            Ok(o @ (Order::Beam3Last | Order::Beam3 | Order::Random)) => o,
             _ => {
                 return Err(value_err(format!(
-                    "sequence {sequence:?}: expected beam3, beam3-start or random"
+                    "sequence {sequence:?}: expected beam3, beam3-last or random"
                 )));
             }
         };

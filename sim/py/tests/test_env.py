@@ -79,7 +79,7 @@ def test_cs_rewards_are_in_range():
     [
         (dict(reward="cs1.5"), "alpha"),
         (dict(reward="fast"), "unknown reward mode"),
-        (dict(sequence="sorted"), "beam3, beam3-start or random"),
+        (dict(sequence="sorted"), "beam3, beam3-last or random"),
         (dict(min_objects=6, max_objects=5), "objects per episode"),
         (dict(sequence_model="/nonexistent/sequence.json"), "sequence.json"),
     ],
@@ -136,7 +136,7 @@ def test_expert_actions_of_an_ended_episode_are_invalid():
 
 def test_episodes_default_to_herbs_order():
     # HERB orders with Beam-3 as Algorithm 1 writes it; the bindings default to it.
-    assert herb_sim.HERB_ORDER == "beam3-start"
+    assert herb_sim.HERB_ORDER == "beam3"
 
     def second_objects(**kw):
         # Both readings pick the same first object (a search from <start>); they part from the
@@ -150,4 +150,4 @@ def test_episodes_default_to_herbs_order():
 
     default = second_objects()
     assert np.array_equal(default, second_objects(sequence=herb_sim.HERB_ORDER))
-    assert not np.array_equal(default, second_objects(sequence="beam3"))
+    assert not np.array_equal(default, second_objects(sequence="beam3-last"))

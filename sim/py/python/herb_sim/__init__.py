@@ -7,9 +7,9 @@
 Observations follow the shared layout (``[2, 224, 224]`` float32 in ``[0, 1]``: box heightmap
 and the next object's top-down projection); actions are ``(x, y, theta)`` in ``[-1, 1]^3``.
 Rewards: ``simple``, ``c`` or ``cs<alpha>`` (HERB paper). Episodes: random multisets of catalog
-objects ordered by HERB's Beam-3 (``HERB_ORDER``, ``"beam3-start"``: Algorithm 1 as written; the
-default), by the other reading (``"beam3"``, each search rooted at the last object chosen) or
-randomly (``"random"``).
+objects ordered by HERB's Beam-3 (``HERB_ORDER``, ``"beam3"``: Algorithm 1 as written; the
+default; ``"beam3-start"`` is an alias kept for one release), by the other reading
+(``"beam3-last"``, each search rooted at the last object chosen) or randomly (``"random"``).
 """
 
 from __future__ import annotations
