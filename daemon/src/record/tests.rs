@@ -1,0 +1,200 @@
+//! The run log written by the writer thread and read back.
+
+use super::*;
+use herb_ipc::{Header, HeightmapFrame, JointState, Payload};
+use herb_robot::kinematics::DOF;
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+fn js(seq: u64) -> JointState {
+    JointState {
+        header: Header::at(seq, 1000 + seq),
+        position: [0.1 * seq as f64; DOF],
+        velocity: [f64::from_bits(0x7ff8_0000_0000_0042); DOF],
+    }
+}
+
+fn header() -> RunHeader {
+    RunHeader {
+        herbd: "test".into(),
+        cpu: cpu_identity(),
+        started_unix_s: 42,
+        config_toml: "[loop]\nrate_hz = 1000.0\n".into(),
+        catalog: 1,
+        policy: 2,
+        sequence: 3,
+        segment: 0,
+    }
+}
+
+fn dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("herb-record-{}-{tag}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+#[test]
+fn a_recording_reads_back_record_for_record_and_bit_for_bit() {
+    let d = dir("rt");
+    let rec = start(
+        RecordOptions {
+            dir: d.clone(),
+            segment_bytes: 1 << 30,
+            keep_bytes: 1 << 30,
+        },
+        header(),
+    )
+    .unwrap();
+    let Recording {
+        mut recorder,
+        frames,
+        writer,
+        stop,
+    } = rec;
+    let mut frame: Box<HeightmapFrame> =
+        HeightmapFrame::from_bytes(&vec![0u8; std::mem::size_of::<HeightmapFrame>()])
+            .unwrap()
+            .into();
+    frame.nx = 3;
+    frame.ny = 2;
+    frame.data[5] = 0.25;
+    for i in 1..=50u64 {
+        recorder.push(LoopRec::Cycle { now: i * 1000 });
+        recorder.push(LoopRec::Js {
+            publisher: 7,
+            received: i,
+            m: js(i),
+        });
+        recorder.push(LoopRec::Tick {
+            stop: i == 50,
+            digest: i * 3,
+        });
+    }
+    recorder.push(LoopRec::Resp(RespRec {
+        digest: 9,
+        decision_ns: 400_000,
+    }));
+    frames(0, Some(&frame));
+    frames(1, None);
+    frames(2, Some(&frame));
+    std::thread::sleep(Duration::from_millis(50));
+    stop.store(true, Ordering::Relaxed);
+    let files = writer.join().unwrap().unwrap();
+    assert_eq!(files.len(), 1);
+    let log = Log::read(&files[0]).unwrap();
+    assert_eq!(log.header, header());
+    assert!(log.incomplete.is_none());
+    assert_eq!(log.entries.len(), 151);
+    let Entry::Js(p, r, m) = log.entries[1] else {
+        panic!("{:?}", log.entries[1])
+    };
+    assert_eq!((p, r), (7, 1));
+    assert_eq!(m.as_bytes(), js(1).as_bytes(), "NaN payloads kept");
+    assert!(matches!(log.entries[149], Entry::Tick(true, 150)));
+    assert!(matches!(
+        log.entries[150],
+        Entry::Resp(RespRec {
+            digest: 9,
+            decision_ns: 400_000
+        })
+    ));
+    // Frames: two requests served with the same frame, stored once.
+    assert_eq!(log.frames.len(), 1);
+    assert_eq!(log.plan_frames.get(&1), Some(&None));
+    let f0 = log.plan_frames[&0].unwrap();
+    assert_eq!(log.plan_frames[&2], Some(f0));
+    assert_eq!(log.frames[&f0].cells(), frame.cells());
+
+    // A torn tail: what comes before it is read, and the log says where it ends.
+    let data = std::fs::read(&files[0]).unwrap();
+    let torn = d.join("torn.log");
+    std::fs::write(&torn, &data[..data.len() - 3]).unwrap();
+    let log = Log::read(&torn).unwrap();
+    assert!(log.incomplete.unwrap().contains("torn"));
+    // A flipped bit: a CRC error.
+    let mut bad = data.clone();
+    let n = bad.len();
+    bad[n - 30] ^= 1;
+    std::fs::write(&torn, &bad).unwrap();
+    assert!(
+        Log::read(&torn)
+            .unwrap()
+            .incomplete
+            .unwrap()
+            .contains("CRC")
+    );
+    // Not a log.
+    std::fs::write(&torn, b"hello").unwrap();
+    assert!(Log::read(&torn).unwrap_err().contains("not a HERB run log"));
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn segments_rotate_between_jobs_and_the_oldest_are_deleted() {
+    let d = dir("rot");
+    let Recording {
+        mut recorder,
+        writer,
+        stop,
+        ..
+    } = start(
+        RecordOptions {
+            dir: d.clone(),
+            segment_bytes: 20_000,
+            keep_bytes: 50_000,
+        },
+        header(),
+    )
+    .unwrap();
+    let cfg = crate::config::Config::default();
+    let buf = || Box::new(crate::plan::MotionPlan::with_capacity(1));
+    let params = crate::job::JobParams {
+        timeouts: (&cfg.timeouts).into(),
+        lower: cfg.limits.lower,
+        upper: cfg.limits.upper,
+        catalog_len: 24,
+        grasp_retries: 1,
+    };
+    let snap = crate::job::Job::new(params, buf(), buf())
+        .snapshot()
+        .expect("idle");
+    let mut rotations = 0;
+    for i in 1..=2000u64 {
+        recorder.push(LoopRec::Cycle { now: i });
+        recorder.push(LoopRec::Js {
+            publisher: 1,
+            received: i,
+            m: js(i),
+        });
+        if recorder.wants_snapshot() {
+            recorder.snapshot(i, snap);
+            rotations += 1;
+        }
+        if i % 100 == 0 {
+            std::thread::sleep(Duration::from_millis(120));
+        }
+    }
+    stop.store(true, Ordering::Relaxed);
+    let files = writer.join().unwrap().unwrap();
+    assert!(rotations >= 3, "{rotations}");
+    let on_disk: Vec<_> = std::fs::read_dir(&d).unwrap().collect();
+    let closed: u64 = files[..files.len() - 1]
+        .iter()
+        .filter_map(|p| std::fs::metadata(p).ok())
+        .map(|m| m.len())
+        .sum();
+    assert_eq!(on_disk.len(), files.len());
+    assert!(on_disk.len() < rotations + 1, "old segments deleted");
+    assert!(
+        closed <= 50_000,
+        "closed segments within keep_bytes: {closed}"
+    );
+    // A later segment starts from its snapshot.
+    let last = Log::read(files.last().unwrap()).unwrap();
+    let (before, s) = last.snapshot.expect("a snapshot");
+    assert!(before > 0);
+    assert_eq!(s, snap);
+    assert!(last.header.segment >= 3);
+    let _ = std::fs::remove_dir_all(&d);
+}
