@@ -62,6 +62,22 @@ const RULES: &[(&str, &[&str])] = &[
     ),
     // herbd: no pictures (herbctl, its own crate, draws them).
     ("herb-daemon", &["plotters"]),
+    // The Rust client library: the wire and iceoryx2 only; no physics engine, policies'
+    // runtime or pictures, and none of the crates that bring them.
+    (
+        "herb-client",
+        &[
+            "rapier3d",
+            "tract-onnx",
+            "plotters",
+            "herb-core",
+            "herb-sim",
+            "herb-picture",
+            "herb-decide",
+            "herb-robot",
+            "herb-daemon",
+        ],
+    ),
     ("herb-robot", ROBOT_SIDE_NEVER),
     (
         "herb-adapter",
