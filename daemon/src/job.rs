@@ -199,24 +199,7 @@ pub struct Job {
     upper: [f64; DOF],
     catalog_len: usize,
     grasp_retries: u32,
-    // latched inputs
-    js: Option<JointState>,
-    js_at: u64,
-    /// Order of the joint states (per publisher: sequence and stamp grow).
-    js_order: InOrder,
-    gs: Option<GripperState>,
-    gs_at: u64,
-    /// Order of the gripper states.
-    gs_order: InOrder,
-    /// The arm adapter's latest word on why it withholds state, and its stamp.
-    arm_blocker: ArmBlocker,
-    arm_at: u64,
-    arm_order: InOrder,
-    /// When the newest valid heightmap was received (the cycle's start).
-    hm_rx_at: u64,
-    /// The newest valid heightmap's capture stamp.
-    hm_stamp: u64,
-    rejected: u64,
+    inputs: Inputs,
     // the job
     phase: Phase,
     job_id: u64,
@@ -247,41 +230,105 @@ pub struct Job {
     active: Option<Box<MotionPlan>>,
     spare: Option<Box<MotionPlan>>,
     brake: Option<Box<MotionPlan>>,
-    // commands
-    cmd: Setpoint,
+    out: Commands,
     commanding: bool,
-    grip_cmd: GripperAction,
-    grip_object: u32,
-    /// The gripper command changed: publish it at this tick.
-    grip_due: bool,
-    grip_sent_at: u64,
-    last_heartbeat: u64,
-    limit_holds: u64,
     stopping: bool,
 }
 
-/// The machine's state between jobs (no job, no request at the planner, both buffers home):
-/// what a run log's later segment starts from ([`Job::snapshot`], [`Job::restore`]).
+/// The machine's latched inputs: the newest valid sample of each source, the order checks that
+/// admitted them, and how many were rejected.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct JobSnapshot {
-    /// Latest joint state.
+pub struct Inputs {
+    /// The latest joint state.
     pub js: Option<JointState>,
     /// Its stamp.
     pub js_at: u64,
-    /// Order check of the joint states.
-    pub js_order: Option<(u128, u64, u64)>,
-    /// Latest gripper state.
+    /// Order of the joint states (per publisher: sequence and stamp grow).
+    pub js_order: InOrder,
+    /// The latest gripper state.
     pub gs: Option<GripperState>,
     /// Its stamp.
     pub gs_at: u64,
-    /// Order check of the gripper states.
-    pub gs_order: Option<(u128, u64, u64)>,
-    /// When the newest valid frame was received.
+    /// Order of the gripper states.
+    pub gs_order: InOrder,
+    /// The arm adapter's latest word on why it withholds state.
+    pub arm_blocker: ArmBlocker,
+    /// Its stamp.
+    pub arm_at: u64,
+    /// Order of the arm adapter's statuses.
+    pub arm_order: InOrder,
+    /// When the newest valid heightmap was received (the cycle's start).
     pub hm_rx_at: u64,
-    /// The newest valid frame's stamp.
+    /// The newest valid heightmap's capture stamp.
     pub hm_stamp: u64,
-    /// Inputs rejected.
+    /// Inputs rejected (invalid, from the future, out of order; bad job and cancel requests).
     pub rejected: u64,
+}
+
+impl Default for Inputs {
+    /// Nothing received yet.
+    fn default() -> Self {
+        Self {
+            js: None,
+            js_at: 0,
+            js_order: InOrder::default(),
+            gs: None,
+            gs_at: 0,
+            gs_order: InOrder::default(),
+            arm_blocker: ArmBlocker::None,
+            arm_at: 0,
+            arm_order: InOrder::default(),
+            hm_rx_at: 0,
+            hm_stamp: 0,
+            rejected: 0,
+        }
+    }
+}
+
+/// What the machine commands: the last joint command, the gripper command and when it was
+/// published, the heartbeat, and the commands held at the limits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Commands {
+    /// The last joint command (what a brake starts from).
+    pub cmd: Setpoint,
+    /// The gripper command.
+    pub grip_cmd: GripperAction,
+    /// The object it names (`NO_OBJECT`: none).
+    pub grip_object: u32,
+    /// The gripper command changed: it is published at the next tick.
+    pub grip_due: bool,
+    /// When the gripper command was last published.
+    pub grip_sent_at: u64,
+    /// When the last heartbeat was published.
+    pub last_heartbeat: u64,
+    /// Commands outside the joint limits replaced by holding the last one.
+    pub limit_holds: u64,
+}
+
+impl Default for Commands {
+    /// Nothing commanded yet: the gripper open.
+    fn default() -> Self {
+        Self {
+            cmd: Setpoint::default(),
+            grip_cmd: GripperAction::Open,
+            grip_object: NO_OBJECT,
+            grip_due: false,
+            grip_sent_at: 0,
+            last_heartbeat: 0,
+            limit_holds: 0,
+        }
+    }
+}
+
+/// The machine's state between jobs (no job, no request at the planner, both buffers home,
+/// nothing commanded): what a run log's later segment starts from ([`Job::snapshot`],
+/// [`Job::restore`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JobSnapshot {
+    /// The latched inputs.
+    pub inputs: Inputs,
+    /// The last commands (the gripper's is repeated between jobs too).
+    pub commands: Commands,
     /// The last job's id (0 between jobs).
     pub job_id: u64,
     /// The last job's order.
@@ -296,22 +343,10 @@ pub struct JobSnapshot {
     pub release_stamp: u64,
     /// An object is believed held.
     pub holding: bool,
-    /// The last fault (code).
-    pub fault: u32,
-    /// The last command.
-    pub cmd: [[f64; DOF]; 3],
-    /// Commanding.
-    pub commanding: bool,
-    /// The gripper command (code), its object, whether due, when last sent.
-    pub grip: (u32, u32, bool, u64),
-    /// The last heartbeat.
-    pub last_heartbeat: u64,
-    /// Commands held at the limits.
-    pub limit_holds: u64,
+    /// The last fault.
+    pub fault: Fault,
     /// Stopping.
     pub stopping: bool,
-    /// The arm adapter's last status: blocker code, stamp, order check.
-    pub arm: (u32, u64, Option<(u128, u64, u64)>),
 }
 
 /// A recovered job's arm stands at an object's release configuration when every joint is
@@ -359,18 +394,7 @@ impl Job {
             upper: p.upper,
             catalog_len: p.catalog_len,
             grasp_retries: p.grasp_retries,
-            js: None,
-            js_at: 0,
-            js_order: InOrder::default(),
-            gs: None,
-            gs_at: 0,
-            gs_order: InOrder::default(),
-            arm_blocker: ArmBlocker::None,
-            arm_at: 0,
-            arm_order: InOrder::default(),
-            hm_rx_at: 0,
-            hm_stamp: 0,
-            rejected: 0,
+            inputs: Inputs::default(),
             phase: Phase::Idle,
             job_id: 0,
             objects: [0; MAX_JOB_OBJECTS],
@@ -391,14 +415,8 @@ impl Job {
             active: Some(a),
             spare: Some(b),
             brake: None,
-            cmd: Setpoint::default(),
+            out: Commands::default(),
             commanding: false,
-            grip_cmd: GripperAction::Open,
-            grip_object: NO_OBJECT,
-            grip_due: false,
-            grip_sent_at: 0,
-            last_heartbeat: 0,
-            limit_holds: 0,
             stopping: false,
         }
     }
@@ -409,12 +427,12 @@ impl Job {
         match m.validate() {
             Ok(())
                 if not_from_the_future(m.header.stamp_ns, now, received_ns)
-                    && self.js_order.accept(publisher, &m.header) =>
+                    && self.inputs.js_order.accept(publisher, &m.header) =>
             {
-                self.js = Some(*m);
-                self.js_at = m.header.stamp_ns;
+                self.inputs.js = Some(*m);
+                self.inputs.js_at = m.header.stamp_ns;
             }
-            _ => self.rejected += 1,
+            _ => self.inputs.rejected += 1,
         }
     }
 
@@ -423,12 +441,12 @@ impl Job {
         match m.validate() {
             Ok(())
                 if not_from_the_future(m.header.stamp_ns, now, received_ns)
-                    && self.gs_order.accept(publisher, &m.header) =>
+                    && self.inputs.gs_order.accept(publisher, &m.header) =>
             {
-                self.gs = Some(*m);
-                self.gs_at = m.header.stamp_ns;
+                self.inputs.gs = Some(*m);
+                self.inputs.gs_at = m.header.stamp_ns;
             }
-            _ => self.rejected += 1,
+            _ => self.inputs.rejected += 1,
         }
     }
 
@@ -437,12 +455,13 @@ impl Job {
         match m.validate() {
             Ok(())
                 if not_from_the_future(m.header.stamp_ns, now, received_ns)
-                    && self.arm_order.accept(publisher, &m.header) =>
+                    && self.inputs.arm_order.accept(publisher, &m.header) =>
             {
-                self.arm_blocker = ArmBlocker::from_code(m.blocker).unwrap_or(ArmBlocker::None);
-                self.arm_at = m.header.stamp_ns;
+                self.inputs.arm_blocker =
+                    ArmBlocker::from_code(m.blocker).unwrap_or(ArmBlocker::None);
+                self.inputs.arm_at = m.header.stamp_ns;
             }
-            _ => self.rejected += 1,
+            _ => self.inputs.rejected += 1,
         }
     }
 
@@ -451,10 +470,10 @@ impl Job {
     pub fn heightmap(&mut self, f: &HeightmapFrame, now: u64) {
         match f.validate_meta() {
             Ok(()) => {
-                self.hm_rx_at = now;
-                self.hm_stamp = self.hm_stamp.max(f.header.stamp_ns);
+                self.inputs.hm_rx_at = now;
+                self.inputs.hm_stamp = self.inputs.hm_stamp.max(f.header.stamp_ns);
             }
-            Err(_) => self.rejected += 1,
+            Err(_) => self.inputs.rejected += 1,
         }
     }
 
@@ -469,7 +488,7 @@ impl Job {
                 Err((RejectReason::Busy, 0))
             } else if let Some(why) = self.not_ready(now) {
                 Err((RejectReason::NotReady, why as u32))
-            } else if let Some(g) = self.gs.filter(|g| g.holding == 1) {
+            } else if let Some(g) = self.inputs.gs.filter(|g| g.holding == 1) {
                 // What the gripper holds is the truth: never start a job that would place it.
                 let known = (g.object_type != NO_OBJECT).then_some(g.object_type);
                 let believed = self.holding.then(|| self.current_type());
@@ -483,7 +502,7 @@ impl Job {
         });
         let (reason, detail) = verdict.err().unwrap_or((RejectReason::None, 0));
         if reason != RejectReason::None {
-            self.rejected += 1;
+            self.inputs.rejected += 1;
         }
         fx.reply(r.job_id, reason, detail);
         if reason == RejectReason::None {
@@ -503,7 +522,7 @@ impl Job {
             Ok(()) => RejectReason::None,
         };
         if reason != RejectReason::None {
-            self.rejected += 1;
+            self.inputs.rejected += 1;
         }
         fx.cancel_reply(r.job_id, reason);
         if reason != RejectReason::None || self.cancelling {
@@ -524,15 +543,15 @@ impl Job {
 
     /// Asks for the retreat of a cancelled job (when a buffer is home; else on a later tick).
     fn retreat(&mut self, fx: &mut impl Effects) {
-        self.cmd.velocity = [0.0; DOF];
-        self.cmd.acceleration = [0.0; DOF];
+        self.out.cmd.velocity = [0.0; DOF];
+        self.out.cmd.acceleration = [0.0; DOF];
         self.phase = Phase::Retreating { asked: false };
         let Some(buf) = self.spare.take() else {
             return;
         };
-        let held = self.holding || self.gs.is_some_and(|g| g.holding == 1);
+        let held = self.holding || self.inputs.gs.is_some_and(|g| g.holding == 1);
         let req = Request::Retreat {
-            from: self.cmd.position,
+            from: self.out.cmd.position,
             held: held.then(|| self.order.get(self.index).copied()).flatten(),
             buf,
         };
@@ -557,19 +576,19 @@ impl Job {
         self.done = 0;
         self.fault = Fault::None;
         self.cancelling = false;
-        self.holding = self.gs.is_some_and(|g| g.holding == 1);
+        self.holding = self.inputs.gs.is_some_and(|g| g.holding == 1);
         self.missed = 0;
         self.announced = false;
         self.release_stamp = 0;
-        let q = self.js.map(|j| j.position).unwrap_or_default();
-        self.cmd = Setpoint::at_rest(q);
+        let q = self.inputs.js.map(|j| j.position).unwrap_or_default();
+        self.out.cmd = Setpoint::at_rest(q);
         self.commanding = true;
         // A known gripper state to start from: open, unless it holds something (which the job
         // then deals with as its first object's grasp would: it is never dropped here).
         if !self.holding {
-            self.grip_cmd = GripperAction::Open;
-            self.grip_object = NO_OBJECT;
-            self.grip_due = true;
+            self.out.grip_cmd = GripperAction::Open;
+            self.out.grip_object = NO_OBJECT;
+            self.out.grip_due = true;
         }
         let _ = fx.plan(Request::Order {
             job_id: r.job_id,
@@ -716,15 +735,8 @@ impl Job {
             return None;
         }
         Some(JobSnapshot {
-            js: self.js,
-            js_at: self.js_at,
-            js_order: self.js_order.last(),
-            gs: self.gs,
-            gs_at: self.gs_at,
-            gs_order: self.gs_order.last(),
-            hm_rx_at: self.hm_rx_at,
-            hm_stamp: self.hm_stamp,
-            rejected: self.rejected,
+            inputs: self.inputs,
+            commands: self.out,
             job_id: self.job_id,
             order: self.order,
             count: self.count as u64,
@@ -732,34 +744,16 @@ impl Job {
             done: self.done as u64,
             release_stamp: self.release_stamp,
             holding: self.holding,
-            fault: self.fault as u32,
-            cmd: [self.cmd.position, self.cmd.velocity, self.cmd.acceleration],
-            commanding: self.commanding,
-            grip: (
-                self.grip_cmd as u32,
-                self.grip_object,
-                self.grip_due,
-                self.grip_sent_at,
-            ),
-            last_heartbeat: self.last_heartbeat,
-            limit_holds: self.limit_holds,
+            fault: self.fault,
             stopping: self.stopping,
-            arm: (self.arm_blocker as u32, self.arm_at, self.arm_order.last()),
         })
     }
 
     /// Takes up the state of `s` (an idle machine's), keeping this machine's buffers and
     /// parameters.
     pub fn restore(&mut self, s: &JobSnapshot) {
-        self.js = s.js;
-        self.js_at = s.js_at;
-        self.js_order = InOrder::with_last(s.js_order);
-        self.gs = s.gs;
-        self.gs_at = s.gs_at;
-        self.gs_order = InOrder::with_last(s.gs_order);
-        self.hm_rx_at = s.hm_rx_at;
-        self.hm_stamp = s.hm_stamp;
-        self.rejected = s.rejected;
+        self.inputs = s.inputs;
+        self.out = s.commands;
         self.phase = Phase::Idle;
         self.job_id = s.job_id;
         self.order = s.order;
@@ -771,25 +765,12 @@ impl Job {
         self.ordered = false;
         self.placement = None;
         self.recovered = false;
-        self.fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
+        self.fault = s.fault;
         self.cancelling = false;
-        self.cmd = Setpoint {
-            position: s.cmd[0],
-            velocity: s.cmd[1],
-            acceleration: s.cmd[2],
-        };
-        self.commanding = s.commanding;
-        self.grip_cmd = GripperAction::from_code(s.grip.0).unwrap_or(GripperAction::Open);
-        self.grip_object = s.grip.1;
-        self.grip_due = s.grip.2;
-        self.grip_sent_at = s.grip.3;
-        self.last_heartbeat = s.last_heartbeat;
-        self.limit_holds = s.limit_holds;
+        // Between jobs nothing is commanded.
+        self.commanding = false;
         self.stopping = s.stopping;
         self.announced = false;
-        self.arm_blocker = ArmBlocker::from_code(s.arm.0).unwrap_or(ArmBlocker::None);
-        self.arm_at = s.arm.1;
-        self.arm_order = InOrder::with_last(s.arm.2);
         self.missed = 0;
     }
 
@@ -805,12 +786,12 @@ impl Job {
 
     /// Inputs rejected so far (invalid, from the future, out of order; bad job requests).
     pub fn rejected_inputs(&self) -> u64 {
-        self.rejected
+        self.inputs.rejected
     }
 
     /// Commands outside the joint limits replaced by holding the last one.
     pub fn limit_holds(&self) -> u64 {
-        self.limit_holds
+        self.out.limit_holds
     }
 
     /// The running job as the journal keeps it ([`JournalRecord::NONE`] between jobs and
@@ -882,9 +863,9 @@ impl Job {
     /// Why a job cannot run now, if it cannot: the stale input's fault (see
     /// [`Job::stale_input`]), or the missing one's.
     fn not_ready(&self, now: u64) -> Option<Fault> {
-        if self.js.is_none() {
+        if self.inputs.js.is_none() {
             Some(self.joint_fault(now))
-        } else if self.gs.is_none() {
+        } else if self.inputs.gs.is_none() {
             Some(Fault::GripperStateTimeout)
         } else {
             self.stale_input(now)
@@ -896,8 +877,8 @@ impl Job {
     /// the robot can move while no joint state comes: the robot is silent); else the adapter
     /// itself is silent (stopped, killed: its last word came before its last joint state).
     fn joint_fault(&self, now: u64) -> Fault {
-        let said_recently = self.arm_status_fresh(now) && self.arm_at > self.js_at;
-        match self.arm_blocker {
+        let said_recently = self.arm_status_fresh(now) && self.inputs.arm_at > self.inputs.js_at;
+        match self.inputs.arm_blocker {
             _ if !said_recently => Fault::JointStateTimeout,
             ArmBlocker::None => Fault::RobotSilent,
             b => b.fault(),
@@ -906,15 +887,15 @@ impl Job {
 
     /// The arm adapter spoke within three of its status periods.
     fn arm_status_fresh(&self, now: u64) -> bool {
-        self.arm_at != 0 && now.saturating_sub(self.arm_at) < 3 * ARM_STATUS_PERIOD_NS
+        self.inputs.arm_at != 0 && now.saturating_sub(self.inputs.arm_at) < 3 * ARM_STATUS_PERIOD_NS
     }
 
     fn stale_input(&self, now: u64) -> Option<Fault> {
-        if now.saturating_sub(self.js_at) >= self.t.joint_state_ns {
+        if now.saturating_sub(self.inputs.js_at) >= self.t.joint_state_ns {
             Some(self.joint_fault(now))
-        } else if now.saturating_sub(self.gs_at) >= self.t.gripper_state_ns {
+        } else if now.saturating_sub(self.inputs.gs_at) >= self.t.gripper_state_ns {
             Some(Fault::GripperStateTimeout)
-        } else if now.saturating_sub(self.hm_rx_at) >= self.t.heightmap_ns {
+        } else if now.saturating_sub(self.inputs.hm_rx_at) >= self.t.heightmap_ns {
             Some(Fault::HeightmapTimeout)
         } else {
             None
@@ -950,8 +931,8 @@ impl Job {
 
     /// The last command moves the arm.
     fn moving(&self) -> bool {
-        self.cmd.velocity.iter().any(|v| *v != 0.0)
-            || self.cmd.acceleration.iter().any(|a| *a != 0.0)
+        self.out.cmd.velocity.iter().any(|v| *v != 0.0)
+            || self.out.cmd.acceleration.iter().any(|a| *a != 0.0)
     }
 
     fn begin_brake(&mut self, fx: &mut impl Effects) {
@@ -962,7 +943,7 @@ impl Job {
         };
         if moving && let Some(buf) = self.spare.take() {
             match fx.plan(Request::Brake {
-                state: self.cmd,
+                state: self.out.cmd,
                 buf,
             }) {
                 Ok(()) => {
@@ -981,8 +962,8 @@ impl Job {
     }
 
     fn enter_faulted(&mut self, fx: &mut impl Effects) {
-        self.cmd.velocity = [0.0; DOF];
-        self.cmd.acceleration = [0.0; DOF];
+        self.out.cmd.velocity = [0.0; DOF];
+        self.out.cmd.acceleration = [0.0; DOF];
         self.phase = Phase::Faulted {
             healthy_since: None,
         };
@@ -1042,7 +1023,7 @@ impl Job {
             index: self.index as u32,
             object: self.order[self.index],
             after_stamp_ns: self.release_stamp,
-            from: self.cmd.position,
+            from: self.out.cmd.position,
             place_only,
             repick: false,
             pose,
@@ -1064,7 +1045,7 @@ impl Job {
                 }
                 if now.saturating_sub(since) > self.t.fresh_heightmap_ns {
                     self.raise(fx, Fault::HeightmapTimeout);
-                } else if self.hm_stamp > self.release_stamp {
+                } else if self.inputs.hm_stamp > self.release_stamp {
                     self.request_plan(fx, false, since);
                 }
             }
@@ -1118,7 +1099,7 @@ impl Job {
                     // (An adapter that says "ready" while its first joint state is on the way
                     // changes nothing.)
                     let ready_said =
-                        self.arm_blocker == ArmBlocker::None && self.arm_status_fresh(now);
+                        self.inputs.arm_blocker == ArmBlocker::None && self.arm_status_fresh(now);
                     if arm_unseen(why) && arm_unseen(self.fault) && why != self.fault && !ready_said
                     {
                         self.fault = why;
@@ -1146,7 +1127,7 @@ impl Job {
         seg: usize,
         since: u64,
     ) {
-        let Some(g) = self.gs else { return };
+        let Some(g) = self.inputs.gs else { return };
         let reached = match action {
             GripperAction::Close => g.closed == 1 && g.holding == 1,
             GripperAction::Open => g.closed == 0,
@@ -1177,9 +1158,9 @@ impl Job {
                 self.fault = Fault::MissedGrasp;
                 self.missed += 1;
                 self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
-                self.grip_cmd = GripperAction::Open;
-                self.grip_object = NO_OBJECT;
-                self.grip_due = true;
+                self.out.grip_cmd = GripperAction::Open;
+                self.out.grip_object = NO_OBJECT;
+                self.out.grip_due = true;
                 self.phase = Phase::Regrasp { since: now };
                 return;
             }
@@ -1195,7 +1176,7 @@ impl Job {
         if self.stopping {
             return;
         }
-        let Some(g) = self.gs else { return };
+        let Some(g) = self.inputs.gs else { return };
         let opened = g.closed == 0 && g.header.stamp_ns >= since;
         if !opened {
             if now.saturating_sub(since) > self.t.gripper_action_ns {
@@ -1235,7 +1216,7 @@ impl Job {
             index: self.index as u32,
             object: self.order[self.index],
             after_stamp_ns: self.release_stamp,
-            from: self.cmd.position,
+            from: self.out.cmd.position,
             place_only: false,
             repick: true,
             pose: p.pose,
@@ -1264,15 +1245,15 @@ impl Job {
                     && active_cursor < sg.end
                     && let Some(s) = p.setpoints.get(active_cursor)
                 {
-                    self.cmd = *s;
+                    self.out.cmd = *s;
                     self.phase = Phase::Braking {
                         cursor: None,
                         seg,
                         active_cursor: active_cursor + 1,
                     };
                 } else {
-                    self.cmd.velocity = [0.0; DOF];
-                    self.cmd.acceleration = [0.0; DOF];
+                    self.out.cmd.velocity = [0.0; DOF];
+                    self.out.cmd.acceleration = [0.0; DOF];
                 }
             }
             Some(k) => {
@@ -1282,7 +1263,7 @@ impl Job {
                     .and_then(|b| b.setpoints.get(k).copied());
                 match next {
                     Some(s) => {
-                        self.cmd = s;
+                        self.out.cmd = s;
                         self.phase = Phase::Braking {
                             cursor: Some(k + 1),
                             seg,
@@ -1294,8 +1275,8 @@ impl Job {
                             self.recycle(b);
                         }
                         if self.cancelling && !self.stopping {
-                            self.cmd.velocity = [0.0; DOF];
-                            self.cmd.acceleration = [0.0; DOF];
+                            self.out.cmd.velocity = [0.0; DOF];
+                            self.out.cmd.acceleration = [0.0; DOF];
                             self.emit(fx, StatusEvent::Braked, self.current_type(), [0.0; 4], 0);
                             self.retreat(fx);
                         } else {
@@ -1309,12 +1290,12 @@ impl Job {
 
     fn resume(&mut self, fx: &mut impl Effects, now: u64) {
         // Re-synchronise to where the arm is.
-        if let Some(j) = self.js {
-            self.cmd = Setpoint::at_rest(j.position);
+        if let Some(j) = self.inputs.js {
+            self.out.cmd = Setpoint::at_rest(j.position);
         }
         // A recovered job commands nothing before this.
         self.commanding = true;
-        let held = self.gs.is_some_and(|g| g.holding == 1);
+        let held = self.inputs.gs.is_some_and(|g| g.holding == 1);
         self.emit(fx, StatusEvent::Resumed, self.current_type(), [0.0; 4], 0);
         if self.recovered {
             self.recovered = false;
@@ -1337,12 +1318,12 @@ impl Job {
             // The grasp closed while the job was halted: the current object is in the gripper.
             self.holding = true;
         }
-        self.grip_cmd = if self.holding {
+        self.out.grip_cmd = if self.holding {
             GripperAction::Close
         } else {
             GripperAction::Open
         };
-        self.grip_object = if self.holding {
+        self.out.grip_object = if self.holding {
             self.current_type()
         } else {
             NO_OBJECT
@@ -1366,7 +1347,7 @@ impl Job {
     fn take_up_measured_state(&mut self, fx: &mut impl Effects, held: bool, now: u64) -> bool {
         let placement = self.placement.filter(|p| p.index as usize == self.index);
         let at_release = |p: &Placement| {
-            self.js.is_some_and(|j| {
+            self.inputs.js.is_some_and(|j| {
                 j.position
                     .iter()
                     .zip(&p.release_q)
@@ -1424,7 +1405,7 @@ impl Job {
         };
         if cursor < sg.end {
             if let Some(s) = p.setpoints.get(cursor) {
-                self.cmd = *s;
+                self.out.cmd = *s;
             }
             self.phase = Phase::Streaming {
                 seg,
@@ -1433,17 +1414,17 @@ impl Job {
             return;
         }
         // At the segment's end, at rest.
-        self.cmd.velocity = [0.0; DOF];
-        self.cmd.acceleration = [0.0; DOF];
+        self.out.cmd.velocity = [0.0; DOF];
+        self.out.cmd.acceleration = [0.0; DOF];
         match sg.then {
             Some(action) => {
-                self.grip_cmd = action;
-                self.grip_object = if action == GripperAction::Close {
+                self.out.grip_cmd = action;
+                self.out.grip_object = if action == GripperAction::Close {
                     p.object as u32
                 } else {
                     NO_OBJECT
                 };
-                self.grip_due = true;
+                self.out.grip_due = true;
                 self.phase = Phase::Gripper {
                     action,
                     seg,
@@ -1459,24 +1440,24 @@ impl Job {
             // Faulted, nothing moves the arm: the robot holds by itself, and the next command
             // is planned from the state measured when the job resumes.
             let halted = matches!(self.phase, Phase::Faulted { .. } | Phase::Recovering { .. });
-            let q = self.cmd.position;
+            let q = self.out.cmd.position;
             let inside = (0..DOF).all(|i| q[i] >= self.lower[i] && q[i] <= self.upper[i]);
             if !halted {
                 if inside {
-                    fx.joint(&self.cmd);
+                    fx.joint(&self.out.cmd);
                 } else {
                     // Never reached by planned samples (checked by the planner); a guard.
-                    self.limit_holds += 1;
+                    self.out.limit_holds += 1;
                 }
             }
-            if self.grip_due || now.saturating_sub(self.grip_sent_at) >= GRIPPER_REPEAT_NS {
-                self.grip_due = false;
-                self.grip_sent_at = now;
-                fx.gripper(self.job_id, self.grip_cmd, self.grip_object);
+            if self.out.grip_due || now.saturating_sub(self.out.grip_sent_at) >= GRIPPER_REPEAT_NS {
+                self.out.grip_due = false;
+                self.out.grip_sent_at = now;
+                fx.gripper(self.job_id, self.out.grip_cmd, self.out.grip_object);
             }
         }
-        if now.saturating_sub(self.last_heartbeat) >= HEARTBEAT_PERIOD_NS {
-            self.last_heartbeat = now;
+        if now.saturating_sub(self.out.last_heartbeat) >= HEARTBEAT_PERIOD_NS {
+            self.out.last_heartbeat = now;
             // Between jobs, a heartbeat's fault says why a job would be refused now.
             if self.phase == Phase::Idle {
                 self.fault = self.not_ready(now).unwrap_or(Fault::None);
@@ -1507,7 +1488,7 @@ impl Job {
             decision_ns: dns,
             cycles: 0,
             deadline_misses: 0,
-            rejected_inputs: self.rejected,
+            rejected_inputs: self.inputs.rejected,
             max_cycle_ns: 0,
         }
     }

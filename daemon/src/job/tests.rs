@@ -784,7 +784,7 @@ fn the_next_object_is_planned_only_on_a_frame_newer_than_the_release() {
     };
     assert_eq!(index, 1);
     assert_eq!(after_stamp_ns, r.job.release_stamp);
-    assert!(r.job.hm_stamp > after_stamp_ns);
+    assert!(r.job.inputs.hm_stamp > after_stamp_ns);
 }
 
 #[test]
@@ -1431,7 +1431,7 @@ fn invalid_future_and_out_of_order_states_and_bad_frames_are_rejected_not_latche
     r.js_up = false;
     r.gs_up = false;
     let now = r.now;
-    let before = r.job.js;
+    let before = r.job.inputs.js;
     let mut bad = r.js(now);
     bad.position[2] = f64::NAN;
     r.job.joint_state(1, &bad, now, now);
@@ -1442,14 +1442,14 @@ fn invalid_future_and_out_of_order_states_and_bad_frames_are_rejected_not_latche
         ..r.js(now)
     };
     r.job.joint_state(1, &old, now, now); // seq goes back
-    assert_eq!(r.job.js, before);
+    assert_eq!(r.job.inputs.js, before);
     assert_eq!(r.job.rejected_inputs(), 3);
     // 1 ms ahead is allowed; later is allowed only if the clock at receipt is past it.
     let ahead = r.js(now + MAX_FUTURE_STAMP_NS);
     r.job.joint_state(1, &ahead, now, now);
     let late = r.js(now + 5 * MS);
     r.job.joint_state(1, &late, now, now + 5 * MS);
-    assert_eq!(r.job.js, Some(late));
+    assert_eq!(r.job.inputs.js, Some(late));
     assert_eq!(r.job.rejected_inputs(), 3);
     // Gripper states likewise.
     let mut g = r.gs(now);
@@ -1457,12 +1457,12 @@ fn invalid_future_and_out_of_order_states_and_bad_frames_are_rejected_not_latche
     r.job.gripper_state(2, &g, now, now);
     assert_eq!(r.job.rejected_inputs(), 4);
     // A frame with a bad grid or header.
-    let stamp = r.job.hm_stamp;
+    let stamp = r.job.inputs.hm_stamp;
     r.frame.nx = 0;
     r.frame.header.stamp_ns = now + 1;
     let f = r.frame.clone();
     r.job.heightmap(&f, now);
-    assert_eq!((r.job.rejected_inputs(), r.job.hm_stamp), (5, stamp));
+    assert_eq!((r.job.rejected_inputs(), r.job.inputs.hm_stamp), (5, stamp));
 }
 
 #[test]
@@ -1477,7 +1477,7 @@ fn the_adapter_back_resumes_after_the_window_from_the_measured_position() {
     let back = r.now;
     r.until_event(5000, StatusEvent::Resumed);
     assert_eq!(r.now - back, params().timeouts.resume_after_ns);
-    assert_eq!(r.job.cmd, Setpoint::at_rest(r.q));
+    assert_eq!(r.job.out.cmd, Setpoint::at_rest(r.q));
     r.until_event(5000, StatusEvent::JobDone);
 }
 

@@ -8,13 +8,12 @@
 //! payload).
 
 use crate::digest::Fnv;
-use crate::job::JobSnapshot;
+use crate::job::{Commands, Inputs, JobSnapshot};
 use crate::plan::Request;
 use herb_ipc::{
-    ArmStatus, CancelJobRequest, GripperAction, GripperState, HeightmapFrame, JointState,
-    MAX_JOB_OBJECTS, PackJobRequest, Payload, RejectReason, Status,
+    ArmBlocker, ArmStatus, CancelJobRequest, Fault, GripperAction, GripperState, HeightmapFrame,
+    InOrder, JointState, MAX_JOB_OBJECTS, PackJobRequest, Payload, RejectReason, Status,
 };
-use herb_robot::kinematics::DOF;
 use herb_robot::motion::Setpoint;
 use std::io::Write;
 
@@ -353,7 +352,7 @@ impl RunHeader {
 pub(super) fn encode_snapshot(requests_before: u64, s: &JobSnapshot) -> Vec<u8> {
     let mut e = Enc::default();
     e.u64(requests_before);
-    let opt_order = |e: &mut Enc, o: Option<(u128, u64, u64)>| match o {
+    let opt_order = |e: &mut Enc, o: InOrder| match o.last() {
         Some((p, q, t)) => {
             e.u8(1).u128(p).u64(q).u64(t);
         }
@@ -361,21 +360,22 @@ pub(super) fn encode_snapshot(requests_before: u64, s: &JobSnapshot) -> Vec<u8> 
             e.u8(0);
         }
     };
-    match &s.js {
+    let i = &s.inputs;
+    match &i.js {
         Some(m) => e.u8(1).bytes(m.as_bytes()),
         None => e.u8(0),
     };
-    e.u64(s.js_at);
-    opt_order(&mut e, s.js_order);
-    match &s.gs {
+    e.u64(i.js_at);
+    opt_order(&mut e, i.js_order);
+    match &i.gs {
         Some(m) => e.u8(1).bytes(m.as_bytes()),
         None => e.u8(0),
     };
-    e.u64(s.gs_at);
-    opt_order(&mut e, s.gs_order);
-    e.u64(s.hm_rx_at)
-        .u64(s.hm_stamp)
-        .u64(s.rejected)
+    e.u64(i.gs_at);
+    opt_order(&mut e, i.gs_order);
+    e.u64(i.hm_rx_at)
+        .u64(i.hm_stamp)
+        .u64(i.rejected)
         .u64(s.job_id);
     for o in s.order {
         e.u32(o as u32);
@@ -385,23 +385,25 @@ pub(super) fn encode_snapshot(requests_before: u64, s: &JobSnapshot) -> Vec<u8> 
         .u64(s.done)
         .u64(s.release_stamp)
         .u8(s.holding as u8)
-        .u32(s.fault);
-    for row in &s.cmd {
+        .u32(s.fault as u32);
+    let c = &s.commands;
+    for row in [&c.cmd.position, &c.cmd.velocity, &c.cmd.acceleration] {
         for v in row {
             e.f64(*v);
         }
     }
-    e.u8(s.commanding as u8)
-        .u32(s.grip.0)
-        .u32(s.grip.1)
-        .u8(s.grip.2 as u8)
-        .u64(s.grip.3)
-        .u64(s.last_heartbeat)
-        .u64(s.limit_holds)
+    // Nothing is commanded between jobs.
+    e.u8(0)
+        .u32(c.grip_cmd as u32)
+        .u32(c.grip_object)
+        .u8(c.grip_due as u8)
+        .u64(c.grip_sent_at)
+        .u64(c.last_heartbeat)
+        .u64(c.limit_holds)
         .u8(s.stopping as u8);
     // Appended later: a snapshot without it reads as "nothing said yet".
-    e.u32(s.arm.0).u64(s.arm.1);
-    opt_order(&mut e, s.arm.2);
+    e.u32(i.arm_blocker as u32).u64(i.arm_at);
+    opt_order(&mut e, i.arm_order);
     e.0
 }
 
@@ -409,11 +411,11 @@ pub(super) fn encode_snapshot(requests_before: u64, s: &JobSnapshot) -> Vec<u8> 
 pub(super) fn decode_snapshot(b: &[u8]) -> Option<(u64, JobSnapshot)> {
     let mut d = Dec(b);
     let before = d.u64()?;
-    fn opt_order(d: &mut Dec) -> Option<Option<(u128, u64, u64)>> {
-        Some(match d.u8()? {
+    fn opt_order(d: &mut Dec) -> Option<InOrder> {
+        Some(InOrder::with_last(match d.u8()? {
             0 => None,
             _ => Some((d.u128()?, d.u64()?, d.u64()?)),
-        })
+        }))
     }
     let js = match d.u8()? {
         0 => None,
@@ -434,32 +436,46 @@ pub(super) fn decode_snapshot(b: &[u8]) -> Option<(u64, JobSnapshot)> {
     }
     let (count, index, done, release_stamp) = (d.u64()?, d.u64()?, d.u64()?, d.u64()?);
     let (holding, fault) = (d.bool()?, d.u32()?);
-    let mut cmd = [[0.0; DOF]; 3];
-    for row in &mut cmd {
+    let mut cmd = Setpoint::default();
+    for row in [&mut cmd.position, &mut cmd.velocity, &mut cmd.acceleration] {
         for v in row.iter_mut() {
             *v = d.f64()?;
         }
     }
-    let commanding = d.bool()?;
-    let grip = (d.u32()?, d.u32()?, d.bool()?, d.u64()?);
+    let _commanding = d.bool()?;
+    let (grip_cmd, grip_object, grip_due, grip_sent_at) = (d.u32()?, d.u32()?, d.bool()?, d.u64()?);
     let (last_heartbeat, limit_holds, stopping) = (d.u64()?, d.u64()?, d.bool()?);
-    let arm = if d.0.is_empty() {
-        (0, 0, None)
+    let (arm_blocker, arm_at, arm_order) = if d.0.is_empty() {
+        (0, 0, InOrder::default())
     } else {
         (d.u32()?, d.u64()?, opt_order(&mut d)?)
     };
     Some((
         before,
         JobSnapshot {
-            js,
-            js_at,
-            js_order,
-            gs,
-            gs_at,
-            gs_order,
-            hm_rx_at,
-            hm_stamp,
-            rejected,
+            inputs: Inputs {
+                js,
+                js_at,
+                js_order,
+                gs,
+                gs_at,
+                gs_order,
+                arm_blocker: ArmBlocker::from_code(arm_blocker).unwrap_or(ArmBlocker::None),
+                arm_at,
+                arm_order,
+                hm_rx_at,
+                hm_stamp,
+                rejected,
+            },
+            commands: Commands {
+                cmd,
+                grip_cmd: GripperAction::from_code(grip_cmd).unwrap_or(GripperAction::Open),
+                grip_object,
+                grip_due,
+                grip_sent_at,
+                last_heartbeat,
+                limit_holds,
+            },
             job_id,
             order,
             count,
@@ -467,13 +483,7 @@ pub(super) fn decode_snapshot(b: &[u8]) -> Option<(u64, JobSnapshot)> {
             done,
             release_stamp,
             holding,
-            fault,
-            cmd,
-            commanding,
-            grip,
-            last_heartbeat,
-            arm,
-            limit_holds,
+            fault: Fault::from_code(fault).unwrap_or(Fault::None),
             stopping,
         },
     ))
