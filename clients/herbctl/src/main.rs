@@ -2,12 +2,12 @@
 //! summary; cancel a running job; empty the simulated box; print the daemon's state.
 
 use clap::{Parser, Subcommand};
+use herb_client::{Client, JobEvent, PackOptions, StatusError, SubmitError, WatchError};
 use herb_daemon::record::Log;
 use herb_daemon::replay::{Outcome, ReplayOptions, Replayed};
-use herb_ipc::bus::{Bus, Sub};
 use herb_ipc::{
-    CancelJobRequest, Fault, Header, HeightmapFrame, JobState, PackJobRequest, RejectReason,
-    Services, SimOutcome, SimReset, Status, StatusEvent, monotonic_ns,
+    Fault, Header, HeightmapFrame, JobState, RejectReason, Services, SimOutcome, SimReset, Status,
+    StatusEvent, monotonic_ns,
 };
 use herb_picture::{PictureObject, write_pack_picture};
 use herb_sim::{Catalog, GridSpec, Heightmap, TypeIdx, boxed, paths};
@@ -193,13 +193,16 @@ fn pack(
         return Err(format!("--reconnect {reconnect} outside 0..=3600 s"));
     }
     let (objects, what) = objects_of(cli, session, ids, catalog)?;
-    let (bus, services, status, frames) = listen(cli)?;
-    let outcomes = bus
-        .subscriber::<SimOutcome>(&services.sim_outcome())
+    let client = connect(cli)?;
+    let frames = client
+        .bus()
+        .subscriber::<HeightmapFrame>(&client.services().heightmap())
         .map_err(|e| e.to_string())?;
-    let client = bus.job_client().map_err(|e| e.to_string())?;
-    let deadline = Instant::now() + Duration::from_secs_f64(timeout);
-    let job_id = (monotonic_ns() & 0xffff_ffff) << 16 | (std::process::id() as u64 & 0xffff) | 1;
+    let outcomes = client
+        .bus()
+        .subscriber::<SimOutcome>(&client.services().sim_outcome())
+        .map_err(|e| e.to_string())?;
+    let job_id = herb_client::new_job_id();
     if what.ends_with(" objects") {
         eprintln!("herbctl: submitting job {job_id}: {what}");
     } else {
@@ -211,57 +214,44 @@ fn pack(
 
     // Submit, waiting for the daemon to come up and the robot to be ready (said at once, and
     // again when the reason changes).
-    let mut not_ready: Option<Fault> = None;
-    let reply = 'submit: loop {
-        if Instant::now() > deadline {
-            return Err(match not_ready {
-                Some(f) => format!(
-                    "robot not ready: {} (gave up after {timeout} s)",
-                    f.describe()
-                ),
-                None => "no reply from herbd (is it running with this prefix?)".into(),
-            });
-        }
-        let req = PackJobRequest::new(job_id, &objects);
-        let pending = client.send_copy(req).map_err(|e| format!("send: {e:?}"))?;
-        if pending.number_of_server_connections() == 0 {
-            drop(pending);
-            std::thread::sleep(Duration::from_millis(100));
-            continue;
-        }
-        let t0 = Instant::now();
-        while t0.elapsed() < Duration::from_secs(2) {
-            if let Ok(Some(r)) = pending.receive() {
-                let r = *r.payload();
-                if r.validate() == Ok(RejectReason::NotReady) {
-                    let why = Fault::from_code(r.detail).unwrap_or(Fault::JointStateTimeout);
-                    if not_ready != Some(why) {
-                        println!("robot not ready: {}; waiting", why.describe());
-                        not_ready = Some(why);
-                    }
-                    std::thread::sleep(Duration::from_millis(200));
-                    continue 'submit;
-                }
-                break 'submit r;
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        }
+    let options = PackOptions {
+        job_id: Some(job_id),
+        timeout: Duration::from_secs_f64(timeout),
+        reconnect: Duration::from_secs_f64(reconnect),
     };
-    match reply.validate() {
-        Ok(RejectReason::None) => eprintln!("herbctl: accepted"),
-        Ok(RejectReason::Holding) => {
-            let what = if reply.detail == herb_ipc::NO_OBJECT {
+    let mut not_ready: Option<Fault> = None;
+    let submitted = client.pack(&objects, &options, |why| {
+        if not_ready != Some(why) {
+            println!("robot not ready: {}; waiting", why.describe());
+            not_ready = Some(why);
+        }
+    });
+    let mut watch = match submitted {
+        Ok(watch) => {
+            eprintln!("herbctl: accepted");
+            watch
+        }
+        Err(SubmitError::NotReady(f)) => {
+            return Err(format!(
+                "robot not ready: {} (gave up after {timeout} s)",
+                f.describe()
+            ));
+        }
+        Err(SubmitError::Rejected {
+            reason: RejectReason::Holding,
+            detail,
+        }) => {
+            let what = if detail == herb_ipc::NO_OBJECT {
                 "an object".to_string()
             } else {
-                name(catalog, reply.detail)
+                name(catalog, detail)
             };
             return Err(format!(
                 "rejected: the gripper holds {what}; take it out (the loopback: herbctl reset) and submit again"
             ));
         }
-        Ok(r) => return Err(format!("rejected: {r:?} (detail {})", reply.detail)),
-        Err(e) => return Err(format!("malformed reply: {e}")),
-    }
+        Err(e) => return Err(e.to_string()),
+    };
 
     let mut decision_ms = Vec::new();
     let mut faults = Vec::new();
@@ -280,138 +270,123 @@ fn pack(
             *into = Heightmap::from_data(spec, f.cells().to_vec()).ok();
         }
     };
-    let mut heard = Instant::now();
-    // herbd went silent at this time (waiting for it to come back with the job).
-    let mut lost_since: Option<Instant> = None;
-    // A heartbeat of a herbd that came back without the job, and when.
-    let mut back_without: Option<Instant> = None;
-    while ok.is_none() {
-        if Instant::now() > deadline {
-            return Err(format!(
-                "timed out after {timeout} s; {placed}/{total} placed"
-            ));
-        }
-        if heard.elapsed() > DAEMON_LOST_AFTER && lost_since.is_none() && reconnect > 0.0 {
-            println!(
-                "herbd lost (no status for {:.1} s): waiting up to {reconnect} s for it to come back with job {job_id} (its journal resumes the job)",
-                heard.elapsed().as_secs_f64()
-            );
-            lost_since = Some(Instant::now());
-        }
-        // Back, but idle: its journal did not have the job (none configured, or abandoned).
-        if back_without.is_some_and(|t| t.elapsed() > Duration::from_secs(3)) {
-            return Err(format!(
-                "herbd came back without job {job_id} (no job journal, or the job was abandoned); {placed}/{total} placed"
-            ));
-        }
-        let waited_out = lost_since.is_none_or(|t| t.elapsed().as_secs_f64() > reconnect);
-        if heard.elapsed() > DAEMON_LOST_AFTER && waited_out {
-            let at = last.map_or(String::from("no status yet"), |s| {
-                format!(
-                    "object {}/{total} ({}), state {:?}",
+    loop {
+        let s = match watch.poll() {
+            Ok(Some(JobEvent::Status(s))) => s,
+            Ok(Some(JobEvent::Lost { silent_for })) => {
+                println!(
+                    "herbd lost (no status for {:.1} s): waiting up to {reconnect} s for it to come back with job {job_id} (its journal resumes the job)",
+                    silent_for.as_secs_f64()
+                );
+                continue;
+            }
+            Ok(Some(JobEvent::Back)) => {
+                println!("herbd back: job {job_id} goes on");
+                continue;
+            }
+            Ok(None) => {
+                while let Ok(Some(o)) = outcomes.receive() {
+                    if o.payload().validate().is_ok() && o.payload().job_id == job_id {
+                        last_outcome = Some(*o.payload());
+                    }
+                }
+                while let Ok(Some(f)) = frames.receive() {
+                    keep_frame(f.payload(), &mut latest_frame);
+                }
+                if watch.is_finished() {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(5));
+                continue;
+            }
+            Err(WatchError::TimedOut { .. }) => {
+                return Err(format!(
+                    "timed out after {timeout} s; {placed}/{total} placed"
+                ));
+            }
+            Err(WatchError::CameBackWithoutJob { .. }) => {
+                return Err(format!(
+                    "herbd came back without job {job_id} (no job journal, or the job was abandoned); {placed}/{total} placed"
+                ));
+            }
+            Err(WatchError::DaemonLost { silent_for, .. }) => {
+                let at = last.map_or(String::from("no status yet"), |s| {
+                    format!(
+                        "object {}/{total} ({}), state {:?}",
+                        s.object_index + 1,
+                        name(catalog, s.object_type),
+                        JobState::from_code(s.state).unwrap_or(JobState::Idle)
+                    )
+                });
+                return Err(format!(
+                    "daemon lost: no status from herbd for {:.1} s (it heartbeats at 10 Hz); job {job_id}: {placed}/{total} placed, last known {at}",
+                    silent_for.as_secs_f64()
+                ));
+            }
+        };
+        last = Some(s);
+        total = s.objects_total;
+        let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
+        match StatusEvent::from_code(s.event) {
+            Some(StatusEvent::Decided) => {
+                if operator {
+                    println!(
+                        "operator: put {} at the pick station",
+                        name(catalog, s.object_type)
+                    );
+                }
+                decision_ms.push(s.decision_ns as f64 / 1e6);
+                println!(
+                    "object {:>2}/{total}: {:<28} x {:+.3} y {:+.3} z {:.3} m yaw {:+.2} rad  decision {:.3} ms",
                     s.object_index + 1,
                     name(catalog, s.object_type),
-                    JobState::from_code(s.state).unwrap_or(JobState::Idle)
-                )
-            });
-            return Err(format!(
-                "daemon lost: no status from herbd for {:.1} s (it heartbeats at 10 Hz); job {job_id}: {placed}/{total} placed, last known {at}",
-                heard.elapsed().as_secs_f64()
-            ));
-        }
-        while let Ok(Some(s)) = status.receive() {
-            let s = *s.payload();
-            if s.validate().is_err() {
-                continue;
+                    s.pose[0],
+                    s.pose[1],
+                    s.pose[2],
+                    s.pose[3],
+                    s.decision_ns as f64 / 1e6
+                );
             }
-            if s.job_id != job_id {
-                // A herbd heartbeating again after it was lost, without the job.
-                if lost_since.is_some()
-                    && back_without.is_none()
-                    && s.event == StatusEvent::Heartbeat as u32
-                {
-                    back_without = Some(Instant::now());
-                }
-                continue;
+            Some(StatusEvent::Placed) => {
+                placed = s.objects_done;
+                println!("placed {placed}/{total}");
             }
-            if lost_since.take().is_some() {
-                println!("herbd back: job {job_id} goes on");
-            }
-            back_without = None;
-            heard = Instant::now();
-            last = Some(s);
-            total = s.objects_total;
-            let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
-            match StatusEvent::from_code(s.event) {
-                Some(StatusEvent::Decided) => {
-                    if operator {
-                        println!(
-                            "operator: put {} at the pick station",
-                            name(catalog, s.object_type)
-                        );
-                    }
-                    decision_ms.push(s.decision_ns as f64 / 1e6);
+            Some(StatusEvent::Fault) => {
+                faults.push(format!("{fault:?}"));
+                println!("FAULT {fault:?} ({}): halting", fault.describe());
+                if operator && fault == Fault::MissedGrasp {
                     println!(
-                        "object {:>2}/{total}: {:<28} x {:+.3} y {:+.3} z {:.3} m yaw {:+.2} rad  decision {:.3} ms",
-                        s.object_index + 1,
-                        name(catalog, s.object_type),
-                        s.pose[0],
-                        s.pose[1],
-                        s.pose[2],
-                        s.pose[3],
-                        s.decision_ns as f64 / 1e6
+                        "operator: put {} at the pick station (the pick is tried again)",
+                        name(catalog, s.object_type)
                     );
                 }
-                Some(StatusEvent::Placed) => {
-                    placed = s.objects_done;
-                    println!("placed {placed}/{total}");
-                }
-                Some(StatusEvent::Fault) => {
-                    faults.push(format!("{fault:?}"));
-                    println!("FAULT {fault:?} ({}): halting", fault.describe());
-                    if operator && fault == Fault::MissedGrasp {
-                        println!(
-                            "operator: put {} at the pick station (the pick is tried again)",
-                            name(catalog, s.object_type)
-                        );
-                    }
-                }
-                Some(StatusEvent::Skipped) => {
-                    skipped += 1;
-                    println!(
-                        "skipped object {}/{total} ({}): {}",
-                        s.object_index + 1,
-                        name(catalog, s.object_type),
-                        fault.describe()
-                    );
-                }
-                Some(StatusEvent::Braked) => println!("braked: standing still"),
-                Some(StatusEvent::Resumed) => println!("resumed"),
-                Some(StatusEvent::JobDone) => ok = Some(true),
-                Some(StatusEvent::JobFailed) => {
-                    println!("job failed: {fault:?}");
-                    ok = Some(false)
-                }
-                Some(StatusEvent::JobCancelled) => {
-                    println!("job cancelled");
-                    ok = Some(false)
-                }
-                Some(StatusEvent::Shutdown) => {
-                    println!("herbd shut down");
-                    ok = Some(false)
-                }
-                _ => {}
             }
-        }
-        while let Ok(Some(o)) = outcomes.receive() {
-            if o.payload().validate().is_ok() && o.payload().job_id == job_id {
-                last_outcome = Some(*o.payload());
+            Some(StatusEvent::Skipped) => {
+                skipped += 1;
+                println!(
+                    "skipped object {}/{total} ({}): {}",
+                    s.object_index + 1,
+                    name(catalog, s.object_type),
+                    fault.describe()
+                );
             }
+            Some(StatusEvent::Braked) => println!("braked: standing still"),
+            Some(StatusEvent::Resumed) => println!("resumed"),
+            Some(StatusEvent::JobDone) => ok = Some(true),
+            Some(StatusEvent::JobFailed) => {
+                println!("job failed: {fault:?}");
+                ok = Some(false)
+            }
+            Some(StatusEvent::JobCancelled) => {
+                println!("job cancelled");
+                ok = Some(false)
+            }
+            Some(StatusEvent::Shutdown) => {
+                println!("herbd shut down");
+                ok = Some(false)
+            }
+            _ => {}
         }
-        while let Ok(Some(f)) = frames.receive() {
-            keep_frame(f.payload(), &mut latest_frame);
-        }
-        std::thread::sleep(Duration::from_millis(5));
     }
     // The last release's settle: wait briefly for its heightmap and outcome.
     let t0 = Instant::now();
@@ -594,34 +569,22 @@ fn id_of(catalog: &Catalog, t: u32) -> String {
 }
 
 fn status(cli: &Cli, timeout: f64) -> Result<bool, String> {
-    let services = Services::new(&cli.prefix).map_err(|e| e.to_string())?;
-    let bus = Bus::open("herbctl", &services).map_err(|e| e.to_string())?;
-    let sub = bus
-        .subscriber::<Status>(&services.status())
-        .map_err(|e| e.to_string())?;
-    let t0 = Instant::now();
-    while t0.elapsed().as_secs_f64() < timeout {
-        while let Ok(Some(s)) = sub.receive() {
-            let s = s.payload();
-            if s.validate().is_ok() && s.event == StatusEvent::Heartbeat as u32 {
-                let state = JobState::from_code(s.state).unwrap_or(JobState::Idle);
-                let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
-                // Between jobs the fault is why a job would be refused now.
-                let why = match (state, fault) {
-                    (_, Fault::None) => String::new(),
-                    (JobState::Idle, f) => format!(" (robot not ready: {})", f.describe()),
-                    (_, f) => format!(" ({})", f.describe()),
-                };
-                println!(
-                    "herbd: {state:?}, job {}, {}/{} placed, {} cycles, {} deadline misses, fault {fault:?}{why}",
-                    s.job_id, s.objects_done, s.objects_total, s.cycles, s.deadline_misses,
-                );
-                return Ok(true);
-            }
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    Err("no heartbeat from herbd".into())
+    let client = connect(cli)?;
+    let within = Duration::try_from_secs_f64(timeout).unwrap_or(Duration::ZERO);
+    let s = client.status(within).map_err(|e| e.to_string())?;
+    let state = JobState::from_code(s.state).unwrap_or(JobState::Idle);
+    let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
+    // Between jobs the fault is why a job would be refused now.
+    let why = match (state, fault) {
+        (_, Fault::None) => String::new(),
+        (JobState::Idle, f) => format!(" (robot not ready: {})", f.describe()),
+        (_, f) => format!(" ({})", f.describe()),
+    };
+    println!(
+        "herbd: {state:?}, job {}, {}/{} placed, {} cycles, {} deadline misses, fault {fault:?}{why}",
+        s.job_id, s.objects_done, s.objects_total, s.cycles, s.deadline_misses,
+    );
+    Ok(true)
 }
 
 /// `herbctl watch`: redraws [`herb_daemon::watch::WatchView`] every `period` seconds.
@@ -636,9 +599,10 @@ fn watch(
     if !(period.is_finite() && (0.02..=60.0).contains(&period)) {
         return Err(format!("--period {period} outside 0.02..=60 s"));
     }
-    let (bus, services, status, _frames) = listen(cli)?;
-    let outcomes = bus
-        .subscriber::<SimOutcome>(&services.sim_outcome())
+    let client = connect(cli)?;
+    let outcomes = client
+        .bus()
+        .subscriber::<SimOutcome>(&client.services().sim_outcome())
         .map_err(|e| e.to_string())?;
     let t0 = Instant::now();
     let label = |t: u32| name(catalog, t);
@@ -646,13 +610,8 @@ fn watch(
     let mut next_draw = 0.0;
     loop {
         let t = t0.elapsed().as_secs_f64();
-        while let Ok(Some(s)) = status.receive() {
-            view.status(
-                s.payload(),
-                t,
-                &wall_label(std::time::SystemTime::now()),
-                &label,
-            );
+        for s in client.statuses() {
+            view.status(&s, t, &wall_label(std::time::SystemTime::now()), &label);
         }
         while let Ok(Some(o)) = outcomes.receive() {
             view.outcome(o.payload());
@@ -681,33 +640,28 @@ fn watch(
     }
 }
 
-/// herbctl's bus under the prefix of `cli`, with subscribers to herbd's status and to the
-/// camera's heightmaps.
-fn listen(cli: &Cli) -> Result<(Bus, Services, Sub<Status>, Sub<HeightmapFrame>), String> {
-    let services = Services::new(&cli.prefix).map_err(|e| e.to_string())?;
-    let bus = Bus::open("herbctl", &services).map_err(|e| e.to_string())?;
-    let status = bus
-        .subscriber::<Status>(&services.status())
-        .map_err(|e| e.to_string())?;
-    let frames = bus
-        .subscriber::<HeightmapFrame>(&services.heightmap())
-        .map_err(|e| e.to_string())?;
-    Ok((bus, services, status, frames))
+/// herbctl's client of the herbd under the prefix of `cli`.
+fn connect(cli: &Cli) -> Result<Client, String> {
+    Client::connect_as(&cli.prefix, "herbctl").map_err(|e| e.to_string())
 }
 
 /// `herbctl reset`: asks the loopback to empty its box, unless herbd reports a running job, and
 /// waits for the heightmap of the empty box.
 fn reset(cli: &Cli, timeout: f64) -> Result<bool, String> {
-    let (bus, services, status, frames) = listen(cli)?;
-    let request = bus
-        .publisher::<SimReset>(&services.sim_reset())
+    let client = connect(cli)?;
+    let frames = client
+        .bus()
+        .subscriber::<HeightmapFrame>(&client.services().heightmap())
+        .map_err(|e| e.to_string())?;
+    let request = client
+        .bus()
+        .publisher::<SimReset>(&client.services().sim_reset())
         .map_err(|e| e.to_string())?;
     // A heartbeat within two periods says whether a job runs (no herbd: nothing runs).
     let t0 = Instant::now();
     while t0.elapsed() < Duration::from_millis(250) {
-        while let Ok(Some(s)) = status.receive() {
-            let s = s.payload();
-            if s.validate().is_ok() && s.event == StatusEvent::Heartbeat as u32 && s.job_id != 0 {
+        for s in client.statuses() {
+            if s.event == StatusEvent::Heartbeat as u32 && s.job_id != 0 {
                 return Err(format!("job {} is running: the box is not reset", s.job_id));
             }
         }
@@ -737,90 +691,57 @@ fn reset(cli: &Cli, timeout: f64) -> Result<bool, String> {
 
 /// `herbctl cancel`: cancels job `job` (or the running one) and follows it to its end.
 fn cancel(cli: &Cli, job: Option<u64>, timeout: f64) -> Result<bool, String> {
-    let (bus, _, status, _) = listen(cli)?;
+    let client = connect(cli)?;
     let deadline = Instant::now() + Duration::from_secs_f64(timeout);
     let job_id = match job {
         Some(j) => j,
-        None => {
-            // The running job, from the next heartbeat (10 Hz).
-            let mut found = None;
-            let t0 = Instant::now();
-            while found.is_none() && t0.elapsed() < Duration::from_secs(1) {
-                while let Ok(Some(s)) = status.receive() {
-                    let s = s.payload();
-                    if s.validate().is_ok() && s.event == StatusEvent::Heartbeat as u32 {
-                        found = Some(s.job_id);
-                    }
-                }
-                std::thread::sleep(Duration::from_millis(10));
+        // The running job, from the next heartbeat (10 Hz).
+        None => match client.current_job(Duration::from_secs(1)) {
+            Err(StatusError::NoHeartbeat) => {
+                return Err("no heartbeat from herbd (is it running?)".into());
             }
-            match found {
-                None => return Err("no heartbeat from herbd (is it running?)".into()),
-                Some(0) => return Err("no job is running".into()),
-                Some(j) => j,
-            }
-        }
+            Ok(None) => return Err("no job is running".into()),
+            Ok(Some(j)) => j,
+        },
     };
-    let client = bus.cancel_client().map_err(|e| e.to_string())?;
-    let pending = client
-        .send_copy(CancelJobRequest::new(job_id))
-        .map_err(|e| format!("send: {e:?}"))?;
-    if pending.number_of_server_connections() == 0 {
-        return Err("no herbd serves this prefix".into());
-    }
-    let t0 = Instant::now();
-    let reply = loop {
-        if let Ok(Some(r)) = pending.receive() {
-            break *r.payload();
-        }
-        if t0.elapsed() > Duration::from_secs(2) {
-            return Err("no reply from herbd".into());
-        }
-        std::thread::sleep(Duration::from_millis(2));
-    };
-    match reply.validate() {
-        Ok(RejectReason::None) => println!("cancelling job {job_id}"),
-        Ok(RejectReason::NoSuchJob) => return Err(format!("job {job_id} is not running")),
-        Ok(r) => return Err(format!("cancel refused: {r:?}")),
-        Err(e) => return Err(format!("malformed reply: {e}")),
-    }
-    let mut heard = Instant::now();
-    while Instant::now() < deadline {
-        if heard.elapsed() > DAEMON_LOST_AFTER {
-            return Err("daemon lost: no status from herbd".into());
-        }
-        while let Ok(Some(s)) = status.receive() {
-            let s = *s.payload();
-            if s.validate().is_err() || s.job_id != job_id {
-                continue;
+    client.cancel(job_id).map_err(|e| e.to_string())?;
+    println!("cancelling job {job_id}");
+    // Followed without waiting for a lost herbd to come back.
+    let mut watch = client.watch(job_id, deadline, Duration::ZERO);
+    loop {
+        let s = match watch.next_event() {
+            Ok(Some(JobEvent::Status(s))) => s,
+            Ok(Some(JobEvent::Lost { .. } | JobEvent::Back)) => continue,
+            Err(WatchError::DaemonLost { .. } | WatchError::CameBackWithoutJob { .. }) => {
+                return Err("daemon lost: no status from herbd".into());
             }
-            heard = Instant::now();
-            let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
-            match StatusEvent::from_code(s.event) {
-                Some(StatusEvent::Braked) => println!("braked: standing still"),
-                Some(StatusEvent::JobCancelled) => {
-                    let how = if fault == Fault::None {
-                        String::new()
-                    } else {
-                        format!(" (last fault {fault:?})")
-                    };
-                    println!(
-                        "job {job_id} cancelled{how}: {}/{} placed",
-                        s.objects_done, s.objects_total
-                    );
-                    return Ok(true);
-                }
-                Some(e @ (StatusEvent::JobDone | StatusEvent::JobFailed)) => {
-                    println!("job {job_id} ended before the cancel took effect: {e:?}");
-                    return Ok(false);
-                }
-                Some(StatusEvent::Shutdown) => return Err("herbd shut down".into()),
-                _ => {}
+            Ok(None) | Err(WatchError::TimedOut { .. }) => {
+                return Err(format!("job {job_id} not cancelled within {timeout} s"));
             }
+        };
+        let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
+        match StatusEvent::from_code(s.event) {
+            Some(StatusEvent::Braked) => println!("braked: standing still"),
+            Some(StatusEvent::JobCancelled) => {
+                let how = if fault == Fault::None {
+                    String::new()
+                } else {
+                    format!(" (last fault {fault:?})")
+                };
+                println!(
+                    "job {job_id} cancelled{how}: {}/{} placed",
+                    s.objects_done, s.objects_total
+                );
+                return Ok(true);
+            }
+            Some(e @ (StatusEvent::JobDone | StatusEvent::JobFailed)) => {
+                println!("job {job_id} ended before the cancel took effect: {e:?}");
+                return Ok(false);
+            }
+            Some(StatusEvent::Shutdown) => return Err("herbd shut down".into()),
+            _ => {}
         }
-        std::thread::sleep(Duration::from_millis(5));
     }
-    Err(format!("job {job_id} not cancelled within {timeout} s"))
 }
 
 /// `herbctl replay`.
@@ -983,10 +904,6 @@ fn explain(
     }
     Ok(true)
 }
-
-/// How long without a status message from herbd (it heartbeats at 10 Hz) before a client
-/// following a job says the daemon is lost: five heartbeat periods.
-const DAEMON_LOST_AFTER: Duration = Duration::from_millis(500);
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
