@@ -252,6 +252,12 @@ impl PackingEnv {
         self.running.then(|| self.sequence[self.next])
     }
 
+    /// The index in the sequence of the next object to place (the number of placements made
+    /// in this episode).
+    pub fn step_index(&self) -> usize {
+        self.next
+    }
+
     /// The objects still to place, the next one first (empty once the episode is over).
     pub fn remaining(&self) -> &[TypeIdx] {
         if self.running {

@@ -17,9 +17,11 @@ use rapier3d::math::{Pose, Rotation, Vector};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// How placements are chosen.
+/// The humans' own packs, replayed or checked: the methods of Table I that take the human order
+/// and, but for [`Replay::Random`], the humans' placements. A [`ReplayPlacer`] places them in the
+/// world; [`Replay::HumanRecorded`] is scored without physics ([`recorded_episode`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Method {
+pub enum Replay {
     /// The human order with the humans' own planar placements.
     Human,
     /// The human order with the humans' full orientations (tilted placements included) at their
@@ -32,7 +34,7 @@ pub enum Method {
     HumanRecorded,
 }
 
-impl Method {
+impl Replay {
     /// Name used on the command line and in tables.
     pub fn name(&self) -> &'static str {
         match self {
@@ -160,43 +162,144 @@ impl EpisodeResult {
 /// are a few millimetres off the real objects.
 pub const REPLAY_WALL_SLIDE_M: f32 = 0.015;
 
-/// Places object `i` of `ep` as `method` decides: the one dispatch from methods to the
-/// environment, shared by batch evaluation and single-episode tools.
-pub fn method_step<'a>(
-    env: &'a mut PackingEnv,
-    ep: &Episode,
-    i: usize,
-    method: Method,
-) -> Result<StepResult<'a>> {
-    let h = ep.human.get(i).copied();
-    // The human replays release at the recorded (x, y), slid inside the walls by up to
-    // REPLAY_WALL_SLIDE_M, at z from the heightmap (the recorded z is not used: our pile differs
-    // from the human's by millimetres, and a body released into another is pushed out hard).
-    let slide = |env: &PackingEnv, h: &HumanPlacement, rot: Rotation| {
-        let ty = ep.objects[i];
-        env.world()
-            .slide_inside(ty, h.x, h.y, rot, REPLAY_WALL_SLIDE_M)
-    };
-    match (method, h) {
-        (Method::Human, Some(h)) => {
-            let (x, y) = slide(env, &h, Rotation::from_rotation_z(h.theta));
-            env.step_placement(x, y, h.theta)
+/// Where a placer puts the next object: a pose (released as is), a planar placement or a
+/// rotation at (x, y) (z from the heightmap), or an action in `[-1, 1]^3`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Decision {
+    /// The release pose, in B.
+    Pose(Pose),
+    /// Planar placement: (x, y) in B (m) and yaw (rad); z from the heightmap.
+    Planar {
+        /// x in B (m).
+        x: f32,
+        /// y in B (m).
+        y: f32,
+        /// Yaw (rad).
+        theta: f32,
+    },
+    /// Full orientation at (x, y); z from the heightmap.
+    Rotated {
+        /// x in B (m).
+        x: f32,
+        /// y in B (m).
+        y: f32,
+        /// Orientation.
+        rotation: Rotation,
+    },
+    /// An action in `[-1, 1]^3` ([`PackingEnv::step`]).
+    Action([f32; 3]),
+}
+
+/// What a placer's own failure carries (a decision-core error, a model error...).
+pub type PlaceError = Box<dyn std::error::Error + Send + Sync + 'static>;
+
+/// A placement method as the one episode loop ([`run_episode`]) drives it: every method of
+/// Table I (policies, rules, teachers, replays), the training bindings' rules and the benches
+/// place through this.
+pub trait Placer {
+    /// Name for tables and logs.
+    fn name(&self) -> String;
+    /// Starts an episode: `ep` (its name and the humans' placements), `seed` its seed. Called
+    /// after the environment's reset.
+    fn begin_episode(&mut self, _ep: &Episode, _seed: u64) -> std::result::Result<(), PlaceError> {
+        Ok(())
+    }
+    /// Where the environment's next object goes; `None` when no placement is feasible (the
+    /// episode ends, failed).
+    fn decide(&mut self, env: &mut PackingEnv)
+    -> std::result::Result<Option<Decision>, PlaceError>;
+    /// Whether decisions are timed into [`EpisodeResult::decision_ns`] (the deciding methods;
+    /// not the replays, whose "decision" is a lookup).
+    fn timed(&self) -> bool {
+        true
+    }
+}
+
+/// Places the environment's next object as `d` says.
+pub fn apply<'a>(env: &'a mut PackingEnv, d: Decision) -> Result<StepResult<'a>> {
+    match d {
+        Decision::Pose(pose) => env.step_pose(pose),
+        Decision::Planar { x, y, theta } => env.step_placement(x, y, theta),
+        Decision::Rotated { x, y, rotation } => env.step_rotated(x, y, rotation),
+        Decision::Action(a) => env.step(a),
+    }
+}
+
+/// A human replay in the world ([`Replay::Human`], [`Replay::HumanPose`], [`Replay::Random`]).
+#[derive(Debug, Clone)]
+pub struct ReplayPlacer {
+    replay: Replay,
+    human: Vec<HumanPlacement>,
+    episode: String,
+}
+
+impl ReplayPlacer {
+    /// A placer replaying `replay`; an error for [`Replay::HumanRecorded`], which is not a
+    /// placement in the world.
+    pub fn new(replay: Replay) -> Result<Self> {
+        if replay == Replay::HumanRecorded {
+            return Err(SimError::Config(
+                "human-recorded is a check of the recorded poses, not a placement in the world"
+                    .into(),
+            ));
         }
-        (Method::HumanPose, Some(h)) => {
-            let (x, y) = slide(env, &h, h.rotation);
-            env.step_rotated(x, y, h.rotation)
+        Ok(Self {
+            replay,
+            human: Vec::new(),
+            episode: String::new(),
+        })
+    }
+}
+
+impl Placer for ReplayPlacer {
+    fn name(&self) -> String {
+        self.replay.name().into()
+    }
+
+    fn begin_episode(&mut self, ep: &Episode, _seed: u64) -> std::result::Result<(), PlaceError> {
+        self.human.clone_from(&ep.human);
+        self.episode.clone_from(&ep.name);
+        Ok(())
+    }
+
+    /// The human replays release at the recorded (x, y), slid inside the walls by up to
+    /// [`REPLAY_WALL_SLIDE_M`], at z from the heightmap (the recorded z is not used: our pile
+    /// differs from the human's by millimetres, and a body released into another is pushed out
+    /// hard).
+    fn decide(
+        &mut self,
+        env: &mut PackingEnv,
+    ) -> std::result::Result<Option<Decision>, PlaceError> {
+        if self.replay == Replay::Random {
+            return Ok(Some(Decision::Action(env.sample_action())));
         }
-        (Method::Human | Method::HumanPose, None) => Err(SimError::Config(format!(
-            "episode {} has no human placement {i}",
-            ep.name
-        ))),
-        (Method::Random, _) => {
-            let a = env.sample_action();
-            env.step(a)
-        }
-        (Method::HumanRecorded, _) => Err(SimError::Config(
-            "human-recorded is a check of the recorded poses, not a placement in the world".into(),
-        )),
+        let i = env.step_index();
+        let (Some(h), Some(ty)) = (self.human.get(i), env.next_object()) else {
+            return Err(SimError::Config(format!(
+                "episode {} has no human placement {i}",
+                self.episode
+            ))
+            .into());
+        };
+        let rotation = match self.replay {
+            Replay::HumanPose => h.rotation,
+            _ => Rotation::from_rotation_z(h.theta),
+        };
+        let (x, y) = env
+            .world()
+            .slide_inside(ty, h.x, h.y, rotation, REPLAY_WALL_SLIDE_M);
+        Ok(Some(match self.replay {
+            Replay::HumanPose => Decision::Rotated { x, y, rotation },
+            _ => Decision::Planar {
+                x,
+                y,
+                theta: h.theta,
+            },
+        }))
+    }
+
+    fn timed(&self) -> bool {
+        false
     }
 }
 
@@ -306,26 +409,54 @@ pub fn recorded_pose(catalog: &Catalog, ep: &Episode, i: usize) -> Result<Pose> 
     Ok(pose)
 }
 
-/// Runs one episode with `method` in `env`.
+/// Why an episode could not be run to its end (a failed placement is a result, not this).
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    /// The world or the environment refused (configuration, data).
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    /// The placer failed (a model error, a broken input...).
+    #[error("{0}")]
+    Placer(PlaceError),
+    /// Episode `episode` could not be run.
+    #[error("episode {episode}: {source}")]
+    Episode {
+        /// The session's name.
+        episode: String,
+        /// Why.
+        source: Box<EvalError>,
+    },
+    /// The episode was never run (its worker could not start).
+    #[error("not run")]
+    NotRun,
+}
+
+/// The one episode loop: resets `env` with `order` and `seed`, then places each object where
+/// `placer` decides until the episode ends (an object outside, or no feasible placement).
+/// Each decision is timed when the placer says so. Every evaluation (Table I, the tools, the
+/// tests) runs episodes through this.
 pub fn run_episode(
     env: &mut PackingEnv,
     ep: &Episode,
-    method: Method,
+    order: &[crate::TypeIdx],
+    placer: &mut dyn Placer,
     seed: u64,
-) -> Result<EpisodeResult> {
-    if method == Method::HumanRecorded {
-        let cfg = env.world().config();
-        return recorded_episode(
-            env.world().catalog(),
-            ep,
-            cfg.inside_tolerance_m,
-            cfg.stability_tilt_deg,
-        );
-    }
-    env.reset(&ep.objects, seed)?;
-    let mut r = EpisodeResult::new(&ep.name, ep.objects.len());
-    for i in 0..ep.objects.len() {
-        let step = method_step(env, ep, i, method)?;
+) -> std::result::Result<EpisodeResult, EvalError> {
+    env.reset(order, seed)?;
+    placer.begin_episode(ep, seed).map_err(EvalError::Placer)?;
+    let timed = placer.timed();
+    let mut r = EpisodeResult::new(&ep.name, order.len());
+    while env.next_object().is_some() {
+        let t0 = std::time::Instant::now();
+        let decided = placer.decide(env).map_err(EvalError::Placer)?;
+        if timed {
+            r.decision_ns.push(t0.elapsed().as_nanos() as u64);
+        }
+        let Some(d) = decided else {
+            r.record_no_feasible_placement();
+            break;
+        };
+        let step = apply(env, d)?;
         if r.record(&step) {
             break;
         }
@@ -333,22 +464,8 @@ pub fn run_episode(
     Ok(r)
 }
 
-/// Runs `method` over `episodes` on `jobs` threads. Results keep the episodes' order; an
-/// episode that errors is reported with its error and the others go on.
-pub fn run_all(
-    catalog: &SharedCatalog,
-    cfg: &WorldConfig,
-    episodes: &[Episode],
-    method: Method,
-    seed: u64,
-    jobs: usize,
-) -> Result<Vec<std::result::Result<EpisodeResult, String>>> {
-    run_all_with(catalog, cfg, episodes, jobs, || {
-        Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
-            run_episode(env, ep, method, seed.wrapping_add(i as u64)).map_err(|e| e.to_string())
-        })
-    })
-}
+/// An episode's result, or why it could not be run.
+pub type EpisodeOutcome = std::result::Result<EpisodeResult, EvalError>;
 
 /// Runs episodes on `jobs` threads, each with its own environment and its own worker made by
 /// `make_worker` (e.g. a policy per thread). The worker runs episode `i`. Results keep the
@@ -360,30 +477,31 @@ pub fn run_all_with<W, F>(
     episodes: &[Episode],
     jobs: usize,
     make_worker: F,
-) -> Result<Vec<std::result::Result<EpisodeResult, String>>>
+) -> Result<Vec<EpisodeOutcome>>
 where
-    F: Fn() -> std::result::Result<W, String> + Sync,
-    W: FnMut(&mut PackingEnv, &Episode, usize) -> std::result::Result<EpisodeResult, String>,
+    F: Fn() -> std::result::Result<W, EvalError> + Sync,
+    W: FnMut(&mut PackingEnv, &Episode, usize) -> EpisodeOutcome,
 {
     // Build one environment up front so configuration errors surface once, not per episode.
     PackingEnv::new(catalog.clone(), cfg.clone(), RewardMode::Simple)?;
     let next = AtomicUsize::new(0);
-    let out: Mutex<Vec<Option<std::result::Result<EpisodeResult, String>>>> =
-        Mutex::new(vec![None; episodes.len()]);
+    let out: Slots = Mutex::new(episodes.iter().map(|_| None).collect());
     std::thread::scope(|s| {
         for _ in 0..jobs.max(1) {
             s.spawn(|| {
                 let env = PackingEnv::new(catalog.clone(), cfg.clone(), RewardMode::Simple);
                 let (mut env, mut worker) = match (env, make_worker()) {
                     (Ok(e), Ok(w)) => (e, w),
-                    (Err(e), _) => return fail_rest(&next, episodes, &out, e.to_string()),
-                    (_, Err(e)) => return fail_rest(&next, episodes, &out, e),
+                    (Err(e), _) => return fail_rest(&next, episodes, &out, &e.to_string()),
+                    (_, Err(e)) => return fail_rest(&next, episodes, &out, &e.to_string()),
                 };
                 loop {
                     let i = next.fetch_add(1, Ordering::Relaxed);
                     let Some(ep) = episodes.get(i) else { break };
-                    let res =
-                        worker(&mut env, ep, i).map_err(|e| format!("episode {}: {e}", ep.name));
+                    let res = worker(&mut env, ep, i).map_err(|e| EvalError::Episode {
+                        episode: ep.name.clone(),
+                        source: Box::new(e),
+                    });
                     out.lock().unwrap_or_else(|p| p.into_inner())[i] = Some(res);
                 }
             });
@@ -393,18 +511,20 @@ where
         .into_inner()
         .unwrap_or_else(|p| p.into_inner())
         .into_iter()
-        .map(|r| r.unwrap_or_else(|| Err("not run".into())))
+        .map(|r| r.unwrap_or(Err(EvalError::NotRun)))
         .collect())
 }
 
-type Slots = Mutex<Vec<Option<std::result::Result<EpisodeResult, String>>>>;
+type Slots = Mutex<Vec<Option<EpisodeOutcome>>>;
 
-fn fail_rest(next: &AtomicUsize, episodes: &[Episode], out: &Slots, why: String) {
+fn fail_rest(next: &AtomicUsize, episodes: &[Episode], out: &Slots, why: &str) {
     loop {
         let i = next.fetch_add(1, Ordering::Relaxed);
         let Some(ep) = episodes.get(i) else { break };
-        out.lock().unwrap_or_else(|p| p.into_inner())[i] =
-            Some(Err(format!("episode {}: {why}", ep.name)));
+        out.lock().unwrap_or_else(|p| p.into_inner())[i] = Some(Err(EvalError::Episode {
+            episode: ep.name.clone(),
+            source: Box::new(EvalError::Placer(why.into())),
+        }));
     }
 }
 
@@ -447,7 +567,7 @@ pub struct Summary {
 }
 
 /// Summarises results (errored episodes are counted apart and excluded).
-pub fn summarize(method: &str, results: &[std::result::Result<EpisodeResult, String>]) -> Summary {
+pub fn summarize(method: &str, results: &[EpisodeOutcome]) -> Summary {
     let ok: Vec<&EpisodeResult> = results.iter().filter_map(|r| r.as_ref().ok()).collect();
     let n = ok.len().max(1) as f64;
     let placements: usize = ok.iter().map(|r| r.placements).sum();

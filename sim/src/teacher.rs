@@ -18,13 +18,11 @@
 use crate::catalog::TypeIdx;
 use crate::env::{PackingEnv, RewardMode};
 use crate::error::Result;
-use crate::eval::EpisodeResult;
 use crate::heightmap::Heightmap;
 use crate::lattice::{Lattice, Placement};
 use crate::reserve::Reserve;
 use crate::world::PackingWorld;
 use rapier3d::math::{Rotation, Vector};
-use std::time::Instant;
 
 /// What the rollout after one candidate placement achieved.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -257,35 +255,28 @@ impl LatticeRule {
     }
 }
 
-/// Runs one episode: `order` placed by `rule`, timing each decision (the rule plus the z
-/// estimate of the release pose). An object without a feasible placement ends the episode as
-/// a failure ("no feasible placement").
-pub fn run_lattice_episode(
-    env: &mut PackingEnv,
-    name: &str,
-    order: &[TypeIdx],
-    rule: &mut LatticeRule,
-    seed: u64,
-) -> Result<EpisodeResult> {
-    env.reset(order, seed)?;
-    let mut r = EpisodeResult::new(name, order.len());
-    while let Some(object) = env.next_object() {
-        let t0 = Instant::now();
-        let Some(p) = rule.decide(env)? else {
-            r.decision_ns.push(t0.elapsed().as_nanos() as u64);
-            r.record_no_feasible_placement();
-            break;
+impl crate::eval::Placer for LatticeRule {
+    fn name(&self) -> String {
+        LatticeRule::name(self)
+    }
+
+    /// The rule's placement, released at the world's release pose (part of the timed
+    /// decision).
+    fn decide(
+        &mut self,
+        env: &mut PackingEnv,
+    ) -> std::result::Result<Option<crate::eval::Decision>, crate::eval::PlaceError> {
+        let Some(object) = env.next_object() else {
+            return Ok(None);
+        };
+        let Some(p) = LatticeRule::decide(self, env)? else {
+            return Ok(None);
         };
         let pose =
             env.world_mut()
                 .release_pose(object, p.x, p.y, Rotation::from_rotation_z(p.theta()));
-        r.decision_ns.push(t0.elapsed().as_nanos() as u64);
-        let res = env.step_pose(pose)?;
-        if r.record(&res) {
-            break;
-        }
+        Ok(Some(crate::eval::Decision::Pose(pose)))
     }
-    Ok(r)
 }
 
 /// What the geometric rollout after one candidate placement achieved.

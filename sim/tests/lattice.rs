@@ -6,9 +6,7 @@ use herb_sim::env::{PackingEnv, RewardMode};
 use herb_sim::eval::NO_FEASIBLE_PLACEMENT;
 use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y, SUCCESS_TOP_Z};
 use herb_sim::lattice::{BELOW_LIMIT, FEASIBLE, INSIDE, Lattice, NUM_YAWS, WALL_TOL_M, YAWS};
-use herb_sim::teacher::{
-    GeoLookahead, LatticeRule, Lookahead, raise_bounding_box, rollout, run_lattice_episode,
-};
+use herb_sim::teacher::{GeoLookahead, LatticeRule, Lookahead, raise_bounding_box, rollout};
 use herb_sim::zestimate::{ZScratch, estimate_z};
 use herb_sim::{Heightmap, PackingWorld, SharedCatalog, TypeIdx, WorldConfig};
 use rapier3d::math::Rotation;
@@ -192,7 +190,12 @@ fn a_full_box_has_no_feasible_placement_and_the_episode_ends_with_that_reason() 
     let (c, big) = with_board();
     let mut env = PackingEnv::new(c.clone(), WorldConfig::default(), RewardMode::Simple).unwrap();
     let mut rule = LatticeRule::Blbf(Box::new(Lattice::new(&c)));
-    let r = run_lattice_episode(&mut env, "big", &[big], &mut rule, 0).unwrap();
+    let ep = herb_sim::boxed::Episode {
+        name: "big".into(),
+        objects: vec![big],
+        human: vec![],
+    };
+    let r = herb_sim::eval::run_episode(&mut env, &ep, &[big], &mut rule, 0).unwrap();
     assert!(!r.success);
     assert_eq!(r.placements, 0);
     assert_eq!(r.failure.unwrap().bound, NO_FEASIBLE_PLACEMENT);

@@ -4,21 +4,18 @@ use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, Parser, Subcommand};
 use herb_sim::boxed::{self, Episode};
 use herb_sim::catalog::Catalog;
-use herb_sim::eval::{self, Method as Replay};
+use herb_sim::eval::{self, EpisodeOutcome, EvalError, Replay, ReplayPlacer};
 use herb_sim::hull::fit_canonical;
 use herb_sim::paths::{self, MeshSource};
-use herb_sim::teacher::{LatticeRule, run_lattice_episode};
 use herb_sim::{PackingEnv, RewardMode, SharedCatalog, WorldConfig};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::time::Instant;
 
-mod evaluate;
 mod plot;
 
-use evaluate::{run_packit_so3_episode, run_policy_episode};
-use herb_decide::{Blbf, Decider, Method, Order, PackitSo3, Policy, PolicySpec, SequenceModel};
+use herb_decide::{Method, MethodSettings, Order, PolicySpec, SequenceModel};
 
 /// The replays `herb-sim pack` shows.
 const REPLAYS: [Method; 3] = [Method::Human, Method::HumanPose, Method::Random];
@@ -118,10 +115,10 @@ struct EvalArgs {
     /// flag name `--sequence` is an alias for one release.
     #[arg(long, alias = "sequence", value_parser = order_parser())]
     order: Option<Order>,
-    /// The ONNX placement policy for herb (repeat for one herb row per policy, labelled by
-    /// file stem).
+    /// The placement policy for herb: a shipped policy's name (cs06, cs09: `models/`) or an
+    /// ONNX file (repeat for one herb row per policy, labelled by file stem).
     #[arg(long)]
-    policy: Vec<PathBuf>,
+    policy: Vec<PolicySpec>,
     /// The folder of the behaviour-cloning models for bc-mse and bc-mdn
     /// (`bc-<kind>-heldout-{even,odd}.onnx`, written by `training/bc.py`).
     #[arg(long, default_value = "models")]
@@ -366,97 +363,76 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
     let mut csv_text = String::from(
         "method,sequence,episode,objects,packed,success,placements,stable,final_compactness,physics_steps,latency_mean_ms\n",
     );
+    let run = EvalRun {
+        catalog: &catalog,
+        cfg: &cfg,
+        episodes: &episodes,
+        model: model.as_ref(),
+        seed: a.seed,
+        threads: a.threads,
+    };
+    let base = MethodSettings {
+        policy: None,
+        bc_models: a.bc_models.clone(),
+        lookahead_k: a.lookahead_k,
+        lookahead_reward,
+        lookahead_horizon: a.lookahead_horizon.map(|h| h as usize),
+        clearance_m: cfg.clearance_m,
+    };
     // One run per (row, policy): herb once per policy, the others once.
-    let runs: Vec<(Row, Option<&Path>)> = a
+    let models_dir = Path::new(PolicySpec::DEFAULT_MODELS_DIR);
+    let runs: Vec<(Row, Option<PathBuf>)> = a
         .method
         .iter()
         .flat_map(|&r| match r.method {
-            Method::Herb => a.policy.iter().map(|p| (r, Some(p.as_path()))).collect(),
+            Method::Herb => a
+                .policy
+                .iter()
+                .map(|p| match p.resolved(models_dir) {
+                    PolicySpec::Onnx(path) => (r, Some(path)),
+                    _ => (r, None),
+                })
+                .collect(),
             _ => vec![(r, None)],
         })
         .collect();
     for (row, policy) in runs {
         let m = row.method;
         let t = Instant::now();
-        let name = match (m, policy) {
-            (_, Some(p)) => format!(
+        let name = match &policy {
+            Some(p) => format!(
                 "{} {}",
                 m.name(),
                 p.file_stem().and_then(|s| s.to_str()).unwrap_or("policy")
             ),
-            (_, None) => m.name().to_string(),
+            None => m.name().to_string(),
         };
-        // The tables' label: the humans' rows say what they are (replay or recorded poses).
-        let shown = match policy {
-            Some(_) => name.clone(),
-            None => m.label().to_string(),
-        };
-        let (label, seq_name, results) = match (m.replay(), m.order(row.order.or(a.order))) {
-            (Some(sm), _) => (
-                shown.clone(),
-                "human",
-                eval::run_all(&catalog, &cfg, &episodes, sm, a.seed, a.threads)?,
-            ),
-            (None, mode) => {
-                let mode = mode.expect("every method without a replay has an order");
-                let horizon = a.lookahead_horizon.map(|h| h as usize);
-                let rule = m.lattice_rule(&catalog, a.lookahead_k, lookahead_reward, horizon);
-                let results = match rule {
-                    _ if m.bc_models(&a.bc_models).is_some() => run_bc_method(
-                        &catalog,
-                        &cfg,
-                        &episodes,
-                        m,
-                        &a.bc_models,
-                        mode,
-                        model.as_ref(),
-                        a.seed,
-                        a.threads,
-                    )?,
-                    _ if m == Method::PackitSo3 => run_packit_so3_method(
-                        &catalog,
-                        &cfg,
-                        &episodes,
-                        mode,
-                        model.as_ref(),
-                        a.seed,
-                        a.threads,
-                    )?,
-                    Some(rule) => run_lattice_method(
-                        &catalog,
-                        &cfg,
-                        &episodes,
-                        &rule,
-                        mode,
-                        model.as_ref(),
-                        a.seed,
-                        a.threads,
-                    )?,
-                    None => run_policy_method(
-                        &catalog,
-                        &cfg,
-                        &episodes,
-                        m,
-                        mode,
-                        model.as_ref(),
-                        policy,
-                        a.seed,
-                        a.threads,
-                    )?,
-                };
-                // The table names the teacher's k; the CSV keeps the method's name.
-                let shown = match m {
-                    Method::Lookahead => {
-                        let horizon = a
-                            .lookahead_horizon
-                            .map(|h| format!(", horizon {h}"))
-                            .unwrap_or_default();
-                        format!("lookahead (teacher, k = {}{horizon})", a.lookahead_k)
-                    }
-                    _ => shown,
-                };
-                (format!("{shown} ({})", mode.name()), mode.name(), results)
+        if let Some(p) = &policy {
+            let bytes = std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
+            eprintln!("policy {}: {:.2} MB", p.display(), bytes as f64 / 1e6);
+        }
+        // The tables' label: the humans' rows say what they are (replay or recorded poses),
+        // the teacher names its k.
+        let shown = match (m, &policy) {
+            (_, Some(_)) => name.clone(),
+            (Method::Lookahead, _) => {
+                let horizon = a
+                    .lookahead_horizon
+                    .map(|h| format!(", horizon {h}"))
+                    .unwrap_or_default();
+                format!("lookahead (teacher, k = {}{horizon})", a.lookahead_k)
             }
+            _ => m.label().to_string(),
+        };
+        let order = m.order(row.order.or(a.order));
+        let settings = MethodSettings {
+            policy: policy.clone().map(PolicySpec::Onnx),
+            ..base.clone()
+        };
+        let results = run.method(m, order, &settings)?;
+        let (label, seq_name) = match order {
+            Some(o) => (format!("{shown} ({})", o.name()), o.name()),
+            None => (shown, "human"),
         };
         let secs = t.elapsed().as_secs_f64();
         let placements: usize = results
@@ -524,10 +500,10 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
         ));
     }
     for (label, results) in &all_results {
-        let errors: Vec<&str> = results
+        let errors: Vec<String> = results
             .iter()
             .filter_map(|r| r.as_ref().err())
-            .map(String::as_str)
+            .map(ToString::to_string)
             .collect();
         if !errors.is_empty() {
             table.push_str(&format!(
@@ -588,7 +564,7 @@ fn check_eval_args(a: &EvalArgs) -> AnyResult<()> {
 }
 
 /// The per-episode CSV rows of one method.
-fn csv_rows(name: &str, seq_name: &str, results: &[Result<eval::EpisodeResult, String>]) -> String {
+fn csv_rows(name: &str, seq_name: &str, results: &[EpisodeOutcome]) -> String {
     let mut text = String::new();
     for r in results {
         match r {
@@ -619,147 +595,70 @@ fn csv_rows(name: &str, seq_name: &str, results: &[Result<eval::EpisodeResult, S
     text
 }
 
-/// Episode `i`'s seed (`seed + i`) and its objects in the order `mode` gives them.
-fn episode_order(
-    env: &PackingEnv,
-    ep: &Episode,
-    i: usize,
-    mode: Order,
-    model: Option<&SequenceModel>,
+/// What every row of one `herb-sim eval` run shares.
+struct EvalRun<'a> {
+    catalog: &'a SharedCatalog,
+    cfg: &'a WorldConfig,
+    episodes: &'a [Episode],
+    model: Option<&'a SequenceModel>,
     seed: u64,
-) -> Result<(u64, Vec<herb_sim::TypeIdx>), String> {
-    let s = seed.wrapping_add(i as u64);
-    let order = mode
-        .order(env.world().catalog(), model, &ep.objects, s)
-        .map_err(|e| e.to_string())?;
-    Ok((s, order))
+    threads: usize,
 }
 
-/// Runs a decision-core policy over `episodes`, one policy per worker thread.
-#[allow(clippy::too_many_arguments)]
-fn run_policy_method(
-    catalog: &SharedCatalog,
-    cfg: &WorldConfig,
-    episodes: &[Episode],
-    m: Method,
-    mode: Order,
-    model: Option<&SequenceModel>,
-    policy_path: Option<&Path>,
-    seed: u64,
-    jobs: usize,
-) -> AnyResult<Vec<Result<eval::EpisodeResult, String>>> {
-    match (m, policy_path) {
-        (Method::Herb, None) => return Err("herb needs --policy <model.onnx>".into()),
-        // Load once up front: a bad model is one clear error, not one per episode.
-        (Method::Herb, Some(p)) => {
-            herb_decide::load_policy(&PolicySpec::Onnx(p.to_owned()), catalog)?;
-            let bytes = std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
-            eprintln!("policy {}: {:.2} MB", p.display(), bytes as f64 / 1e6);
+impl EvalRun<'_> {
+    /// Runs method `m` over the episodes, each ordered by `order` (the human order when
+    /// `None`), one placer per worker thread, through the one episode loop
+    /// ([`eval::run_episode`]); the humans' recorded poses are scored without physics.
+    fn method(
+        &self,
+        m: Method,
+        order: Option<Order>,
+        settings: &MethodSettings,
+    ) -> AnyResult<Vec<EpisodeOutcome>> {
+        let (catalog, cfg, model, seed) = (self.catalog, self.cfg, self.model, self.seed);
+        if m == Method::HumanRecorded {
+            let (tol, tilt) = (cfg.inside_tolerance_m, cfg.stability_tilt_deg);
+            return Ok(eval::run_all_with(
+                catalog,
+                cfg,
+                self.episodes,
+                self.threads,
+                || {
+                    Ok(move |_: &mut PackingEnv, ep: &Episode, _| {
+                        Ok(eval::recorded_episode(catalog, ep, tol, tilt)?)
+                    })
+                },
+            )?);
         }
-        _ => {}
-    }
-    let env_catalog = catalog.clone();
-    let make = || -> Result<_, String> {
-        let policy: Box<dyn Policy> = match (m, policy_path) {
-            (Method::Blbf, _) => Box::new(Blbf::new()),
-            (Method::Herb, Some(p)) => {
-                herb_decide::load_policy(&PolicySpec::Onnx(p.to_owned()), env_catalog.as_ref())
-                    .map_err(|e| e.to_string())?
-            }
-            _ => return Err(format!("{} is not a decision-core policy", m.name())),
-        };
-        let mut decider = Decider::new(policy, env_catalog.clone(), cfg.clearance_m);
-        Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
-            let (s, order) = episode_order(env, ep, i, mode, model, seed)?;
-            run_policy_episode(env, ep, &order, &mut decider, s).map_err(|e| e.to_string())
-        })
-    };
-    Ok(eval::run_all_with(catalog, cfg, episodes, jobs, make)?)
-}
-
-/// Runs a behaviour-cloning method over `episodes`: each episode is placed by the model trained
-/// without its participant (`Method::bc_models`: even participants by the `heldout-even` model,
-/// odd ones by the other), one pair of policies per worker thread.
-#[allow(clippy::too_many_arguments)]
-fn run_bc_method(
-    catalog: &SharedCatalog,
-    cfg: &WorldConfig,
-    episodes: &[Episode],
-    m: Method,
-    dir: &Path,
-    mode: Order,
-    model: Option<&SequenceModel>,
-    seed: u64,
-    jobs: usize,
-) -> AnyResult<Vec<Result<eval::EpisodeResult, String>>> {
-    let files = m.bc_models(dir).ok_or("not a behaviour-cloning method")?;
-    // Load once up front: a missing or bad model is one clear error, not one per episode.
-    for f in &files {
-        herb_decide::load_policy(&PolicySpec::Onnx(f.clone()), catalog)
-            .map_err(|e| format!("{}: {e} (train with training/bc.py)", m.name()))?;
-    }
-    let make = || -> Result<_, String> {
-        let mut deciders = Vec::new();
-        for f in &files {
-            let p = herb_decide::load_policy(&PolicySpec::Onnx(f.clone()), catalog.as_ref())
-                .map_err(|e| e.to_string())?;
-            deciders.push(Decider::new(p, catalog.clone(), cfg.clearance_m));
-        }
-        Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
-            let s = seed.wrapping_add(i as u64);
-            let p = boxed::participant(&ep.name).ok_or_else(|| {
-                format!("no participant number in the session name {:?}", ep.name)
+        // Built once up front: a bad model is one clear error, not one per episode.
+        m.placer(catalog, settings)
+            .map_err(|e| match m.bc_models(&settings.bc_models) {
+                Some(_) => format!("{e} (train with training/bc.py)"),
+                None => e.to_string(),
             })?;
-            let order = mode
-                .order(env.world().catalog(), model, &ep.objects, s)
-                .map_err(|e| e.to_string())?;
-            let decider = &mut deciders[(p % 2) as usize];
-            run_policy_episode(env, ep, &order, decider, s).map_err(|e| e.to_string())
-        })
-    };
-    Ok(eval::run_all_with(catalog, cfg, episodes, jobs, make)?)
-}
-
-/// Runs PackIt SO(3) over `episodes`, one heuristic per worker thread.
-fn run_packit_so3_method(
-    catalog: &SharedCatalog,
-    cfg: &WorldConfig,
-    episodes: &[Episode],
-    mode: Order,
-    model: Option<&SequenceModel>,
-    seed: u64,
-    jobs: usize,
-) -> AnyResult<Vec<Result<eval::EpisodeResult, String>>> {
-    let make = || -> Result<_, String> {
-        let mut packit = PackitSo3::new();
-        Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
-            let (s, order) = episode_order(env, ep, i, mode, model, seed)?;
-            run_packit_so3_episode(env, ep, &order, &mut packit, s).map_err(|e| e.to_string())
-        })
-    };
-    Ok(eval::run_all_with(catalog, cfg, episodes, jobs, make)?)
-}
-
-/// Runs a lattice rule over `episodes`, one copy of the rule per worker thread.
-#[allow(clippy::too_many_arguments)]
-fn run_lattice_method(
-    catalog: &SharedCatalog,
-    cfg: &WorldConfig,
-    episodes: &[Episode],
-    rule: &LatticeRule,
-    mode: Order,
-    model: Option<&SequenceModel>,
-    seed: u64,
-    jobs: usize,
-) -> AnyResult<Vec<Result<eval::EpisodeResult, String>>> {
-    let make = || -> Result<_, String> {
-        let mut rule = rule.clone();
-        Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
-            let (s, order) = episode_order(env, ep, i, mode, model, seed)?;
-            run_lattice_episode(env, &ep.name, &order, &mut rule, s).map_err(|e| e.to_string())
-        })
-    };
-    Ok(eval::run_all_with(catalog, cfg, episodes, jobs, make)?)
+        let make = || -> Result<_, EvalError> {
+            let mut placer = m
+                .placer(catalog, settings)
+                .map_err(|e| EvalError::Placer(e.into()))?;
+            Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
+                let s = seed.wrapping_add(i as u64);
+                let objects = match order {
+                    Some(o) => o
+                        .order(catalog, model, &ep.objects, s)
+                        .map_err(|e| EvalError::Placer(e.into()))?,
+                    None => ep.objects.clone(),
+                };
+                eval::run_episode(env, ep, &objects, placer.as_mut(), s)
+            })
+        };
+        Ok(eval::run_all_with(
+            catalog,
+            cfg,
+            self.episodes,
+            self.threads,
+            make,
+        )?)
+    }
 }
 
 fn write_file(p: &Path, text: &str) -> AnyResult<()> {
@@ -777,7 +676,8 @@ fn pack_quiet(
     png: &Path,
 ) -> AnyResult<()> {
     let mut env = PackingEnv::new(catalog.clone(), WorldConfig::default(), RewardMode::Simple)?;
-    eval::run_episode(&mut env, ep, m, seed)?;
+    let mut placer = ReplayPlacer::new(m)?;
+    eval::run_episode(&mut env, ep, &ep.objects, &mut placer, seed)?;
     herb_sim::image::write_heightmap_png(png, env.world().heightmap(), 0.30, 3)?;
     Ok(())
 }
@@ -795,6 +695,8 @@ fn pack_one(
         RewardMode::cs(0.6)?,
     )?;
     env.reset(&ep.objects, seed)?;
+    let mut placer = ReplayPlacer::new(m)?;
+    eval::Placer::begin_episode(&mut placer, ep, seed).map_err(|e| e.to_string())?;
     println!(
         "episode {} ({} objects), method {}",
         ep.name,
@@ -803,7 +705,9 @@ fn pack_one(
     );
     let t = Instant::now();
     for (i, &ty) in ep.objects.iter().enumerate() {
-        let step = eval::method_step(&mut env, ep, i, m)?;
+        let decided = eval::Placer::decide(&mut placer, &mut env).map_err(|e| e.to_string())?;
+        let Some(d) = decided else { break };
+        let step = eval::apply(&mut env, d)?;
         let o = step.info.outcome;
         let (x, y, th) = step.info.placement;
         println!(

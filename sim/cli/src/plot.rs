@@ -3,11 +3,11 @@
 //! Text needs a TrueType font, read at run time from `$HERB_FONT` or the DejaVu Sans path of
 //! Debian/Ubuntu (`fonts-dejavu-core`): `herb_picture::register_font`.
 
-use herb_sim::eval::EpisodeResult;
+use herb_sim::eval::{EpisodeOutcome, EpisodeResult};
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
-type Results = [(String, Vec<Result<EpisodeResult, String>>)];
+type Results = [(String, Vec<EpisodeOutcome>)];
 
 /// Writes `compactness_per_step.png` and `objects_packed.png` into `dir`.
 pub fn write_plots(dir: &Path, results: &Results) -> Result<Vec<PathBuf>, String> {
@@ -21,7 +21,7 @@ pub fn write_plots(dir: &Path, results: &Results) -> Result<Vec<PathBuf>, String
 }
 
 /// Mean C after step k (1-based) over the episodes that made at least k placements.
-fn mean_compactness(results: &[Result<EpisodeResult, String>]) -> Vec<(u32, f64)> {
+fn mean_compactness(results: &[EpisodeOutcome]) -> Vec<(u32, f64)> {
     let ok: Vec<&EpisodeResult> = results.iter().filter_map(|r| r.as_ref().ok()).collect();
     let max = ok
         .iter()

@@ -50,6 +50,14 @@ pub enum DecideError {
     /// between the walls below the height limit.
     #[error("no feasible placement")]
     NoFeasiblePlacement,
+    /// A method that cannot be built as asked (a missing policy, a replay asked to decide).
+    #[error("{method}: {message}")]
+    Method {
+        /// The method's name.
+        method: &'static str,
+        /// What is wrong.
+        message: String,
+    },
     /// An error from the packing world.
     #[error(transparent)]
     Sim(#[from] herb_sim::SimError),

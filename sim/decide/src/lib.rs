@@ -14,6 +14,7 @@ pub mod error;
 pub mod method;
 pub mod onnx;
 pub mod order;
+pub mod placer;
 pub mod policy;
 pub mod sequence;
 
@@ -23,6 +24,7 @@ pub use error::{DecideError, Result};
 pub use method::Method;
 pub use onnx::OnnxPolicy;
 pub use order::Order;
+pub use placer::{HeldOutPlacer, MethodSettings};
 pub use policy::{Blbf, DecisionInput, PackitSo3, Policy};
 pub use sequence::{SequenceModel, beam3, beam3_last};
 

@@ -3,7 +3,7 @@
 use crate::order::Order;
 use herb_sim::RewardMode;
 use herb_sim::catalog::Catalog;
-use herb_sim::eval::Method as Replay;
+use herb_sim::eval::Replay;
 use herb_sim::lattice::Lattice;
 use herb_sim::reserve::Reserve;
 use herb_sim::teacher::{GeoLookahead, LatticeRule, Lookahead};

@@ -1,0 +1,181 @@
+//! The decision core's methods as [`Placer`]s of the one episode loop
+//! ([`herb_sim::eval::run_episode`]), and the registry's factory: [`Method::placer`] builds the
+//! placer of any method of Table I from one [`MethodSettings`].
+
+use crate::error::{DecideError, Result};
+use crate::method::Method;
+use crate::policy::{PackitSo3, Policy};
+use crate::{Decider, PolicySpec};
+use herb_sim::boxed::{Episode, participant};
+use herb_sim::eval::{Decision, PlaceError, Placer, ReplayPlacer};
+use herb_sim::{PackingEnv, RewardMode, SharedCatalog};
+use std::path::PathBuf;
+
+impl<P: Policy + ?Sized> Placer for Decider<P> {
+    fn name(&self) -> String {
+        self.policy_name().into()
+    }
+
+    fn begin_episode(&mut self, _ep: &Episode, seed: u64) -> std::result::Result<(), PlaceError> {
+        Decider::begin_episode(self, seed);
+        Ok(())
+    }
+
+    /// herbd's decision path on the world's heightmap: the policy, the checks and the z
+    /// estimate (one [`Decider::decide`] call).
+    fn decide(
+        &mut self,
+        env: &mut PackingEnv,
+    ) -> std::result::Result<Option<Decision>, PlaceError> {
+        let Some(object) = env.next_object() else {
+            return Ok(None);
+        };
+        let after = env.remaining().get(1..).unwrap_or(&[]);
+        match Decider::decide(
+            self,
+            env.world().heightmap().into(),
+            object,
+            env.step_index(),
+            after,
+        ) {
+            Ok(d) => Ok(Some(Decision::Pose(d.pose()))),
+            Err(DecideError::NoFeasiblePlacement) => Ok(None),
+            Err(e) => Err(e.into()),
+        }
+    }
+}
+
+impl Placer for PackitSo3 {
+    fn name(&self) -> String {
+        "packit-so3".into()
+    }
+
+    /// The PackIt heuristic over the 24 axis-aligned orientations on the world's heightmap,
+    /// released at the estimated resting height plus the world's clearance.
+    fn decide(
+        &mut self,
+        env: &mut PackingEnv,
+    ) -> std::result::Result<Option<Decision>, PlaceError> {
+        let Some(object) = env.next_object() else {
+            return Ok(None);
+        };
+        let world = env.world();
+        let shape = world.catalog().shape(object);
+        let pose = PackitSo3::decide(self, world.heightmap(), shape, world.config().clearance_m);
+        Ok(pose.map(Decision::Pose))
+    }
+}
+
+/// A behaviour-cloning method: each episode placed by the model trained without its
+/// participant (even participants by the `heldout-even` model, odd ones by the other).
+pub struct HeldOutPlacer {
+    deciders: [Decider; 2],
+    active: usize,
+}
+
+impl Placer for HeldOutPlacer {
+    fn name(&self) -> String {
+        self.deciders[self.active].policy_name().into()
+    }
+
+    fn begin_episode(&mut self, ep: &Episode, seed: u64) -> std::result::Result<(), PlaceError> {
+        let p = participant(&ep.name)
+            .ok_or_else(|| format!("no participant number in the session name {:?}", ep.name))?;
+        self.active = (p % 2) as usize;
+        self.deciders[self.active].begin_episode(seed);
+        Ok(())
+    }
+
+    fn decide(
+        &mut self,
+        env: &mut PackingEnv,
+    ) -> std::result::Result<Option<Decision>, PlaceError> {
+        Placer::decide(&mut self.deciders[self.active], env)
+    }
+}
+
+/// What the methods of the registry may need besides the catalog: one value for the CLI, the
+/// bindings, the benches and the tests.
+#[derive(Debug, Clone)]
+pub struct MethodSettings {
+    /// The placement policy of [`Method::Herb`] (BLBF, a shipped policy or an ONNX file).
+    pub policy: Option<PolicySpec>,
+    /// The folder of the behaviour-cloning models ([`Method::bc_models`]).
+    pub bc_models: PathBuf,
+    /// Candidates the lookahead teachers simulate per decision.
+    pub lookahead_k: usize,
+    /// Reward whose return the lookahead teacher maximises.
+    pub lookahead_reward: RewardMode,
+    /// Objects per rollout of the lookahead teacher (`None`: to the episode's end).
+    pub lookahead_horizon: Option<usize>,
+    /// Gap above the estimated resting height at release (m), for the decision core's
+    /// policies.
+    pub clearance_m: f32,
+}
+
+impl Default for MethodSettings {
+    fn default() -> Self {
+        Self {
+            policy: None,
+            bc_models: PathBuf::from(PolicySpec::DEFAULT_MODELS_DIR),
+            lookahead_k: 8,
+            lookahead_reward: RewardMode::CompactnessStability { alpha: 0.6 },
+            lookahead_horizon: None,
+            clearance_m: herb_sim::WorldConfig::default().clearance_m,
+        }
+    }
+}
+
+impl Method {
+    /// The placer of this method, built from `settings`: the one factory of the registry.
+    /// [`Method::HumanRecorded`] is not a placement in the world
+    /// ([`herb_sim::eval::recorded_episode`] scores it) and is an error here, as are a missing
+    /// policy for [`Method::Herb`] and a model that does not load.
+    pub fn placer(
+        &self,
+        catalog: &SharedCatalog,
+        settings: &MethodSettings,
+    ) -> Result<Box<dyn Placer>> {
+        let decider = |p: Box<dyn Policy>| Decider::new(p, catalog.clone(), settings.clearance_m);
+        if let Some(replay) = self.replay() {
+            return ReplayPlacer::new(replay)
+                .map(|p| Box::new(p) as Box<dyn Placer>)
+                .map_err(|e| DecideError::Method {
+                    method: self.name(),
+                    message: e.to_string(),
+                });
+        }
+        if let Some(rule) = self.lattice_rule(
+            catalog,
+            settings.lookahead_k,
+            settings.lookahead_reward,
+            settings.lookahead_horizon,
+        ) {
+            return Ok(Box::new(rule));
+        }
+        if let Some(files) = self.bc_models(&settings.bc_models) {
+            let [even, odd] = files.map(|f| crate::load_policy(&PolicySpec::Onnx(f), catalog));
+            return Ok(Box::new(HeldOutPlacer {
+                deciders: [decider(even?), decider(odd?)],
+                active: 0,
+            }));
+        }
+        Ok(match self {
+            Self::Herb => {
+                let spec = settings.policy.as_ref().ok_or(DecideError::Method {
+                    method: self.name(),
+                    message: "needs a policy (e.g. models/policy-cs06.onnx or cs06)".into(),
+                })?;
+                Box::new(decider(crate::load_policy(spec, catalog)?))
+            }
+            Self::Blbf => Box::new(decider(Box::new(crate::Blbf::new()))),
+            Self::PackitSo3 => Box::new(PackitSo3::new()),
+            other => {
+                return Err(DecideError::Method {
+                    method: other.name(),
+                    message: "has no placer".into(),
+                });
+            }
+        })
+    }
+}
