@@ -15,7 +15,7 @@
 //! of a primitive (cuboid, elliptic cylinder, ellipsoid, capsule) with the real dimensions.
 
 use crate::error::{Result, SimError};
-use crate::hull::{hull_volume, quad_faced_hull, sphere_directions};
+use crate::hull::{HullError, hull_volume, quad_faced_hull, sphere_directions};
 use crate::paths::MeshSource;
 use parry3d::math::{Rotation, Vector};
 use parry3d::shape::SharedShape;
@@ -304,9 +304,9 @@ fn build_shape(spec: &ObjectSpec, meshes: &MeshSource) -> Result<ObjectShape> {
         ShapeSource::Mesh(p) => p.clone(),
         ShapeSource::Primitive(_) => PathBuf::from(format!("<primitive of {}>", spec.id)),
     };
-    ObjectShape::from_points(&points, source).map_err(|message| SimError::Mesh {
+    ObjectShape::from_points(&points, source).map_err(|e| SimError::Mesh {
         path: path_for_err,
-        message,
+        message: e.to_string(),
     })
 }
 
@@ -316,17 +316,14 @@ impl ObjectShape {
     pub fn from_points(
         points: &[Vector],
         source: ShapeSource,
-    ) -> std::result::Result<Self, String> {
+    ) -> std::result::Result<Self, HullError> {
         if points.len() < 4 || points.iter().any(|p| !p.is_finite()) {
-            return Err(format!(
-                "{} points (need 4 or more, all finite)",
-                points.len()
-            ));
+            return Err(HullError::TooFewPoints(points.len()));
         }
         let (vertices, triangles, poly) = quad_faced_hull(points)?;
         let volume = hull_volume(&vertices, &triangles);
         if volume.is_nan() || volume <= 1e-9 {
-            return Err(format!("degenerate hull (volume {volume:e} m^3)"));
+            return Err(HullError::Degenerate(volume));
         }
         let (aabb_min, aabb_max) = vertices.iter().fold(
             (Vector::splat(f32::MAX), Vector::splat(f32::MIN)),

@@ -4,6 +4,27 @@
 //! [`crate::catalog`] uses both).
 
 use parry3d::math::{Rotation, Vector};
+use parry3d::transformation::ConvexHullError;
+
+/// Why no usable hull could be made of a point cloud.
+#[derive(Debug, PartialEq, thiserror::Error)]
+pub enum HullError {
+    /// Too few points, or a point that is not finite.
+    #[error("{0} points (need 4 or more, all finite)")]
+    TooFewPoints(usize),
+    /// parry's convex hull failed.
+    #[error("convex hull failed: {0:?}")]
+    ConvexHull(#[source] ConvexHullError),
+    /// parry did not take the hull as a convex mesh.
+    #[error("parry rejected the hull as a convex mesh")]
+    NotConvexMesh,
+    /// Some face still had more than four vertices after the last round.
+    #[error("could not reduce the hull's faces to quads in 12 rounds")]
+    FacesNotReduced,
+    /// The hull is flat (its volume, m^3, is zero, tiny or NaN).
+    #[error("degenerate hull (volume {0:e} m^3)")]
+    Degenerate(f32),
+}
 
 /// Number of sampling directions used to reduce a hull (plus the 26 axis and diagonal ones).
 pub const SUPPORT_DIRECTIONS: usize = 160;
@@ -22,13 +43,13 @@ pub const FACE_NUDGE_M: f32 = 0.0004;
 /// span the largest quadrilateral and move the others [`FACE_NUDGE_M`] inwards along the face
 /// normal, then rebuild the hull, until every face is a triangle or a quad. The object then
 /// rests on that quad (as parry's own cylinders rest on an inscribed square).
-pub fn quad_faced_hull(points: &[Vector]) -> std::result::Result<QuadHull, String> {
+pub fn quad_faced_hull(points: &[Vector]) -> std::result::Result<QuadHull, HullError> {
     let mut pts = points.to_vec();
     for _ in 0..12 {
-        let (v, t) = parry3d::transformation::try_convex_hull(&pts)
-            .map_err(|e| format!("convex hull failed: {e:?}"))?;
+        let (v, t) =
+            parry3d::transformation::try_convex_hull(&pts).map_err(HullError::ConvexHull)?;
         let poly = parry3d::shape::ConvexPolyhedron::from_convex_mesh(v, &t)
-            .ok_or_else(|| "parry rejected the hull as a convex mesh".to_string())?;
+            .ok_or(HullError::NotConvexMesh)?;
         let mut next = poly.points().to_vec();
         let mut moved = false;
         for face in poly.faces() {
@@ -54,7 +75,7 @@ pub fn quad_faced_hull(points: &[Vector]) -> std::result::Result<QuadHull, Strin
         }
         pts = next;
     }
-    Err("could not reduce the hull's faces to quads in 12 rounds".into())
+    Err(HullError::FacesNotReduced)
 }
 
 /// Fan triangulation of every face of a polyhedron, outward winding. Face vertices are first
