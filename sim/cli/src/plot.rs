@@ -11,7 +11,7 @@ type Results = [(String, Vec<EpisodeOutcome>)];
 
 /// Writes `compactness_per_step.png` and `objects_packed.png` into `dir`.
 pub fn write_plots(dir: &Path, results: &Results) -> Result<Vec<PathBuf>, String> {
-    herb_picture::register_font()?;
+    herb_picture::register_font().map_err(|e| e.to_string())?;
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let a = dir.join("compactness_per_step.png");
     compactness_per_step(&a, results).map_err(|e| format!("{}: {e}", a.display()))?;

@@ -11,23 +11,65 @@
 use herb_core::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, SUCCESS_TOP_Z};
 use herb_core::heightmap::Heightmap;
 use plotters::prelude::*;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// The font read when `$HERB_FONT` is not set.
 pub const DEFAULT_FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
 
-/// Registers the font plotters draws text with (once per process; later calls do nothing).
-pub fn register_font() -> Result<(), String> {
-    static DONE: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
+/// What kept a picture, or the font it needs, from being made.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum PictureError {
+    /// The font file could not be read.
+    #[error(
+        "font {}: {source} (set HERB_FONT to a .ttf file, or install fonts-dejavu-core)",
+        .path.display()
+    )]
+    FontUnreadable {
+        /// The font file (`$HERB_FONT` or [`DEFAULT_FONT`]).
+        path: PathBuf,
+        /// The I/O error.
+        source: Arc<std::io::Error>,
+    },
+    /// The font file is not a TrueType font plotters can use.
+    #[error("font {}: not a usable TrueType font", .path.display())]
+    FontUnusable {
+        /// The font file.
+        path: PathBuf,
+    },
+    /// The picture's folder could not be made.
+    #[error("{}: {source}", .dir.display())]
+    Folder {
+        /// The folder.
+        dir: PathBuf,
+        /// The I/O error.
+        source: Arc<std::io::Error>,
+    },
+    /// Drawing or writing the picture failed.
+    #[error("{}: {message}", .path.display())]
+    Draw {
+        /// The picture file.
+        path: PathBuf,
+        /// What plotters reported.
+        message: String,
+    },
+}
+
+/// Registers the font plotters draws text with (once per process; later calls do nothing and
+/// return the first call's result).
+pub fn register_font() -> Result<(), PictureError> {
+    static DONE: std::sync::OnceLock<Result<(), PictureError>> = std::sync::OnceLock::new();
     DONE.get_or_init(|| {
-        let path = std::env::var("HERB_FONT").unwrap_or_else(|_| DEFAULT_FONT.into());
-        let bytes = std::fs::read(&path).map_err(|e| {
-            format!("font {path}: {e} (set HERB_FONT to a .ttf file, or install fonts-dejavu-core)")
+        let path =
+            PathBuf::from(std::env::var("HERB_FONT").unwrap_or_else(|_| DEFAULT_FONT.into()));
+        let bytes = std::fs::read(&path).map_err(|e| PictureError::FontUnreadable {
+            path: path.clone(),
+            source: Arc::new(e),
         })?;
         // plotters keeps the font for the life of the process.
         let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
         plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
-            .map_err(|_| format!("font {path}: not a usable TrueType font"))
+            .map_err(|_| PictureError::FontUnusable { path })
     })
     .clone()
 }
@@ -76,12 +118,18 @@ pub fn write_pack_picture(
     title: &str,
     hm: &Heightmap,
     objects: &[PictureObject],
-) -> Result<(), String> {
+) -> Result<(), PictureError> {
     register_font()?;
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        std::fs::create_dir_all(dir).map_err(|e| PictureError::Folder {
+            dir: dir.to_owned(),
+            source: Arc::new(e),
+        })?;
     }
-    draw(path, title, hm, objects).map_err(|e| format!("{}: {e}", path.display()))
+    draw(path, title, hm, objects).map_err(|e| PictureError::Draw {
+        path: path.to_owned(),
+        message: e.to_string(),
+    })
 }
 
 fn draw(path: &Path, title: &str, hm: &Heightmap, objects: &[PictureObject]) -> DrawResult {
@@ -256,6 +304,7 @@ mod tests {
         assert!(
             write_pack_picture(bad, "x", &hm, &objects)
                 .unwrap_err()
+                .to_string()
                 .contains("/proc/herb-no")
         );
     }
