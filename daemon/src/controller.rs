@@ -12,8 +12,7 @@
 //! The job state machine, its faults and its guarantees are described in [`crate::job`].
 
 use crate::config::Config;
-use crate::job::{Effects, Job, JobParams};
-use crate::journal::JournalRecord;
+use crate::job::{Effects, Job, JobParams, JobRecord};
 use crate::plan::{MotionPlan, Request, Response};
 use crate::planner::PlannerLink;
 use crate::record::{FRAME_META, LoopRec, OutDigest, Recorder, RespRec};
@@ -313,9 +312,9 @@ pub struct Controller {
     sent: u64,
     received: u64,
     /// The job journal's writer ring, if journaling ([`crate::journal`]).
-    journal: Option<rtrb::Producer<JournalRecord>>,
+    journal: Option<rtrb::Producer<JobRecord>>,
     /// The last record handed to the writer.
-    journaled: JournalRecord,
+    journaled: JobRecord,
 }
 
 /// The reporter's ends of the statistics rings, and of the log's.
@@ -368,7 +367,7 @@ impl Controller {
             sent: 0,
             received: 0,
             journal: None,
-            journaled: JournalRecord::NONE,
+            journaled: JobRecord::NONE,
         };
         (
             c,
@@ -388,14 +387,14 @@ impl Controller {
     }
 
     /// Hands every change of the job's journal record to `writer` ([`crate::journal::spawn`]).
-    pub fn with_journal(mut self, writer: rtrb::Producer<JournalRecord>) -> Self {
+    pub fn with_journal(mut self, writer: rtrb::Producer<JobRecord>) -> Self {
         self.journal = Some(writer);
         self
     }
 
     /// Takes up an unfinished job from the journal before the loop runs, to resume it or, with
     /// `resume` false, to end it ([`Job::recover`]).
-    pub fn recover(&mut self, r: &JournalRecord, resume: bool) {
+    pub fn recover(&mut self, r: &JobRecord, resume: bool) {
         self.job.recover(r, resume);
         self.journaled = *r;
     }

@@ -58,7 +58,6 @@
 //! release configuration, was released there before the crash: it is counted placed.
 
 use crate::config::{Timeouts, secs_to_ns};
-use crate::journal::{JournalRecord, ObjectPhase, Placement};
 use crate::plan::{MotionPlan, Request, Response};
 use herb_ipc::{
     ARM_STATUS_PERIOD_NS, ArmBlocker, ArmStatus, CancelJobRequest, Fault, GRIPPER_REPEAT_NS,
@@ -68,6 +67,9 @@ use herb_ipc::{
 };
 use herb_robot::kinematics::DOF;
 use herb_robot::motion::Setpoint;
+
+pub mod record;
+pub use record::{JobRecord, JobRecordError, ObjectPhase, Placement};
 
 /// The job's timeouts (ns), from the `[timeouts]` section of the configuration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -329,20 +331,11 @@ pub struct JobSnapshot {
     pub inputs: Inputs,
     /// The last commands (the gripper's is repeated between jobs too).
     pub commands: Commands,
-    /// The last job's id (0 between jobs).
-    pub job_id: u64,
-    /// The last job's order.
-    pub order: [u16; MAX_JOB_OBJECTS],
-    /// Its length.
-    pub count: u64,
-    /// Objects tried.
-    pub index: u64,
-    /// Objects placed.
-    pub done: u64,
+    /// The last job: its objects, order and counts (what statuses between jobs report); no job
+    /// runs (`job_id` 0, phase idle).
+    pub job: JobRecord,
     /// The last release's stamp.
     pub release_stamp: u64,
-    /// An object is believed held.
-    pub holding: bool,
     /// The last fault.
     pub fault: Fault,
     /// Stopping.
@@ -737,13 +730,8 @@ impl Job {
         Some(JobSnapshot {
             inputs: self.inputs,
             commands: self.out,
-            job_id: self.job_id,
-            order: self.order,
-            count: self.count as u64,
-            index: self.index as u64,
-            done: self.done as u64,
+            job: self.record(),
             release_stamp: self.release_stamp,
-            holding: self.holding,
             fault: self.fault,
             stopping: self.stopping,
         })
@@ -755,15 +743,17 @@ impl Job {
         self.inputs = s.inputs;
         self.out = s.commands;
         self.phase = Phase::Idle;
-        self.job_id = s.job_id;
-        self.order = s.order;
-        self.count = (s.count as usize).min(MAX_JOB_OBJECTS);
-        self.index = s.index as usize;
-        self.done = s.done as usize;
+        let r = &s.job;
+        self.job_id = r.job_id;
+        self.count = (r.count as usize).min(MAX_JOB_OBJECTS);
+        self.objects = r.objects;
+        self.ordered = r.ordered;
+        self.order = r.order;
+        self.index = r.index as usize;
+        self.done = r.done as usize;
+        self.holding = r.holding;
+        self.placement = r.placement;
         self.release_stamp = s.release_stamp;
-        self.holding = s.holding;
-        self.ordered = false;
-        self.placement = None;
         self.recovered = false;
         self.fault = s.fault;
         self.cancelling = false;
@@ -794,37 +784,38 @@ impl Job {
         self.out.limit_holds
     }
 
-    /// The running job as the journal keeps it ([`JournalRecord::NONE`] between jobs and
-    /// while a cancelled job retreats: a cancelled job is not taken up again). Allocates
-    /// nothing; the loop compares it with the last one it handed to the writer.
-    pub fn journal(&self) -> JournalRecord {
-        if self.job_id == 0 || self.cancelling {
-            return JournalRecord::NONE;
-        }
+    /// The job as the machine holds it, whatever its phase (between jobs: the last job's
+    /// objects, order and counts, `job_id` 0); the placement only if it is the current
+    /// object's. The order is the machine's even before the job is ordered: statuses name the
+    /// current object from it.
+    fn record(&self) -> JobRecord {
         let phase = match self.phase {
-            Phase::Idle | Phase::Retreating { .. } => return JournalRecord::NONE,
+            Phase::Idle => ObjectPhase::Idle,
             Phase::Ordering => ObjectPhase::Ordering,
             Phase::WaitHeightmap { .. } | Phase::Planning { .. } => ObjectPhase::Deciding,
-            Phase::Streaming { .. } | Phase::Gripper { .. } if self.holding => {
+            Phase::Streaming { .. } | Phase::Gripper { .. } | Phase::Retreating { .. }
+                if self.holding =>
+            {
                 ObjectPhase::Carrying
             }
-            Phase::Streaming { .. } | Phase::Gripper { .. } | Phase::Regrasp { .. } => {
-                ObjectPhase::Moving
-            }
+            Phase::Streaming { .. }
+            | Phase::Gripper { .. }
+            | Phase::Regrasp { .. }
+            | Phase::Retreating { .. } => ObjectPhase::Moving,
             Phase::Braking { .. } | Phase::Faulted { .. } | Phase::Recovering { .. } => {
                 ObjectPhase::Halted
             }
         };
-        JournalRecord {
+        // Past the job's objects the machine reads nothing: kept as zeros.
+        let (mut objects, mut order) = ([0; MAX_JOB_OBJECTS], [0; MAX_JOB_OBJECTS]);
+        objects[..self.count].copy_from_slice(&self.objects[..self.count]);
+        order[..self.count].copy_from_slice(&self.order[..self.count]);
+        JobRecord {
             job_id: self.job_id,
             count: self.count as u16,
-            objects: self.objects,
+            objects,
             ordered: self.ordered,
-            order: if self.ordered {
-                self.order
-            } else {
-                [0; MAX_JOB_OBJECTS]
-            },
+            order,
             index: self.index as u16,
             done: self.done as u16,
             holding: self.holding,
@@ -833,12 +824,30 @@ impl Job {
         }
     }
 
+    /// The running job as the journal keeps it ([`JobRecord::NONE`] between jobs and while a
+    /// cancelled job retreats: a cancelled job is not taken up again); until the job is
+    /// ordered, its order is the objects as submitted. Allocates nothing; the loop compares it
+    /// with the last one it handed to the writer.
+    pub fn journal(&self) -> JobRecord {
+        if self.job_id == 0
+            || self.cancelling
+            || matches!(self.phase, Phase::Idle | Phase::Retreating { .. })
+        {
+            return JobRecord::NONE;
+        }
+        let mut r = self.record();
+        if !r.ordered {
+            r.order = r.objects;
+        }
+        r
+    }
+
     /// Takes up the unfinished job `r` from the journal (an idle machine at start, before the
     /// first cycle): the next ticks report [`Fault::Restarted`] and hand the planner the job's
     /// order, then the job waits, faulted and commanding nothing, until its inputs are fresh,
     /// and resumes from the measured state (see the module's "Restart"). With `resume` false,
     /// the first tick reports the fault and ends the job, failed, instead.
-    pub fn recover(&mut self, r: &JournalRecord, resume: bool) {
+    pub fn recover(&mut self, r: &JobRecord, resume: bool) {
         self.abandoning = !resume;
         self.job_id = r.job_id;
         self.count = (r.count as usize).min(MAX_JOB_OBJECTS);

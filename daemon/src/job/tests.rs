@@ -2091,7 +2091,7 @@ fn is_open(o: &Out) -> bool {
 
 /// A fresh machine (a restarted daemon) with the arm and gripper where `crashed` left them,
 /// given `rec` from the journal.
-fn restarted(crashed: &Rig, rec: &JournalRecord, resume: bool) -> Rig {
+fn restarted(crashed: &Rig, rec: &JobRecord, resume: bool) -> Rig {
     let mut r = Rig::new();
     r.q = crashed.q;
     r.closed = crashed.closed;
@@ -2135,7 +2135,7 @@ fn the_journal_record_follows_the_job_and_ends_with_it() {
             Ordering, Deciding, Moving, Carrying, Moving, Deciding, Moving, Carrying, Moving
         ]
     );
-    assert_eq!(last, JournalRecord::NONE);
+    assert_eq!(last, JobRecord::NONE);
 }
 
 #[test]
@@ -2212,7 +2212,7 @@ fn a_recovered_job_holding_its_object_places_it_where_it_was_decided() {
         "each object once, in the order"
     );
     assert_eq!(b.last(JobDone).objects_done, 2);
-    assert_eq!(b.job.journal(), JournalRecord::NONE);
+    assert_eq!(b.job.journal(), JobRecord::NONE);
 }
 
 #[test]
@@ -2270,7 +2270,7 @@ fn an_abandoned_job_ends_failed_without_moving() {
     assert_eq!(b.last(JobFailed).fault, herb_ipc::Fault::Restarted as u32);
     assert!(b.joints_since(mark).is_empty());
     assert_eq!(b.count(|o| matches!(o, Out::Plan(_))), 0);
-    assert_eq!(b.job.journal(), JournalRecord::NONE);
+    assert_eq!(b.job.journal(), JobRecord::NONE);
     // The abandoned job's object is still in the gripper: the next job is refused until it is
     // taken out, then runs.
     assert_eq!(b.submit(8, &[3]), (RejectReason::Holding, NO_OBJECT));
@@ -2402,7 +2402,7 @@ proptest::proptest! {
                     }
                     Disturbance::Restart => {
                         let rec = r.job.journal();
-                        if rec == JournalRecord::NONE {
+                        if rec == JobRecord::NONE {
                             continue; // no job to take up: nothing to restart into
                         }
                         statuses.extend(r.statuses());

@@ -8,19 +8,20 @@
 //! payload).
 
 use crate::digest::Fnv;
-use crate::job::{Commands, Inputs, JobSnapshot};
+use crate::job::{Commands, Inputs, JobRecord, JobRecordError, JobSnapshot};
 use crate::plan::Request;
 use herb_ipc::{
     ArmBlocker, ArmStatus, CancelJobRequest, Fault, GripperAction, GripperState, HeightmapFrame,
-    InOrder, JointState, MAX_JOB_OBJECTS, PackJobRequest, Payload, RejectReason, Status,
+    InOrder, JointState, PackJobRequest, Payload, RejectReason, Status,
 };
 use herb_robot::motion::Setpoint;
 use std::io::Write;
 
 /// The first bytes of a segment file.
 pub const MAGIC: &[u8; 8] = b"HERBRUN\0";
-/// The format version after [`MAGIC`].
-pub const FORMAT: u32 = 1;
+/// The format version after [`MAGIC`] (2: a snapshot holds the job's record in the job
+/// journal's encoding).
+pub const FORMAT: u32 = 2;
 /// A frame's header and grid: the bytes of a [`HeightmapFrame`] before its cells.
 pub const FRAME_META: usize = std::mem::offset_of!(HeightmapFrame, data);
 
@@ -348,10 +349,12 @@ impl RunHeader {
     }
 }
 
-/// A snapshot record: the planner requests sent before it, and the machine's state.
+/// A snapshot record: the planner requests sent before it, then the machine's state: the last
+/// job's record in its own encoding ([`JobRecord::encode`], shared with the job journal), the
+/// latched inputs, the last fault and release, the commands, and the stop flag.
 pub(super) fn encode_snapshot(requests_before: u64, s: &JobSnapshot) -> Vec<u8> {
     let mut e = Enc::default();
-    e.u64(requests_before);
+    e.u64(requests_before).bytes(&s.job.encode());
     let opt_order = |e: &mut Enc, o: InOrder| match o.last() {
         Some((p, q, t)) => {
             e.u8(1).u128(p).u64(q).u64(t);
@@ -373,44 +376,50 @@ pub(super) fn encode_snapshot(requests_before: u64, s: &JobSnapshot) -> Vec<u8> 
     };
     e.u64(i.gs_at);
     opt_order(&mut e, i.gs_order);
-    e.u64(i.hm_rx_at)
-        .u64(i.hm_stamp)
-        .u64(i.rejected)
-        .u64(s.job_id);
-    for o in s.order {
-        e.u32(o as u32);
-    }
-    e.u64(s.count)
-        .u64(s.index)
-        .u64(s.done)
-        .u64(s.release_stamp)
-        .u8(s.holding as u8)
-        .u32(s.fault as u32);
+    e.u32(i.arm_blocker as u32).u64(i.arm_at);
+    opt_order(&mut e, i.arm_order);
+    e.u64(i.hm_rx_at).u64(i.hm_stamp).u64(i.rejected);
+    e.u32(s.fault as u32).u64(s.release_stamp);
     let c = &s.commands;
     for row in [&c.cmd.position, &c.cmd.velocity, &c.cmd.acceleration] {
         for v in row {
             e.f64(*v);
         }
     }
-    // Nothing is commanded between jobs.
-    e.u8(0)
-        .u32(c.grip_cmd as u32)
+    e.u32(c.grip_cmd as u32)
         .u32(c.grip_object)
         .u8(c.grip_due as u8)
         .u64(c.grip_sent_at)
         .u64(c.last_heartbeat)
         .u64(c.limit_holds)
         .u8(s.stopping as u8);
-    // Appended later: a snapshot without it reads as "nothing said yet".
-    e.u32(i.arm_blocker as u32).u64(i.arm_at);
-    opt_order(&mut e, i.arm_order);
     e.0
 }
 
+/// Why a snapshot record does not decode.
+#[derive(Debug, thiserror::Error)]
+pub enum SnapshotError {
+    /// The job's record.
+    #[error("the job's record: {0}")]
+    Job(#[from] JobRecordError),
+    /// The rest is too short, or holds a code that names nothing.
+    #[error("truncated, or an unknown code")]
+    Malformed,
+}
+
 /// A snapshot record read back ([`encode_snapshot`]).
-pub(super) fn decode_snapshot(b: &[u8]) -> Option<(u64, JobSnapshot)> {
+pub(super) fn decode_snapshot(b: &[u8]) -> Result<(u64, JobSnapshot), SnapshotError> {
     let mut d = Dec(b);
-    let before = d.u64()?;
+    let before = d.u64().ok_or(SnapshotError::Malformed)?;
+    let job = JobRecord::decode(d.bytes().ok_or(SnapshotError::Malformed)?)?;
+    decode_machine(&mut d, job)
+        .filter(|_| d.0.is_empty())
+        .map(|s| (before, s))
+        .ok_or(SnapshotError::Malformed)
+}
+
+/// The rest of a snapshot record, after the job's.
+fn decode_machine(d: &mut Dec, job: JobRecord) -> Option<JobSnapshot> {
     fn opt_order(d: &mut Dec) -> Option<InOrder> {
         Some(InOrder::with_last(match d.u8()? {
             0 => None,
@@ -421,72 +430,52 @@ pub(super) fn decode_snapshot(b: &[u8]) -> Option<(u64, JobSnapshot)> {
         0 => None,
         _ => Some(d.payload::<JointState>()?),
     };
-    let js_at = d.u64()?;
-    let js_order = opt_order(&mut d)?;
+    let (js_at, js_order) = (d.u64()?, opt_order(d)?);
     let gs = match d.u8()? {
         0 => None,
         _ => Some(d.payload::<GripperState>()?),
     };
-    let gs_at = d.u64()?;
-    let gs_order = opt_order(&mut d)?;
-    let (hm_rx_at, hm_stamp, rejected, job_id) = (d.u64()?, d.u64()?, d.u64()?, d.u64()?);
-    let mut order = [0u16; MAX_JOB_OBJECTS];
-    for o in &mut order {
-        *o = d.u32()? as u16;
-    }
-    let (count, index, done, release_stamp) = (d.u64()?, d.u64()?, d.u64()?, d.u64()?);
-    let (holding, fault) = (d.bool()?, d.u32()?);
+    let (gs_at, gs_order) = (d.u64()?, opt_order(d)?);
+    let (arm_blocker, arm_at, arm_order) =
+        (ArmBlocker::from_code(d.u32()?)?, d.u64()?, opt_order(d)?);
+    let inputs = Inputs {
+        js,
+        js_at,
+        js_order,
+        gs,
+        gs_at,
+        gs_order,
+        arm_blocker,
+        arm_at,
+        arm_order,
+        hm_rx_at: d.u64()?,
+        hm_stamp: d.u64()?,
+        rejected: d.u64()?,
+    };
+    let (fault, release_stamp) = (Fault::from_code(d.u32()?)?, d.u64()?);
     let mut cmd = Setpoint::default();
     for row in [&mut cmd.position, &mut cmd.velocity, &mut cmd.acceleration] {
         for v in row.iter_mut() {
             *v = d.f64()?;
         }
     }
-    let _commanding = d.bool()?;
-    let (grip_cmd, grip_object, grip_due, grip_sent_at) = (d.u32()?, d.u32()?, d.bool()?, d.u64()?);
-    let (last_heartbeat, limit_holds, stopping) = (d.u64()?, d.u64()?, d.bool()?);
-    let (arm_blocker, arm_at, arm_order) = if d.0.is_empty() {
-        (0, 0, InOrder::default())
-    } else {
-        (d.u32()?, d.u64()?, opt_order(&mut d)?)
+    let commands = Commands {
+        cmd,
+        grip_cmd: GripperAction::from_code(d.u32()?)?,
+        grip_object: d.u32()?,
+        grip_due: d.bool()?,
+        grip_sent_at: d.u64()?,
+        last_heartbeat: d.u64()?,
+        limit_holds: d.u64()?,
     };
-    Some((
-        before,
-        JobSnapshot {
-            inputs: Inputs {
-                js,
-                js_at,
-                js_order,
-                gs,
-                gs_at,
-                gs_order,
-                arm_blocker: ArmBlocker::from_code(arm_blocker).unwrap_or(ArmBlocker::None),
-                arm_at,
-                arm_order,
-                hm_rx_at,
-                hm_stamp,
-                rejected,
-            },
-            commands: Commands {
-                cmd,
-                grip_cmd: GripperAction::from_code(grip_cmd).unwrap_or(GripperAction::Open),
-                grip_object,
-                grip_due,
-                grip_sent_at,
-                last_heartbeat,
-                limit_holds,
-            },
-            job_id,
-            order,
-            count,
-            index,
-            done,
-            release_stamp,
-            holding,
-            fault: Fault::from_code(fault).unwrap_or(Fault::None),
-            stopping,
-        },
-    ))
+    Some(JobSnapshot {
+        inputs,
+        commands,
+        job,
+        release_stamp,
+        fault,
+        stopping: d.bool()?,
+    })
 }
 
 /// A loop record's kind and payload ([`LoopRec::Snapshot`] is the writer's, never encoded).

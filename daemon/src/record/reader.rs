@@ -40,7 +40,8 @@ impl Log {
         let format = u32::from_le_bytes(data[8..12].try_into().unwrap());
         if format != FORMAT {
             return Err(bad(&format!(
-                "run log format {format}, this build reads {FORMAT}"
+                "run log format {format}, this herbd reads format {FORMAT} (replay it with the \
+                 herbd that wrote it)"
             )));
         }
         let mut at = 12usize;
@@ -82,8 +83,9 @@ impl Log {
                     header = Some(RunHeader::decode(payload).ok_or_else(|| bad("bad header"))?);
                 }
                 kind::SNAPSHOT => {
-                    log.snapshot =
-                        Some(decode_snapshot(payload).ok_or_else(|| bad("bad snapshot"))?);
+                    log.snapshot = Some(
+                        decode_snapshot(payload).map_err(|e| bad(&format!("bad snapshot: {e}")))?,
+                    );
                 }
                 kind::GAP => {
                     let n = d.u64().unwrap_or(0);

@@ -127,6 +127,15 @@ fn a_recording_reads_back_record_for_record_and_bit_for_bit() {
     // Not a log.
     std::fs::write(&torn, b"hello").unwrap();
     assert!(Log::read(&torn).unwrap_err().contains("not a HERB run log"));
+    // A log of another format: named, with its version, never read as this one.
+    let mut old = data.clone();
+    old[8..12].copy_from_slice(&1u32.to_le_bytes());
+    std::fs::write(&torn, &old).unwrap();
+    let e = Log::read(&torn).unwrap_err();
+    assert!(
+        e.contains(&torn.display().to_string()) && e.contains("run log format 1"),
+        "{e}"
+    );
     let _ = std::fs::remove_dir_all(&d);
 }
 
@@ -197,4 +206,65 @@ fn segments_rotate_between_jobs_and_the_oldest_are_deleted() {
     assert_eq!(s, snap);
     assert!(last.header.segment >= 3);
     let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn a_snapshot_reads_back_bit_for_bit() {
+    use crate::job::{Commands, Inputs, JobRecord, JobSnapshot, ObjectPhase, Placement};
+    use herb_ipc::{ArmBlocker, Fault, GripperAction, GripperState, InOrder};
+    let mut job = JobRecord::NONE;
+    job.count = 3;
+    job.objects[..3].copy_from_slice(&[4, 5, 6]);
+    // A job that failed before it was ordered: the machine still holds an older order.
+    job.order[..3].copy_from_slice(&[9, 1, 2]);
+    job.index = 1;
+    job.done = 1;
+    job.holding = true;
+    job.phase = ObjectPhase::Idle;
+    job.placement = Some(Placement {
+        index: 1,
+        pose: [0.1, -0.2, 0.05, std::f32::consts::PI],
+        release_q: [0.1 + 0.2, -1.0 / 3.0, 0.3, 0.4, 0.5, 0.6, 1e-300],
+    });
+    let gs = GripperState::from_bytes(&[0u8; std::mem::size_of::<GripperState>()]).unwrap();
+    let s = JobSnapshot {
+        inputs: Inputs {
+            js: Some(JointState {
+                velocity: [0.25; DOF],
+                ..js(3)
+            }),
+            js_at: 11,
+            js_order: InOrder::with_last(Some((7, 3, 1003))),
+            gs: Some(gs),
+            gs_at: 12,
+            gs_order: InOrder::default(),
+            arm_blocker: ArmBlocker::from_code(2).unwrap(),
+            arm_at: 13,
+            arm_order: InOrder::with_last(Some((u128::MAX, 1, 2))),
+            hm_rx_at: 14,
+            hm_stamp: 15,
+            rejected: 16,
+        },
+        commands: Commands {
+            cmd: herb_robot::motion::Setpoint::at_rest([0.7; DOF]),
+            grip_cmd: GripperAction::Close,
+            grip_object: 5,
+            grip_due: true,
+            grip_sent_at: 17,
+            last_heartbeat: 18,
+            limit_holds: 19,
+        },
+        job,
+        release_stamp: 20,
+        fault: Fault::MissedGrasp,
+        stopping: true,
+    };
+    let b = super::format::encode_snapshot(42, &s);
+    let (before, back) = super::format::decode_snapshot(&b).unwrap();
+    assert_eq!((before, back), (42, s));
+    // Cut short or with a byte too many: an error, never a different state.
+    assert!(super::format::decode_snapshot(&b[..b.len() - 1]).is_err());
+    let mut long = b.clone();
+    long.push(0);
+    assert!(super::format::decode_snapshot(&long).is_err());
 }
