@@ -45,7 +45,7 @@ struct Row {
 }
 
 /// Parses `METHOD` or `METHOD@ORDER`.
-fn parse_row(s: &str) -> Result<Row, String> {
+fn parse_row(s: &str) -> Result<Row, herb_decide::NameError> {
     let (method, order) = match s.split_once('@') {
         Some((m, o)) => (m, Some(o.parse::<Order>()?)),
         None => (s, None),

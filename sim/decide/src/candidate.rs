@@ -18,7 +18,7 @@
 //! evaluation ends the episode as a failure with that reason and herbd ends the job with it.
 //! No NaN and no placement over a wall ever leaves.
 
-use crate::error::{DecideError, Result};
+use crate::error::{DecideError, ModelReadError, Result};
 use crate::policy::{DecisionInput, Policy, check_action};
 use herb_sim::features::{CANDIDATE_LEN, CONTEXT_LEN, CandidateLayout, DecisionFeatures};
 use herb_sim::lattice::{Lattice, MAX_CANDIDATES, Placement};
@@ -221,11 +221,11 @@ fn plan(bytes: &[u8]) -> std::result::Result<(TypedSimpleState, i64), String> {
 }
 
 /// The input names of an ONNX model (to tell the two policy contracts apart).
-pub fn input_names(bytes: &[u8]) -> std::result::Result<Vec<String>, String> {
+pub fn input_names(bytes: &[u8]) -> std::result::Result<Vec<String>, ModelReadError> {
     let raw = std::panic::catch_unwind(|| tract_onnx::onnx().model_for_read(&mut &bytes[..]))
-        .map_err(|_| "the ONNX parser failed on this file".to_string())?
-        .map_err(|e| format!("not a readable ONNX model: {e:#}"))?;
-    let ins = raw.input_outlets().map_err(|e| e.to_string())?;
+        .map_err(|_| ModelReadError::ParserFailed)?
+        .map_err(ModelReadError::Unreadable)?;
+    let ins = raw.input_outlets().map_err(ModelReadError::Inputs)?;
     Ok(ins.iter().map(|o| raw.node(o.node).name.clone()).collect())
 }
 

@@ -62,3 +62,35 @@ pub enum DecideError {
     #[error(transparent)]
     Sim(#[from] herb_sim::SimError),
 }
+
+/// A name that names nothing: an unknown method or order, an empty policy.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum NameError {
+    /// A name that is none of the known ones.
+    #[error("{what} {name:?}: expected one of {}", .expected.join(", "))]
+    Unknown {
+        /// What was named (`method`, `order`).
+        what: &'static str,
+        /// The name given.
+        name: String,
+        /// The known names.
+        expected: Vec<&'static str>,
+    },
+    /// An empty policy.
+    #[error("policy: empty (give blbf or the path of an ONNX model)")]
+    EmptyPolicy,
+}
+
+/// Why the inputs of an ONNX file could not be listed ([`crate::candidate::input_names`]).
+#[derive(Debug, thiserror::Error)]
+pub enum ModelReadError {
+    /// tract's ONNX parser panicked on the file.
+    #[error("the ONNX parser failed on this file")]
+    ParserFailed,
+    /// The file is not an ONNX model tract can read.
+    #[error("not a readable ONNX model: {0:#}")]
+    Unreadable(tract_onnx::prelude::TractError),
+    /// The model's inputs could not be listed.
+    #[error("{0}")]
+    Inputs(tract_onnx::prelude::TractError),
+}

@@ -20,7 +20,7 @@ pub mod sequence;
 
 pub use candidate::CandidatePolicy;
 pub use decider::{Decider, Decision, HeightmapView};
-pub use error::{DecideError, Result};
+pub use error::{DecideError, ModelReadError, NameError, Result};
 pub use method::Method;
 pub use onnx::OnnxPolicy;
 pub use order::Order;
@@ -87,11 +87,11 @@ impl PolicySpec {
 }
 
 impl std::str::FromStr for PolicySpec {
-    type Err = String;
+    type Err = NameError;
 
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
+    fn from_str(s: &str) -> std::result::Result<Self, NameError> {
         match s {
-            "" => Err("policy: empty (give blbf or the path of an ONNX model)".into()),
+            "" => Err(NameError::EmptyPolicy),
             "blbf" => Ok(Self::Blbf),
             name if let Some(&s) = Shipped::ALL.iter().find(|s| s.name() == name) => {
                 Ok(Self::Shipped(s))
@@ -102,9 +102,9 @@ impl std::str::FromStr for PolicySpec {
 }
 
 impl TryFrom<String> for PolicySpec {
-    type Error = String;
+    type Error = NameError;
 
-    fn try_from(s: String) -> std::result::Result<Self, String> {
+    fn try_from(s: String) -> std::result::Result<Self, NameError> {
         s.parse()
     }
 }

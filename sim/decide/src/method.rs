@@ -176,9 +176,9 @@ impl std::fmt::Display for Method {
 }
 
 impl std::str::FromStr for Method {
-    type Err = String;
+    type Err = crate::error::NameError;
 
-    fn from_str(s: &str) -> Result<Self, String> {
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
         crate::order::parse_name("method", s, &Self::ALL, Self::name)
     }
 }

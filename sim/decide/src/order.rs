@@ -1,7 +1,7 @@
 //! In which order an episode's objects are packed: HERB's Beam-3 over the human transition
 //! model, or one of the reference orders of Table I.
 
-use crate::error::{DecideError, Result};
+use crate::error::{DecideError, NameError, Result};
 use crate::sequence::{SequenceModel, beam3, beam3_last};
 use herb_sim::{Catalog, TypeIdx};
 use rand::SeedableRng;
@@ -122,9 +122,9 @@ impl std::fmt::Display for Order {
 }
 
 impl std::str::FromStr for Order {
-    type Err = String;
+    type Err = NameError;
 
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
+    fn from_str(s: &str) -> std::result::Result<Self, NameError> {
         match Self::ALIASES.iter().find(|(alias, _)| *alias == s) {
             Some(&(_, order)) => Ok(order),
             None => parse_name("order", s, &Self::ALL, Self::name),
@@ -134,13 +134,17 @@ impl std::str::FromStr for Order {
 
 /// The member of `all` whose `name` is `s`; else an error naming `what` and listing the names.
 pub(crate) fn parse_name<T: Copy>(
-    what: &str,
+    what: &'static str,
     s: &str,
     all: &[T],
     name: fn(&T) -> &'static str,
-) -> std::result::Result<T, String> {
-    all.iter().copied().find(|t| name(t) == s).ok_or_else(|| {
-        let names: Vec<_> = all.iter().map(name).collect();
-        format!("{what} {s:?}: expected one of {}", names.join(", "))
-    })
+) -> std::result::Result<T, NameError> {
+    all.iter()
+        .copied()
+        .find(|t| name(t) == s)
+        .ok_or_else(|| NameError::Unknown {
+            what,
+            name: s.to_owned(),
+            expected: all.iter().map(name).collect(),
+        })
 }

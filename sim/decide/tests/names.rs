@@ -13,10 +13,15 @@ fn every_method_and_order_parses_back_from_its_name() {
     for o in Order::ALL {
         assert_eq!(o.name().parse::<Order>(), Ok(o));
     }
-    let e = "blfb".parse::<Method>().unwrap_err();
+    let e = "blfb".parse::<Method>().unwrap_err().to_string();
     assert!(e.contains("blfb") && e.contains("lattice-reserve"), "{e}");
-    let e = "biggest".parse::<Order>().unwrap_err();
+    let e = "biggest".parse::<Order>().unwrap_err().to_string();
     assert!(e.contains("largest"), "{e}");
+    // The text users read, kept as it was when the error was a String.
+    assert_eq!(
+        e,
+        r#"order "biggest": expected one of beam3, beam3-last, human, largest, random"#
+    );
 }
 
 #[test]
@@ -43,7 +48,12 @@ fn policies_are_blbf_or_a_model_path() {
         "models/policy-cs06.onnx".parse(),
         Ok(PolicySpec::Onnx("models/policy-cs06.onnx".into()))
     );
-    assert!("".parse::<PolicySpec>().unwrap_err().contains("empty"));
+    assert!(
+        "".parse::<PolicySpec>()
+            .unwrap_err()
+            .to_string()
+            .contains("empty")
+    );
     for s in ["blbf", "cs06", "cs09", "a/b.onnx"] {
         assert_eq!(s.parse::<PolicySpec>().unwrap().to_string(), s);
     }
