@@ -7,6 +7,7 @@
 //! 2. The loopback is killed mid-motion: the daemon reports the joint-state timeout, brakes,
 //!    holds, and resumes the job when the loopback is restarted; the job completes.
 
+use herb_client::{Client, JobEvent, SubmitError};
 use herb_testkit::{Follow, Proc, config, last_json, lines, repo, shortest_session, spawn, tmp};
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus};
@@ -50,20 +51,20 @@ fn herbctl_output(prefix: &str, args: &[&str]) -> (ExitStatus, String) {
     (o.status, text)
 }
 
-/// herbd's count of rejected inputs from its heartbeats on `status`: the newest one once `done`
-/// holds for it, or after 5 s (panics if no heartbeat came at all).
-fn rejected_inputs(
-    status: &herb_ipc::bus::Sub<herb_ipc::Status>,
-    done: impl Fn(u64) -> bool,
-) -> u64 {
+/// A client of the herbd under `prefix` (its status subscribed now).
+fn client(prefix: &str) -> Client {
+    Client::connect_as(prefix, "e2e-test").unwrap()
+}
+
+/// herbd's count of rejected inputs from the heartbeats `client` receives: the newest one once
+/// `done` holds for it, or after 5 s (panics if no heartbeat came at all).
+fn rejected_inputs(client: &Client, done: impl Fn(u64) -> bool) -> u64 {
     let heartbeat = herb_ipc::StatusEvent::Heartbeat as u32;
     let mut counted = None;
     let t0 = Instant::now();
     while t0.elapsed() < Duration::from_secs(5) && !counted.is_some_and(&done) {
-        while let Ok(Some(s)) = status.receive() {
-            if s.payload().event == heartbeat {
-                counted = Some(s.payload().rejected_inputs);
-            }
+        for s in client.statuses().filter(|s| s.event == heartbeat) {
+            counted = Some(s.rejected_inputs);
         }
         std::thread::sleep(Duration::from_millis(20));
     }
@@ -324,77 +325,51 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
     claims.check();
 }
 
-/// Sends `req` to the pack-job server and returns the reply (waits for the server).
-fn submit(
-    client: &herb_ipc::bus::JobClient,
-    req: herb_ipc::PackJobRequest,
-) -> herb_ipc::PackJobReply {
-    let t0 = Instant::now();
-    loop {
-        assert!(
-            t0.elapsed() < Duration::from_secs(30),
-            "no reply from herbd"
-        );
-        let pending = client.send_copy(req).unwrap();
-        if pending.number_of_server_connections() == 0 {
-            std::thread::sleep(Duration::from_millis(100));
-            continue;
-        }
-        let t1 = Instant::now();
-        while t1.elapsed() < Duration::from_secs(2) {
-            if let Ok(Some(r)) = pending.receive() {
-                return *r.payload();
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        }
-    }
-}
-
 #[test]
 fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
-    use herb_ipc::{JointCommand, JointState, PackJobRequest, RejectReason, Services, Status};
+    use herb_ipc::{JointCommand, JointState, PackJobRequest, RejectReason};
     let (dir, prefix, cfg) = setup("bad");
     let claims = herb_testkit::claims::Claims::watch(&prefix);
     let (_lb, _hd) = start_cell(&dir, &cfg);
-    let services = Services::new(&prefix).unwrap();
-    let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
-    let client = bus.job_client().unwrap();
-    let status = bus.subscriber::<Status>(&services.status()).unwrap();
-    let reason = |r: herb_ipc::PackJobReply| (r.validate().unwrap(), r.detail);
+    let client = client(&prefix);
+    let services = client.services().clone();
+    let bus = client.bus();
+    // herbd's reply to `req` as it is (the client waits for herbd to serve).
+    let reason = |req: PackJobRequest| {
+        let deadline = Instant::now() + Duration::from_secs(30);
+        let r = client.request(&req, deadline).expect("a reply from herbd");
+        (r.validate().unwrap(), r.detail)
+    };
 
     // Invalid jobs are rejected for what they are, whether or not the adapter is up.
     assert_eq!(
-        reason(submit(&client, PackJobRequest::new(2, &[]))),
+        reason(PackJobRequest::new(2, &[])),
         (RejectReason::Empty, 0)
     );
     assert_eq!(
-        reason(submit(&client, PackJobRequest::new(3, &[1, 2, 999]))),
+        reason(PackJobRequest::new(3, &[1, 2, 999])),
         (RejectReason::UnknownObject, 2)
     );
     let many: Vec<u16> = (0..65).map(|i| i % 24).collect();
     assert_eq!(
-        reason(submit(&client, PackJobRequest::new(4, &many))).0,
+        reason(PackJobRequest::new(4, &many)).0,
         RejectReason::TooMany
     );
     let mut old = PackJobRequest::new(5, &[1]);
     old.header.version = 0;
-    assert_eq!(reason(submit(&client, old)).0, RejectReason::Malformed);
+    assert_eq!(reason(old).0, RejectReason::Malformed);
     let mut nan_count = PackJobRequest::new(6, &[1]);
     nan_count.count = u32::MAX;
-    assert_eq!(reason(submit(&client, nan_count)).0, RejectReason::TooMany);
+    assert_eq!(reason(nan_count).0, RejectReason::TooMany);
 
-    // A valid job is accepted once herbd hears the adapter (NotReady before); a second one
-    // while it runs is Busy (not queued).
-    let t0 = Instant::now();
-    let mut ok = submit(&client, PackJobRequest::new(7, &[1, 3]));
+    // A valid job is accepted once herbd hears the adapter (NotReady before, retried by the
+    // client); a second one while it runs is Busy (not queued).
     let mut not_ready = 0;
-    while reason(ok).0 == RejectReason::NotReady {
-        not_ready += 1;
-        assert!(t0.elapsed() < Duration::from_secs(30));
-        std::thread::sleep(Duration::from_millis(100));
-        ok = submit(&client, PackJobRequest::new(7, &[1, 3]));
-    }
-    assert_eq!(reason(ok), (RejectReason::None, 0));
+    client
+        .submit(7, &[1, 3], Instant::now() + Duration::from_secs(30), |_| {
+            not_ready += 1
+        })
+        .expect("accepted once herbd hears the adapter");
     // Now that the adapter and herbd publish (herbd heard the adapter), no second process may
     // speak for the arm or command it: the robot services take one publisher each, so a rogue
     // one is refused.
@@ -407,22 +382,31 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
             .is_err()
     );
 
-    assert_eq!(
-        reason(submit(&client, PackJobRequest::new(8, &[1]))).0,
-        RejectReason::Busy
+    let busy = client
+        .submit(8, &[1], Instant::now() + Duration::from_secs(30), |_| {})
+        .unwrap_err();
+    assert!(
+        matches!(
+            busy,
+            SubmitError::Rejected {
+                reason: RejectReason::Busy,
+                ..
+            }
+        ),
+        "{busy:?}"
     );
     // A bad job while busy is answered with what is wrong with it, not Busy.
     let mut old = PackJobRequest::new(9, &[1]);
     old.header.version = 0;
-    assert_eq!(reason(submit(&client, old)).0, RejectReason::Malformed);
+    assert_eq!(reason(old).0, RejectReason::Malformed);
     assert_eq!(
-        reason(submit(&client, PackJobRequest::new(10, &[1, 999]))),
+        reason(PackJobRequest::new(10, &[1, 999])),
         (RejectReason::UnknownObject, 1)
     );
 
     // The daemon counts what it rejected: 8 jobs and the NotReady ones.
     let want = 8 + not_ready;
-    let counted = rejected_inputs(&status, |n| n >= want);
+    let counted = rejected_inputs(&client, |n| n >= want);
     assert_eq!(counted, want, "rejections counted");
     claims.check();
 }
@@ -434,7 +418,7 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
 #[test]
 fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
     use herb_adapter::{CameraPort, Heightmap};
-    use herb_ipc::{Services, Status, monotonic_ns};
+    use herb_ipc::{Services, monotonic_ns};
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
     let (dir, prefix, cfg) = setup("nanframe");
@@ -468,8 +452,7 @@ fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
             sent
         })
     };
-    let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
-    let status = bus.subscriber::<Status>(&services.status()).unwrap();
+    let client = client(&prefix);
     let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, true);
     let ctl_out = Follow::new(&mut ctl);
     let st = ctl.wait_for(Duration::from_secs(150));
@@ -490,7 +473,7 @@ fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
         "no fault: {summary}"
     );
     assert!(sent > 10, "the injector sent {sent} frames");
-    let counted = rejected_inputs(&status, |n| n > 0);
+    let counted = rejected_inputs(&client, |n| n > 0);
     assert!(counted > 0, "bad frames counted in rejected_inputs");
     claims.check();
 }
@@ -501,14 +484,11 @@ fn bad_heightmap_frames_are_dropped_and_counted_not_decided_on() {
 /// a nominal 1 ms, above the 20 rad/s the wire allows).
 #[test]
 fn a_stalled_loopback_reports_real_speeds_and_nothing_is_rejected() {
-    use herb_ipc::{Services, Status};
     let (dir, prefix, cfg) = setup("stall");
     let claims = herb_testkit::claims::Claims::watch(&prefix);
     let (lb, _hd) = start_cell(&dir, &cfg);
-    let services = Services::new(&prefix).unwrap();
-    let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
-    let status = bus.subscriber::<Status>(&services.status()).unwrap();
-    let rejected_now = || rejected_inputs(&status, |_| true);
+    let client = client(&prefix);
+    let rejected_now = || rejected_inputs(&client, |_| true);
     let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, true);
     let mut ctl_out = Follow::new(&mut ctl);
     ctl_out.wait_for("object  1/2", Duration::from_secs(60));
@@ -536,22 +516,20 @@ fn a_stalled_loopback_reports_real_speeds_and_nothing_is_rejected() {
 /// replan was announced as a second `Decided` with `decision_ns` 0).
 #[test]
 fn a_resume_while_holding_announces_no_second_decision() {
-    use herb_ipc::{GripperState, Services, Status, StatusEvent};
+    use herb_ipc::{GripperState, StatusEvent};
     let (dir, prefix, cfg) = setup("holdresume");
     let claims = herb_testkit::claims::Claims::watch(&prefix);
     let (lb, _hd) = start_cell(&dir, &cfg);
-    let services = Services::new(&prefix).unwrap();
-    let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
-    let status = bus.subscriber::<Status>(&services.status()).unwrap();
-    let grip = bus
-        .subscriber::<GripperState>(&services.gripper_state())
+    let client = client(&prefix);
+    let grip = client
+        .bus()
+        .subscriber::<GripperState>(&client.services().gripper_state())
         .unwrap();
     let mut ctl = pack_objects(&dir, &prefix, "003,005", 120, true);
     let (mut decided, mut resumed, mut stalled, mut ended) = (Vec::new(), 0, false, None);
     let t0 = Instant::now();
     while ended.is_none() && t0.elapsed() < Duration::from_secs(120) {
-        while let Ok(Some(s)) = status.receive() {
-            let s = *s.payload();
+        for s in client.statuses() {
             match StatusEvent::from_code(s.event) {
                 Some(StatusEvent::Decided) => decided.push((s.object_index, s.decision_ns)),
                 Some(StatusEvent::Resumed) => resumed += 1,
@@ -725,13 +703,12 @@ fn joint_states_going_backwards_are_rejected_and_counted() {
 /// job's id, so nobody mistakes an earlier job's outcome for their own.
 #[test]
 fn outcomes_carry_their_job_across_jobs() {
-    use herb_ipc::{Services, SimOutcome, Status, StatusEvent};
+    use herb_ipc::{SimOutcome, StatusEvent};
     let (dir, prefix, cfg) = setup("jobids");
     let claims = herb_testkit::claims::Claims::watch(&prefix);
     let (_lb, _hd) = start_cell(&dir, &cfg);
-    let services = Services::new(&prefix).unwrap();
-    let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
-    let status = bus.subscriber::<Status>(&services.status()).unwrap();
+    let client = client(&prefix);
+    let (bus, services) = (client.bus(), client.services());
     let outcomes = bus
         .subscriber::<SimOutcome>(&services.sim_outcome())
         .unwrap();
@@ -741,9 +718,9 @@ fn outcomes_carry_their_job_across_jobs() {
         let mut ctl = pack_objects(&dir, &prefix, objects, 120, false);
         assert!(ctl.wait_for(Duration::from_secs(150)).success());
         std::thread::sleep(Duration::from_millis(1500)); // the last release settles
-        while let Ok(Some(s)) = status.receive() {
-            if s.payload().event == StatusEvent::Accepted as u32 {
-                accepted.push(s.payload().job_id);
+        for s in client.statuses() {
+            if s.event == StatusEvent::Accepted as u32 {
+                accepted.push(s.job_id);
             }
         }
         while let Ok(Some(o)) = outcomes.receive() {
@@ -959,15 +936,14 @@ fn a_job_cancelled_mid_motion_brakes_retreats_and_the_next_job_runs() {
 /// reported and set aside, and herbd starts and serves.
 #[test]
 fn a_job_survives_herbd_killed_mid_motion() {
-    use herb_ipc::{Fault, GripperState, Services, SimOutcome, Status, StatusEvent};
+    use herb_ipc::{Fault, GripperState, SimOutcome, Status, StatusEvent};
     let (dir, prefix, cfg) = setup("crash");
     let claims = herb_testkit::claims::Claims::watch(&prefix);
     let cfg_s = cfg.to_str().unwrap();
     let journal = dir.join("state").join(herb_daemon::journal::FILE);
     let (_lb, mut hd) = start_cell(&dir, &cfg);
-    let services = Services::new(&prefix).unwrap();
-    let bus = herb_ipc::bus::Bus::open("e2e-test", &services).unwrap();
-    let status = bus.subscriber::<Status>(&services.status()).unwrap();
+    let client = client(&prefix);
+    let (bus, services) = (client.bus(), client.services());
     let grip = bus
         .subscriber::<GripperState>(&services.gripper_state())
         .unwrap();
@@ -993,15 +969,18 @@ fn a_job_survives_herbd_killed_mid_motion() {
     );
     let mut events: Vec<Status> = Vec::new();
     let mut released: Vec<SimOutcome> = Vec::new();
-    let drain = |events: &mut Vec<Status>, released: &mut Vec<SimOutcome>| {
-        while let Ok(Some(s)) = status.receive() {
-            if s.payload().event != StatusEvent::Heartbeat as u32 {
-                events.push(*s.payload());
-            }
-        }
+    let drain_outcomes = |released: &mut Vec<SimOutcome>| {
         while let Ok(Some(o)) = outcomes.receive() {
             released.push(*o.payload());
         }
+    };
+    let drain = |events: &mut Vec<Status>, released: &mut Vec<SimOutcome>| {
+        events.extend(
+            client
+                .statuses()
+                .filter(|s| s.event != StatusEvent::Heartbeat as u32),
+        );
+        drain_outcomes(released);
     };
     // Object 2 is decided and then grasped: kill herbd while the arm carries it.
     let t0 = Instant::now();
@@ -1033,20 +1012,29 @@ fn a_job_survives_herbd_killed_mid_motion() {
     assert!(before.contains("\"holding\": true"), "{before}");
     assert!(ctl.wait_for(Duration::from_secs(10)).code() != Some(0));
 
-    // The restart takes the job up.
+    // The restart takes the job up: followed as a client does, waiting for herbd to come
+    // back with the job, to its end.
+    let limit = Duration::from_secs(120);
+    let mut job = client.watch(job_id, Instant::now() + limit, limit);
     let mut hd2 = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd2.log"));
-    let t0 = Instant::now();
-    while !events
-        .iter()
-        .any(|s| s.job_id == job_id && s.event == StatusEvent::JobDone as u32)
-    {
-        assert!(
-            t0.elapsed() < Duration::from_secs(120),
-            "the job did not complete after the restart: {events:?}"
-        );
-        drain(&mut events, &mut released);
-        std::thread::sleep(Duration::from_millis(20));
+    while !job.is_finished() {
+        match job.poll() {
+            Ok(Some(JobEvent::Status(s))) if s.event != StatusEvent::Heartbeat as u32 => {
+                events.push(s)
+            }
+            Ok(Some(_)) => {}
+            Ok(None) => {
+                drain_outcomes(&mut released);
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            Err(e) => panic!("the job did not complete after the restart: {e}: {events:?}"),
+        }
     }
+    assert_eq!(
+        job.end().map(|s| s.event),
+        Some(StatusEvent::JobDone as u32),
+        "{events:?}"
+    );
     std::thread::sleep(Duration::from_millis(1500)); // the last release settles
     drain(&mut events, &mut released);
     let log = std::fs::read_to_string(dir.join("herbd2.log")).unwrap();
@@ -1301,19 +1289,15 @@ fn every_event_reaches_the_log_before_herbd_exits_on_sigterm() {
         &["--config", cfg_s],
         &dir.join("loopback.log"),
     );
-    let services = herb_ipc::Services::new(&prefix).unwrap();
-    let bus = herb_ipc::bus::Bus::open("e2e-log-test", &services).unwrap();
-    let status = bus
-        .subscriber::<herb_ipc::Status>(&services.status())
-        .unwrap();
+    let client = Client::connect_as(&prefix, "e2e-log-test").unwrap();
     let mut with_shutdown = 0;
     // The status stream's events (heartbeats aside), read often so that the subscriber stays
     // connected to each new herbd's publisher.
     let drain = |into: &mut Vec<String>, for_: Duration| {
         let t0 = Instant::now();
         loop {
-            while let Ok(Some(s)) = status.receive() {
-                let ev = herb_ipc::StatusEvent::from_code(s.payload().event).unwrap();
+            for s in client.statuses() {
+                let ev = herb_ipc::StatusEvent::from_code(s.event).unwrap();
                 if ev != herb_ipc::StatusEvent::Heartbeat {
                     into.push(log_name(ev).to_string());
                 }
@@ -1335,11 +1319,10 @@ fn every_event_reaches_the_log_before_herbd_exits_on_sigterm() {
         // Connected once a heartbeat came through.
         let mut heartbeats = 0;
         while heartbeats == 0 {
-            while let Ok(Some(s)) = status.receive() {
-                if s.payload().event == herb_ipc::StatusEvent::Heartbeat as u32 {
-                    heartbeats += 1;
-                }
-            }
+            heartbeats += client
+                .statuses()
+                .filter(|s| s.event == herb_ipc::StatusEvent::Heartbeat as u32)
+                .count();
             std::thread::sleep(Duration::from_millis(5));
         }
         let mut ctl = None;
@@ -1466,7 +1449,7 @@ type JobRecordRef = herb_testkit::claims::JobRecord;
 #[test]
 fn bad_heightmap_cells_are_counted_on_receipt_outside_any_decision() {
     use herb_adapter::{CameraPort, Heightmap};
-    use herb_ipc::{Services, Status, monotonic_ns};
+    use herb_ipc::monotonic_ns;
     let (dir, prefix, cfg) = setup("badcells");
     let _hd = spawn(
         &exe("herbd"),
@@ -1478,11 +1461,9 @@ fn bad_heightmap_cells_are_counted_on_receipt_outside_any_decision() {
         "event=start",
         Duration::from_secs(30),
     );
-    let services = Services::new(&prefix).unwrap();
-    let bus = herb_ipc::bus::Bus::open("e2e-badcells", &services).unwrap();
-    let status = bus.subscriber::<Status>(&services.status()).unwrap();
-    let before = rejected_inputs(&status, |_| true);
-    let camera = CameraPort::open(&bus).unwrap();
+    let client = Client::connect_as(&prefix, "e2e-badcells").unwrap();
+    let before = rejected_inputs(&client, |_| true);
+    let camera = CameraPort::open(client.bus()).unwrap();
     let spec = herb_sim::GridSpec::for_box(herb_sim::ObsLayout::CELL_M).unwrap();
     let bad = [f32::NAN, f32::INFINITY, 5.0, -1.0];
     for k in 0..30u64 {
@@ -1500,7 +1481,7 @@ fn bad_heightmap_cells_are_counted_on_receipt_outside_any_decision() {
         // Frames at the planner's pace or slower (its queue keeps the newest two).
         std::thread::sleep(Duration::from_millis(50));
     }
-    let counted = rejected_inputs(&status, |n| n >= before + 30);
+    let counted = rejected_inputs(&client, |n| n >= before + 30);
     assert_eq!(
         counted - before,
         30,
