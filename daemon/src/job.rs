@@ -175,8 +175,12 @@ enum Phase {
         seg: usize,
         active_cursor: usize,
     },
+    /// Holding after a fault, commanding no joint: resumes once every input has been fresh
+    /// since `healthy_since` for `resume_after_s`. `recovered`: the job was taken up from the
+    /// journal and has not resumed yet (nothing at all is commanded until it does).
     Faulted {
         healthy_since: Option<u64>,
+        recovered: bool,
     },
     /// A grasp missed: the gripper opens (commanded at `since`), then the pick is tried again
     /// or the object skipped.
@@ -188,6 +192,9 @@ enum Phase {
     Recovering {
         asked: bool,
     },
+    /// A job taken up from the journal to be ended, not resumed: the next tick reports the
+    /// fault and fails the job.
+    Abandoning,
     /// A cancelled job's retreat: `asked` once the planner has the request.
     Retreating {
         asked: bool,
@@ -196,13 +203,10 @@ enum Phase {
 
 /// The job state machine. Built once; no method allocates.
 pub struct Job {
-    t: JobTimeouts,
-    lower: [f64; DOF],
-    upper: [f64; DOF],
-    catalog_len: usize,
-    grasp_retries: u32,
+    /// What the machine is built with.
+    p: JobParams,
     inputs: Inputs,
-    // the job
+    // the job; what belongs to one phase only is in its `Phase` variant
     phase: Phase,
     job_id: u64,
     /// The job's objects as submitted.
@@ -221,10 +225,6 @@ pub struct Job {
     missed: u32,
     /// The current object's `Decided` was sent.
     announced: bool,
-    /// The job was taken up from the journal and has not resumed yet.
-    recovered: bool,
-    /// The job taken up from the journal is to be ended, not resumed.
-    abandoning: bool,
     fault: Fault,
     /// A client cancelled the job: brake, retreat, report `JobCancelled`.
     cancelling: bool,
@@ -233,7 +233,7 @@ pub struct Job {
     spare: Option<Box<MotionPlan>>,
     brake: Option<Box<MotionPlan>>,
     out: Commands,
-    commanding: bool,
+    /// The daemon is stopping (SIGINT, SIGTERM): brake, refuse jobs, exit.
     stopping: bool,
 }
 
@@ -382,11 +382,7 @@ impl Job {
     /// A machine without a job, with its two trajectory buffers.
     pub fn new(p: JobParams, a: Box<MotionPlan>, b: Box<MotionPlan>) -> Self {
         Self {
-            t: p.timeouts,
-            lower: p.lower,
-            upper: p.upper,
-            catalog_len: p.catalog_len,
-            grasp_retries: p.grasp_retries,
+            p,
             inputs: Inputs::default(),
             phase: Phase::Idle,
             job_id: 0,
@@ -401,15 +397,12 @@ impl Job {
             placement: None,
             missed: 0,
             announced: false,
-            recovered: false,
-            abandoning: false,
             fault: Fault::None,
             cancelling: false,
             active: Some(a),
             spare: Some(b),
             brake: None,
             out: Commands::default(),
-            commanding: false,
             stopping: false,
         }
     }
@@ -474,7 +467,7 @@ impl Job {
     /// is wrong with it whatever the state; then `ShuttingDown`, `Busy`, `NotReady`), and
     /// started when accepted.
     pub fn job_request(&mut self, r: &PackJobRequest, now: u64, fx: &mut impl Effects) {
-        let verdict = r.validate(self.catalog_len).and_then(|()| {
+        let verdict = r.validate(self.p.catalog_len).and_then(|()| {
             if self.stopping {
                 Err((RejectReason::ShuttingDown, 0))
             } else if self.phase != Phase::Idle {
@@ -563,7 +556,6 @@ impl Job {
         self.objects = objects;
         self.ordered = false;
         self.placement = None;
-        self.recovered = false;
         self.count = n;
         self.index = 0;
         self.done = 0;
@@ -575,7 +567,6 @@ impl Job {
         self.release_stamp = 0;
         let q = self.inputs.js.map(|j| j.position).unwrap_or_default();
         self.out.cmd = Setpoint::at_rest(q);
-        self.commanding = true;
         // A known gripper state to start from: open, unless it holds something (which the job
         // then deals with as its first object's grasp would: it is never dropped here).
         if !self.holding {
@@ -606,9 +597,10 @@ impl Job {
                 self.ordered = true;
                 match self.phase {
                     Phase::Ordering => self.phase = Phase::WaitHeightmap { since: now },
-                    Phase::Recovering { .. } => {
+                    Phase::Recovering { .. } | Phase::Abandoning => {
                         self.phase = Phase::Faulted {
                             healthy_since: None,
+                            recovered: true,
                         }
                     }
                     _ => {}
@@ -617,7 +609,10 @@ impl Job {
             Response::Ordered { .. } => {}
             Response::OrderFailed { job_id }
                 if job_id == self.job_id
-                    && matches!(self.phase, Phase::Ordering | Phase::Recovering { .. }) =>
+                    && matches!(
+                        self.phase,
+                        Phase::Ordering | Phase::Recovering { .. } | Phase::Abandoning
+                    ) =>
             {
                 self.fault = Fault::Decision;
                 self.finish(fx, StatusEvent::JobFailed);
@@ -754,11 +749,8 @@ impl Job {
         self.holding = r.holding;
         self.placement = r.placement;
         self.release_stamp = s.release_stamp;
-        self.recovered = false;
         self.fault = s.fault;
         self.cancelling = false;
-        // Between jobs nothing is commanded.
-        self.commanding = false;
         self.stopping = s.stopping;
         self.announced = false;
         self.missed = 0;
@@ -772,6 +764,25 @@ impl Job {
             Phase::Faulted { .. } => JobState::Faulted,
             _ => JobState::Running,
         }
+    }
+
+    /// The job was taken up from the journal and has not resumed yet.
+    fn recovered(&self) -> bool {
+        matches!(
+            self.phase,
+            Phase::Recovering { .. }
+                | Phase::Abandoning
+                | Phase::Faulted {
+                    recovered: true,
+                    ..
+                }
+        )
+    }
+
+    /// Commands are published: a job runs, and it is not a recovered one that has not resumed
+    /// yet (between jobs, and until a job taken up from the journal resumes, nothing is).
+    fn commanding(&self) -> bool {
+        !matches!(self.phase, Phase::Idle) && !self.recovered()
     }
 
     /// Inputs rejected so far (invalid, from the future, out of order; bad job requests).
@@ -802,9 +813,10 @@ impl Job {
             | Phase::Gripper { .. }
             | Phase::Regrasp { .. }
             | Phase::Retreating { .. } => ObjectPhase::Moving,
-            Phase::Braking { .. } | Phase::Faulted { .. } | Phase::Recovering { .. } => {
-                ObjectPhase::Halted
-            }
+            Phase::Braking { .. }
+            | Phase::Faulted { .. }
+            | Phase::Recovering { .. }
+            | Phase::Abandoning => ObjectPhase::Halted,
         };
         // Past the job's objects the machine reads nothing: kept as zeros.
         let (mut objects, mut order) = ([0; MAX_JOB_OBJECTS], [0; MAX_JOB_OBJECTS]);
@@ -848,7 +860,6 @@ impl Job {
     /// and resumes from the measured state (see the module's "Restart"). With `resume` false,
     /// the first tick reports the fault and ends the job, failed, instead.
     pub fn recover(&mut self, r: &JobRecord, resume: bool) {
-        self.abandoning = !resume;
         self.job_id = r.job_id;
         self.count = (r.count as usize).min(MAX_JOB_OBJECTS);
         self.objects = r.objects;
@@ -861,12 +872,14 @@ impl Job {
         self.placement = r.placement;
         // A placement in the journal was announced before the crash.
         self.announced = r.placement.is_some_and(|p| p.index as usize == self.index);
-        self.recovered = true;
         self.release_stamp = 0;
         self.fault = Fault::Restarted;
         self.cancelling = false;
-        self.commanding = false;
-        self.phase = Phase::Recovering { asked: false };
+        self.phase = if resume {
+            Phase::Recovering { asked: false }
+        } else {
+            Phase::Abandoning
+        };
     }
 
     /// Why a job cannot run now, if it cannot: the stale input's fault (see
@@ -900,11 +913,11 @@ impl Job {
     }
 
     fn stale_input(&self, now: u64) -> Option<Fault> {
-        if now.saturating_sub(self.inputs.js_at) >= self.t.joint_state_ns {
+        if now.saturating_sub(self.inputs.js_at) >= self.p.timeouts.joint_state_ns {
             Some(self.joint_fault(now))
-        } else if now.saturating_sub(self.inputs.gs_at) >= self.t.gripper_state_ns {
+        } else if now.saturating_sub(self.inputs.gs_at) >= self.p.timeouts.gripper_state_ns {
             Some(Fault::GripperStateTimeout)
-        } else if now.saturating_sub(self.inputs.hm_rx_at) >= self.t.heightmap_ns {
+        } else if now.saturating_sub(self.inputs.hm_rx_at) >= self.p.timeouts.heightmap_ns {
             Some(Fault::HeightmapTimeout)
         } else {
             None
@@ -916,7 +929,8 @@ impl Job {
             Phase::Idle
             | Phase::Braking { .. }
             | Phase::Faulted { .. }
-            | Phase::Recovering { .. } => {}
+            | Phase::Recovering { .. }
+            | Phase::Abandoning => {}
             _ => {
                 if let Some(f) = self.stale_input(now) {
                     self.raise(fx, f);
@@ -975,6 +989,7 @@ impl Job {
         self.out.cmd.acceleration = [0.0; DOF];
         self.phase = Phase::Faulted {
             healthy_since: None,
+            recovered: self.recovered(),
         };
         self.emit(fx, StatusEvent::Braked, self.current_type(), [0.0; 4], 0);
     }
@@ -1011,7 +1026,6 @@ impl Job {
     /// Ends the job with `end` (`JobDone`, `JobFailed` or `JobCancelled`).
     fn finish(&mut self, fx: &mut impl Effects, end: StatusEvent) {
         self.phase = Phase::Idle;
-        self.commanding = false;
         self.cancelling = false;
         self.emit(fx, end, NO_OBJECT, [0.0; 4], 0);
         self.job_id = 0;
@@ -1052,7 +1066,7 @@ impl Job {
                 if self.stopping {
                     return;
                 }
-                if now.saturating_sub(since) > self.t.fresh_heightmap_ns {
+                if now.saturating_sub(since) > self.p.timeouts.fresh_heightmap_ns {
                     self.raise(fx, Fault::HeightmapTimeout);
                 } else if self.inputs.hm_stamp > self.release_stamp {
                     self.request_plan(fx, false, since);
@@ -1068,8 +1082,7 @@ impl Job {
             } => self.brake_step(fx, cursor, seg, active_cursor),
             Phase::Retreating { asked: false } => self.retreat(fx),
             Phase::Retreating { asked: true } | Phase::Recovering { asked: true } => {}
-            Phase::Recovering { asked: false } if self.abandoning => {
-                self.abandoning = false;
+            Phase::Abandoning => {
                 self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
                 self.finish(fx, StatusEvent::JobFailed);
             }
@@ -1090,7 +1103,10 @@ impl Job {
                     self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
                 }
             }
-            Phase::Faulted { healthy_since } => {
+            Phase::Faulted {
+                healthy_since,
+                recovered,
+            } => {
                 if self.cancelling {
                     // Cancelled where it stopped (its inputs may be gone: no retreat).
                     self.finish(fx, StatusEvent::JobCancelled);
@@ -1102,6 +1118,7 @@ impl Job {
                 if let Some(why) = self.not_ready(now) {
                     self.phase = Phase::Faulted {
                         healthy_since: None,
+                        recovered,
                     };
                     // The arm adapter said more about the joint states that stopped (or it
                     // changed: an e-stop became a disable): say it once.
@@ -1117,12 +1134,16 @@ impl Job {
                     return;
                 }
                 let since = healthy_since.unwrap_or(now);
+                // Resume once both trajectory buffers are home (a plan may still be in flight).
+                let resuming =
+                    now - since >= self.p.timeouts.resume_after_ns && self.spare.is_some();
+                // A recovered job is the journal's, commanding nothing, until it resumes.
                 self.phase = Phase::Faulted {
                     healthy_since: Some(since),
+                    recovered: recovered && !resuming,
                 };
-                // Resume once both trajectory buffers are home (a plan may still be in flight).
-                if now - since >= self.t.resume_after_ns && self.spare.is_some() {
-                    self.resume(fx, now);
+                if resuming {
+                    self.resume(fx, now, recovered);
                 }
             }
         }
@@ -1161,7 +1182,7 @@ impl Job {
                 }
             }
             self.next_segment(fx, now, seg + 1);
-        } else if now.saturating_sub(since) > self.t.gripper_action_ns {
+        } else if now.saturating_sub(since) > self.p.timeouts.gripper_action_ns {
             if action == GripperAction::Close && g.holding == 0 {
                 // Closed on nothing (or not holding in time): open, then pick again or skip.
                 self.fault = Fault::MissedGrasp;
@@ -1188,7 +1209,7 @@ impl Job {
         let Some(g) = self.inputs.gs else { return };
         let opened = g.closed == 0 && g.header.stamp_ns >= since;
         if !opened {
-            if now.saturating_sub(since) > self.t.gripper_action_ns {
+            if now.saturating_sub(since) > self.p.timeouts.gripper_action_ns {
                 self.fault = Fault::Gripper;
                 self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
                 self.finish(fx, StatusEvent::JobFailed);
@@ -1199,7 +1220,7 @@ impl Job {
             self.retreat(fx);
             return;
         }
-        if self.missed <= self.grasp_retries && self.placement.is_some() {
+        if self.missed <= self.p.grasp_retries && self.placement.is_some() {
             self.request_repick(fx, now);
             return;
         }
@@ -1297,20 +1318,17 @@ impl Job {
         }
     }
 
-    fn resume(&mut self, fx: &mut impl Effects, now: u64) {
+    /// Resumes a faulted job (`recovered`: taken up from the journal, resumed for the first
+    /// time; it commands again from here).
+    fn resume(&mut self, fx: &mut impl Effects, now: u64, recovered: bool) {
         // Re-synchronise to where the arm is.
         if let Some(j) = self.inputs.js {
             self.out.cmd = Setpoint::at_rest(j.position);
         }
-        // A recovered job commands nothing before this.
-        self.commanding = true;
         let held = self.inputs.gs.is_some_and(|g| g.holding == 1);
         self.emit(fx, StatusEvent::Resumed, self.current_type(), [0.0; 4], 0);
-        if self.recovered {
-            self.recovered = false;
-            if !self.take_up_measured_state(fx, held, now) {
-                return;
-            }
+        if recovered && !self.take_up_measured_state(fx, held, now) {
+            return;
         }
         if self.index >= self.count {
             self.finish(fx, StatusEvent::JobDone);
@@ -1445,12 +1463,12 @@ impl Job {
     }
 
     fn publish(&mut self, now: u64, fx: &mut impl Effects) {
-        if self.commanding {
+        if self.commanding() {
             // Faulted, nothing moves the arm: the robot holds by itself, and the next command
             // is planned from the state measured when the job resumes.
-            let halted = matches!(self.phase, Phase::Faulted { .. } | Phase::Recovering { .. });
+            let halted = matches!(self.phase, Phase::Faulted { .. });
             let q = self.out.cmd.position;
-            let inside = (0..DOF).all(|i| q[i] >= self.lower[i] && q[i] <= self.upper[i]);
+            let inside = (0..DOF).all(|i| q[i] >= self.p.lower[i] && q[i] <= self.p.upper[i]);
             if !halted {
                 if inside {
                     fx.joint(&self.out.cmd);

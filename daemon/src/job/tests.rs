@@ -604,7 +604,7 @@ fn a_job_while_braking_or_faulted_is_busy() {
     r.until(200, "plan", is_plan);
     r.respond();
     r.ticks(2); // streaming
-    r.job.t.gripper_state_ns = 20 * MS; // soon stale: the arm is seen, it brakes
+    r.job.p.timeouts.gripper_state_ns = 20 * MS; // soon stale: the arm is seen, it brakes
     r.gs_up = false;
     r.until(200, "brake", is_brake);
     assert!(matches!(r.phase(), Phase::Braking { .. }));
@@ -1330,7 +1330,7 @@ fn joint_states_stopped_are_named_by_the_adapter_and_the_name_follows_it() {
 fn a_gripper_state_timeout_brakes_a_seen_arm_then_commands_nothing() {
     let (mut r, _) = streaming();
     r.ticks(2);
-    r.job.t.gripper_state_ns = 20 * MS; // soon stale: the arm is seen, it brakes
+    r.job.p.timeouts.gripper_state_ns = 20 * MS; // soon stale: the arm is seen, it brakes
     r.gs_up = false;
     r.until(300, "brake", is_brake);
     r.until_event(300, StatusEvent::Braked);
@@ -1402,7 +1402,7 @@ fn a_failed_brake_or_a_full_ring_enters_faulted_where_it_stands() {
     let (mut r, _) = streaming();
     r.auto = false;
     r.ticks(2);
-    r.job.t.gripper_state_ns = 20 * MS; // soon stale: the arm is seen, it brakes
+    r.job.p.timeouts.gripper_state_ns = 20 * MS; // soon stale: the arm is seen, it brakes
     r.gs_up = false;
     r.until(200, "brake", is_brake);
     let Request::Brake { buf, .. } = r.take() else {
@@ -1418,7 +1418,7 @@ fn a_failed_brake_or_a_full_ring_enters_faulted_where_it_stands() {
     let (mut r, _) = streaming();
     r.ticks(2);
     r.fx.refuse = true;
-    r.job.t.gripper_state_ns = 20 * MS; // soon stale: the arm is seen, it brakes
+    r.job.p.timeouts.gripper_state_ns = 20 * MS; // soon stale: the arm is seen, it brakes
     r.gs_up = false;
     r.until_event(200, StatusEvent::Braked);
     assert_eq!(r.count(is_brake), 0);
@@ -1505,7 +1505,7 @@ fn a_resume_while_holding_replans_only_the_placement_at_the_same_pose() {
     r.ticks(3); // holding, carrying
     assert!(r.job.holding);
     r.auto = false;
-    r.job.t.gripper_state_ns = 20 * MS; // soon stale: the arm is seen, it brakes
+    r.job.p.timeouts.gripper_state_ns = 20 * MS; // soon stale: the arm is seen, it brakes
     r.gs_up = false;
     r.until_event(200, StatusEvent::Fault);
     r.respond(); // the brake
