@@ -216,8 +216,8 @@ impl Default for Topics {
 impl ConfigFile for BaxterConfig {
     fn validate(&self) -> Result<(), String> {
         let r = &self.ros;
-        herb_ros1::check_master_uri("ros.master_uri", &r.master_uri)?;
-        herb_ros1::check_name("ros.node_name", &r.node_name)?;
+        herb_ros1::check_master_uri("ros.master_uri", &r.master_uri).map_err(|e| e.to_string())?;
+        herb_ros1::check_name("ros.node_name", &r.node_name).map_err(|e| e.to_string())?;
         in_range("ros.master_check_s", r.master_check_s, 0.01, 10.0)?;
         if !r.ip.is_empty() && r.ip.parse::<std::net::Ipv4Addr>().is_err() {
             return Err(format!("ros.ip {:?} is not an IPv4 address", r.ip));
@@ -265,7 +265,7 @@ impl ConfigFile for BaxterConfig {
             ("topics.gripper_command", &t.gripper_command),
             ("topics.gripper_state", &t.gripper_state),
         ] {
-            herb_ros1::check_name(name, topic)?;
+            herb_ros1::check_name(name, topic).map_err(|e| e.to_string())?;
         }
         Ok(())
     }

@@ -352,7 +352,7 @@ async fn session(
                 }
                 if view == MasterView::Forgotten {
                     eprintln!("herb-baxter: the ROS master restarted and forgot this node: registering again");
-                    let known = announce_again(&master, &subscribed, &published).await?;
+                    let known = announce_again(&master, &subscribed, &published).await.map_err(|e| e.to_string())?;
                     lock(shared).counters.reregistered += 1;
                     announced_at = known.then(monotonic_ns);
                 }

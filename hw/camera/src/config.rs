@@ -156,13 +156,14 @@ impl CameraConfig {
 
 impl ConfigFile for CameraConfig {
     fn validate(&self) -> Result<(), String> {
-        herb_ros1::check_master_uri("ros.master_uri", &self.ros.master_uri)?;
+        herb_ros1::check_master_uri("ros.master_uri", &self.ros.master_uri)
+            .map_err(|e| e.to_string())?;
         for (name, topic) in [
             ("ros.node_name", &self.ros.node_name),
             ("topics.image", &self.topics.image),
             ("topics.camera_info", &self.topics.camera_info),
         ] {
-            herb_ros1::check_name(name, topic)?;
+            herb_ros1::check_name(name, topic).map_err(|e| e.to_string())?;
         }
         for (i, t) in self.pose.translation.iter().enumerate() {
             in_range(&format!("pose.translation[{i}]"), *t, -5.0, 5.0)?;

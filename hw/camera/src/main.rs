@@ -313,7 +313,7 @@ async fn session(
                     .ok_or_else(|| "no camera info yet".to_string())
                     .and_then(|i| {
                         let d = Depth::from_image(&img.encoding, img.is_bigendian, img.width, img.height, img.step, &img.data, &i)?;
-                        let stamp = herb_ros1::time::to_monotonic(&img.header.stamp, monotonic_ns(), SystemTime::now(), max_age_ns)?;
+                        let stamp = herb_ros1::time::to_monotonic(&img.header.stamp, monotonic_ns(), SystemTime::now(), max_age_ns).map_err(|e| e.to_string())?;
                         Ok((i, d, stamp))
                     });
                 let (i, depth, stamp_ns) = match checked {
@@ -339,7 +339,7 @@ async fn session(
             _ = check.tick() => {
                 if master_view(&master, &t.image, &cfg.ros.node_name, MASTER_CHECK).await == MasterView::Forgotten {
                     eprintln!("herb-camera: the ROS master restarted and forgot this node: registering again");
-                    let known = announce_again(&master, &subscribed, &[]).await?;
+                    let known = announce_again(&master, &subscribed, &[]).await.map_err(|e| e.to_string())?;
                     announced_at = known.then(tokio::time::Instant::now);
                 }
                 if let Some(at) = announced_at {

@@ -20,20 +20,44 @@ pub use roslibrust::RosMessageType;
 pub mod node;
 pub mod time;
 
+/// A configuration value that is not a usable master URI or ROS name.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ConfigError {
+    /// Not `http://host:port`.
+    #[error("{key} = {uri:?}: expected http://host:port")]
+    MasterUri {
+        /// The configuration key.
+        key: String,
+        /// The value given.
+        uri: String,
+    },
+    /// Not an absolute ROS name.
+    #[error("{key} = {name:?}: expected an absolute ROS name (/ then letters, digits, _ and /)")]
+    Name {
+        /// The configuration key.
+        key: String,
+        /// The value given.
+        name: String,
+    },
+}
+
 /// Checks a master URI from a configuration (`key` names it in the error): `http://host:port`.
-pub fn check_master_uri(key: &str, uri: &str) -> Result<(), String> {
+pub fn check_master_uri(key: &str, uri: &str) -> Result<(), ConfigError> {
     let rest = uri.strip_prefix("http://").unwrap_or("");
     match rest.rsplit_once(':') {
         Some((host, port)) if !host.is_empty() && port.parse::<u16>().is_ok_and(|p| p > 0) => {
             Ok(())
         }
-        _ => Err(format!("{key} = {uri:?}: expected http://host:port")),
+        _ => Err(ConfigError::MasterUri {
+            key: key.to_owned(),
+            uri: uri.to_owned(),
+        }),
     }
 }
 
 /// Checks a global ROS name from a configuration (a topic or a node; `key` names it in the
 /// error): `/` first, then letters, digits, `_` and `/`.
-pub fn check_name(key: &str, name: &str) -> Result<(), String> {
+pub fn check_name(key: &str, name: &str) -> Result<(), ConfigError> {
     let rest = name.strip_prefix('/').unwrap_or("");
     if !rest.is_empty()
         && rest.starts_with(|c: char| c.is_ascii_alphabetic())
@@ -43,9 +67,10 @@ pub fn check_name(key: &str, name: &str) -> Result<(), String> {
     {
         Ok(())
     } else {
-        Err(format!(
-            "{key} = {name:?}: expected an absolute ROS name (/ then letters, digits, _ and /)"
-        ))
+        Err(ConfigError::Name {
+            key: key.to_owned(),
+            name: name.to_owned(),
+        })
     }
 }
 
@@ -64,7 +89,9 @@ mod tests {
             "http://host:0",
             "http://h:x",
         ] {
-            let e = check_master_uri("ros.master_uri", bad).unwrap_err();
+            let e = check_master_uri("ros.master_uri", bad)
+                .unwrap_err()
+                .to_string();
             assert!(e.contains("ros.master_uri"), "{bad}: {e}");
         }
         assert!(check_name("k", "/robot/joint_states").is_ok());
@@ -72,6 +99,7 @@ mod tests {
             assert!(
                 check_name("topics.x", bad)
                     .unwrap_err()
+                    .to_string()
                     .contains("topics.x"),
                 "{bad}"
             );

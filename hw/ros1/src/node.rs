@@ -102,6 +102,27 @@ pub fn topic_of<T: roslibrust::RosMessageType>(name: &str) -> Topic {
     (name.to_owned(), T::DESCRIPTION.ros_type_name)
 }
 
+/// A registration the master refused or did not answer.
+#[derive(Debug, thiserror::Error)]
+pub enum RegisterError {
+    /// Registering as a subscriber failed.
+    #[error("register subscriber {topic}: {source}")]
+    Subscriber {
+        /// The topic.
+        topic: String,
+        /// The master client's error.
+        source: roslibrust::ros1::RosMasterError,
+    },
+    /// Registering as a publisher failed.
+    #[error("register publisher {topic}: {source}")]
+    Publisher {
+        /// The topic.
+        topic: String,
+        /// The master client's error.
+        source: roslibrust::ros1::RosMasterError,
+    },
+}
+
 /// Registers this node's topics again with a master that forgot it (it restarted), keeping the
 /// node and its connections: peers that are still connected stay connected, and peers that
 /// register later are told about this node. Returns whether the master already knew a
@@ -111,20 +132,26 @@ pub async fn announce_again(
     master: &roslibrust::ros1::MasterClient,
     subscribed: &[Topic],
     published: &[Topic],
-) -> Result<bool, String> {
+) -> Result<bool, RegisterError> {
     let mut known = false;
     for (topic, ty) in subscribed {
         let publishers = master
             .register_subscriber(topic.as_str(), *ty)
             .await
-            .map_err(|e| format!("register subscriber {topic}: {e}"))?;
+            .map_err(|source| RegisterError::Subscriber {
+                topic: topic.clone(),
+                source,
+            })?;
         known |= !publishers.is_empty();
     }
     for (topic, ty) in published {
         master
             .register_publisher(topic.as_str(), *ty)
             .await
-            .map_err(|e| format!("register publisher {topic}: {e}"))?;
+            .map_err(|source| RegisterError::Publisher {
+                topic: topic.clone(),
+                source,
+            })?;
     }
     Ok(known)
 }
