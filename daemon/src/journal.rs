@@ -32,25 +32,48 @@ pub const RING: usize = 64;
 /// The writer's poll period when nothing is pending.
 const POLL: Duration = Duration::from_millis(2);
 
-/// A journal file that cannot be used: which file, and what is wrong with it.
+/// A journal that cannot be used (its file, and what is wrong with it) or kept.
 #[derive(Debug, thiserror::Error)]
-#[error("job journal {path}: {problem}")]
-pub struct JournalError {
-    /// The file.
-    pub path: PathBuf,
-    /// What is wrong.
-    pub problem: JournalProblem,
+pub enum JournalError {
+    /// The file cannot be read.
+    #[error("job journal {path}: cannot read: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// Its record does not decode, or does not describe a job that can be taken up.
+    #[error("job journal {path}: {problem}")]
+    Record {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        problem: JobRecordError,
+    },
+    /// The journal's folder cannot be created.
+    #[error("job journal folder {path}: {source}")]
+    Folder {
+        /// The folder.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The writer thread cannot be started.
+    #[error("cannot start the journal writer: {0}")]
+    Thread(std::io::Error),
 }
 
-/// What is wrong with a journal file.
-#[derive(Debug, thiserror::Error)]
-pub enum JournalProblem {
-    /// It cannot be read.
-    #[error("cannot read: {0}")]
-    Read(std::io::Error),
-    /// Its record does not decode, or does not describe a job that can be taken up.
-    #[error(transparent)]
-    Record(#[from] JobRecordError),
+impl JournalError {
+    /// The file or folder at fault, if any.
+    pub fn path(&self) -> Option<&Path> {
+        match self {
+            Self::Read { path, .. } | Self::Record { path, .. } | Self::Folder { path, .. } => {
+                Some(path)
+            }
+            Self::Thread(_) => None,
+        }
+    }
 }
 
 /// The unfinished job in `dir`, if any (`Ok(None)`: no journal file).
@@ -59,19 +82,11 @@ pub fn load(dir: &Path, catalog_len: usize) -> Result<Option<JobRecord>, Journal
     let bytes = match fs::read(&path) {
         Ok(b) => b,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => {
-            return Err(JournalError {
-                path,
-                problem: JournalProblem::Read(e),
-            });
-        }
+        Err(source) => return Err(JournalError::Read { path, source }),
     };
     JobRecord::decode(&bytes)
         .and_then(|r| r.check_job(catalog_len).map(|()| Some(r)))
-        .map_err(|e| JournalError {
-            path,
-            problem: e.into(),
-        })
+        .map_err(|problem| JournalError::Record { path, problem })
 }
 
 /// Renames a journal that could not be used to `job.json.bad-<unix seconds>` beside it, so
@@ -127,8 +142,11 @@ pub struct WriterReport {
 pub fn spawn(
     dir: PathBuf,
     stop: Arc<AtomicBool>,
-) -> Result<(rtrb::Producer<JobRecord>, JoinHandle<WriterReport>), String> {
-    fs::create_dir_all(&dir).map_err(|e| format!("job journal folder {}: {e}", dir.display()))?;
+) -> Result<(rtrb::Producer<JobRecord>, JoinHandle<WriterReport>), JournalError> {
+    fs::create_dir_all(&dir).map_err(|source| JournalError::Folder {
+        path: dir.clone(),
+        source,
+    })?;
     // A temporary file left by a crash mid-write is not the journal.
     let _ = fs::remove_file(dir.join(TMP));
     let (tx, mut rx) = rtrb::RingBuffer::<JobRecord>::new(RING);
@@ -164,7 +182,7 @@ pub fn spawn(
                 }
             }
         })
-        .map_err(|e| format!("cannot start the journal writer: {e}"))?;
+        .map_err(JournalError::Thread)?;
     Ok((tx, handle))
 }
 
@@ -240,7 +258,7 @@ mod tests {
         for (bytes, want) in cases {
             fs::write(d.join(FILE), &bytes).unwrap();
             let e = load(&d, 10).unwrap_err();
-            assert_eq!(e.path, d.join(FILE));
+            assert_eq!(e.path(), Some(d.join(FILE).as_path()));
             assert!(e.to_string().contains(want), "{want}: {e}");
             let aside = set_aside(&d).unwrap();
             assert!(aside.is_file() && !d.join(FILE).exists());
@@ -253,7 +271,7 @@ mod tests {
         "placement": null}"#;
         fs::write(d.join(FILE), v1).unwrap();
         let e = load(&d, 10).unwrap_err();
-        assert_eq!(e.path, d.join(FILE));
+        assert_eq!(e.path(), Some(d.join(FILE).as_path()));
         assert!(
             e.to_string().contains(
                 "format \"herb-job-journal\" version 1 (expected \"herb-job\" version 2)"

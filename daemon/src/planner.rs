@@ -154,9 +154,8 @@ impl Worker {
 
 impl PlannerCore {
     /// Loads the sequence model and the policy named by `cfg` for `catalog`.
-    pub fn new(cfg: &Config, catalog: SharedCatalog) -> Result<Self, String> {
-        let policy = herb_decide::load_policy(&cfg.models.resolved_policy(), &catalog)
-            .map_err(|e| e.to_string())?;
+    pub fn new(cfg: &Config, catalog: SharedCatalog) -> Result<Self, PlannerError> {
+        let policy = herb_decide::load_policy(&cfg.models.resolved_policy(), &catalog)?;
         Self::with_policy(cfg, catalog, policy)
     }
 
@@ -166,9 +165,8 @@ impl PlannerCore {
         cfg: &Config,
         catalog: SharedCatalog,
         policy: Box<dyn Policy>,
-    ) -> Result<Self, String> {
-        let sequence =
-            SequenceModel::load(&cfg.models.sequence, &catalog).map_err(|e| e.to_string())?;
+    ) -> Result<Self, PlannerError> {
+        let sequence = SequenceModel::load(&cfg.models.sequence, &catalog)?;
         let decider = Decider::new(policy, catalog.clone(), cfg.models.clearance_m as f32);
         let limits = cfg.limits;
         Ok(Self {
@@ -405,6 +403,26 @@ impl PlannerCore {
     }
 }
 
+/// Why the planner cannot start.
+#[derive(Debug, thiserror::Error)]
+pub enum PlannerError {
+    /// The policy or the sequence model cannot be loaded.
+    #[error(transparent)]
+    Models(#[from] herb_decide::DecideError),
+    /// The IPC prefix is not one.
+    #[error(transparent)]
+    Prefix(#[from] herb_ipc::BadPrefix),
+    /// The planner's heightmap subscriber cannot be opened.
+    #[error(transparent)]
+    Bus(#[from] herb_ipc::bus::BusError),
+    /// The thread cannot be started.
+    #[error("cannot start the planner thread: {0}")]
+    Thread(std::io::Error),
+    /// The thread ended before it said it was ready.
+    #[error("the planner thread died while starting")]
+    Died,
+}
+
 /// Starts the planner thread: loads the catalog, sequence model and policy (errors come back
 /// here, before the daemon reports ready), and opens its own heightmap subscriber.
 pub fn spawn(
@@ -412,22 +430,20 @@ pub fn spawn(
     catalog: SharedCatalog,
     stop: Arc<AtomicBool>,
     record: Option<FrameLog>,
-) -> Result<(PlannerLink, JoinHandle<()>), String> {
+) -> Result<(PlannerLink, JoinHandle<()>), PlannerError> {
     let (tx, req_rx) = rtrb::RingBuffer::<Request>::new(RING);
     let (resp_tx, rx) = rtrb::RingBuffer::<Response>::new(RING);
-    let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), PlannerError>>();
     let cfg = cfg.clone();
     let shared_rejects = Arc::new(AtomicU64::new(0));
     let rejected_frames = shared_rejects.clone();
     let handle = std::thread::Builder::new()
         .name("herbd-planner".into())
         .spawn(move || {
-            let setup = (|| -> Result<Worker, String> {
-                let services = Services::new(&cfg.ipc_prefix).map_err(|e| e.to_string())?;
-                let bus = Bus::open("herbd-planner", &services).map_err(|e| e.to_string())?;
-                let hm_sub = bus
-                    .subscriber::<HeightmapFrame>(&services.heightmap())
-                    .map_err(|e| e.to_string())?;
+            let setup = (|| -> Result<Worker, PlannerError> {
+                let services = Services::new(&cfg.ipc_prefix)?;
+                let bus = Bus::open("herbd-planner", &services)?;
+                let hm_sub = bus.subscriber::<HeightmapFrame>(&services.heightmap())?;
                 Ok(Worker {
                     core: PlannerCore::new(&cfg, catalog.clone())?,
                     hm_sub,
@@ -461,7 +477,7 @@ pub fn spawn(
                 std::thread::park_timeout(IDLE_PARK);
             }
         })
-        .map_err(|e| format!("cannot start the planner thread: {e}"))?;
+        .map_err(PlannerError::Thread)?;
     let thread = handle.thread().clone();
     match ready_rx.recv() {
         Ok(Ok(())) => Ok((
@@ -474,6 +490,6 @@ pub fn spawn(
             handle,
         )),
         Ok(Err(e)) => Err(e),
-        Err(_) => Err("the planner thread died while starting".into()),
+        Err(_) => Err(PlannerError::Died),
     }
 }

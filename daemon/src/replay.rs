@@ -77,6 +77,27 @@ pub enum Outcome {
     },
 }
 
+/// Why a log cannot be replayed (before its first cycle).
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    /// The recorded configuration does not parse.
+    #[error("the recorded configuration: {0}")]
+    Config(toml::de::Error),
+    /// The recorded configuration does not validate (with this build's rules).
+    #[error("the recorded configuration: {0}")]
+    Invalid(String),
+    /// The catalog cannot be built.
+    #[error("catalog: {0}")]
+    Catalog(herb_sim::SimError),
+    /// The catalog or a model differs from the recorded digests (and `force` was not given):
+    /// what differs.
+    #[error("{} (--force replays anyway)", .0.join("; "))]
+    Differs(Vec<String>),
+    /// The planner cannot be built (models).
+    #[error(transparent)]
+    Planner(#[from] crate::planner::PlannerError),
+}
+
 /// The machine's effects during a replay: digested as herbd digests them, and kept.
 #[derive(Default)]
 struct ReplayFx {
@@ -141,18 +162,16 @@ impl Effects for ReplayFx {
 }
 
 /// The configuration, catalog and planner of a recorded run, checked against its digests.
-fn rebuild(log: &Log, opts: &ReplayOptions) -> Result<(Config, PlannerCore), String> {
+fn rebuild(log: &Log, opts: &ReplayOptions) -> Result<(Config, PlannerCore), ReplayError> {
     let h = &log.header;
-    let mut cfg: Config =
-        toml::from_str(&h.config_toml).map_err(|e| format!("the recorded configuration: {e}"))?;
+    let mut cfg: Config = toml::from_str(&h.config_toml).map_err(ReplayError::Config)?;
     if let Some(b) = &opts.boxed {
         cfg.models.boxed = Some(b.clone());
     }
-    cfg.validate()
-        .map_err(|e| format!("the recorded configuration: {e}"))?;
+    cfg.validate().map_err(ReplayError::Invalid)?;
     let root = herb_sim::paths::boxed_root(cfg.models.boxed.as_deref());
     let meshes = herb_sim::paths::mesh_source(None, root.as_deref());
-    let catalog = herb_sim::Catalog::builtin(&meshes).map_err(|e| format!("catalog: {e}"))?;
+    let catalog = herb_sim::Catalog::builtin(&meshes).map_err(ReplayError::Catalog)?;
     let mut differ = Vec::new();
     if catalog_digest(&catalog) != h.catalog {
         differ.push(format!(
@@ -172,14 +191,14 @@ fn rebuild(log: &Log, opts: &ReplayOptions) -> Result<(Config, PlannerCore), Str
         ));
     }
     if !differ.is_empty() && !opts.force {
-        return Err(format!("{} (--force replays anyway)", differ.join("; ")));
+        return Err(ReplayError::Differs(differ));
     }
     let core = PlannerCore::new(&cfg, Arc::new(catalog))?;
     Ok((cfg, core))
 }
 
 /// Replays one segment; `Err` when it cannot start (configuration, catalog, models).
-pub fn replay(log: &Log, opts: &ReplayOptions) -> Result<(Outcome, Replayed), String> {
+pub fn replay(log: &Log, opts: &ReplayOptions) -> Result<(Outcome, Replayed), ReplayError> {
     let (cfg, mut core) = rebuild(log, opts)?;
     let samples = cfg.trajectory_samples();
     let buffer = || Box::new(MotionPlan::with_capacity(samples));

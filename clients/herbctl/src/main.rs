@@ -747,13 +747,13 @@ fn cancel(cli: &Cli, job: Option<u64>, timeout: f64) -> Result<bool, String> {
 /// `herbctl replay`.
 fn replay(cli: &Cli, path: &std::path::Path, force: bool) -> ExitCode {
     let run = || -> Result<(Outcome, Replayed, Log), String> {
-        let log = Log::read(path)?;
+        let log = Log::read(path).map_err(|e| e.to_string())?;
         let opts = ReplayOptions {
             boxed: cli.boxed.clone(),
             force,
             explain: None,
         };
-        let (o, r) = herb_daemon::replay::replay(&log, &opts)?;
+        let (o, r) = herb_daemon::replay::replay(&log, &opts).map_err(|e| e.to_string())?;
         Ok((o, r, log))
     };
     match run() {
@@ -811,13 +811,13 @@ fn explain(
         return Err("--object counts from 1".into());
     }
     let index = object - 1;
-    let log = Log::read(path)?;
+    let log = Log::read(path).map_err(|e| e.to_string())?;
     let opts = ReplayOptions {
         boxed: cli.boxed.clone(),
         force,
         explain: Some(index),
     };
-    let (outcome, r) = herb_daemon::replay::replay(&log, &opts)?;
+    let (outcome, r) = herb_daemon::replay::replay(&log, &opts).map_err(|e| e.to_string())?;
     let cfg: herb_daemon::config::Config =
         toml::from_str(&log.header.config_toml).map_err(|e| e.to_string())?;
     let e = r.explained.ok_or_else(|| {
@@ -946,6 +946,7 @@ fn main() -> ExitCode {
                 &mut stdin.lock(),
                 &mut std::io::stderr(),
             )
+            .map_err(|e| e.to_string())
             .map(|cell| {
                 println!("[cell]\n{cell}");
                 true

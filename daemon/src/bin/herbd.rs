@@ -250,14 +250,14 @@ fn run(cli: Cli) -> Result<(), String> {
     let planner_stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
     let recording = match &cfg.record.dir {
         Some(dir) => {
-            let header = record::header_for(&cfg, &catalog)?;
+            let header = record::header_for(&cfg, &catalog).map_err(|e| e.to_string())?;
             let opts = record::RecordOptions {
                 dir: dir.clone(),
                 segment_bytes: cfg.record.segment_mb << 20,
                 keep_bytes: cfg.record.keep_mb << 20,
             };
             logfmt::log("recording", &[("dir", &dir.display())]);
-            Some(record::start(opts, header)?)
+            Some(record::start(opts, header).map_err(|e| e.to_string())?)
         }
         None => None,
     };
@@ -271,7 +271,8 @@ fn run(cli: Cli) -> Result<(), String> {
         None => (None, None, None),
     };
     let (link, planner_thread) =
-        planner::spawn(&cfg, catalog.clone(), planner_stop.clone(), frame_log)?;
+        planner::spawn(&cfg, catalog.clone(), planner_stop.clone(), frame_log)
+            .map_err(|e| e.to_string())?;
     let bus = Bus::open(&node_name, &services).map_err(|e| e.to_string())?;
     let ports = Ports::open(bus).map_err(|e| e.to_string())?;
     let (controller, mut stats_link) =
@@ -317,7 +318,8 @@ fn run(cli: Cli) -> Result<(), String> {
                     );
                 }
             }
-            let (tx, writer) = journal::spawn(dir.clone(), journal_stop.clone())?;
+            let (tx, writer) =
+                journal::spawn(dir.clone(), journal_stop.clone()).map_err(|e| e.to_string())?;
             controller = controller.with_journal(tx);
             Some(writer)
         }

@@ -7,8 +7,9 @@
 //! `kind: u8 | len: u32 | payload | crc32: u32` (little-endian; the CRC covers kind, length and
 //! payload).
 
+use super::error::SnapshotError;
 use crate::digest::Fnv;
-use crate::job::{Commands, Inputs, JobRecord, JobRecordError, JobSnapshot};
+use crate::job::{Commands, Inputs, JobRecord, JobSnapshot};
 use crate::plan::Request;
 use herb_ipc::{
     ArmBlocker, ArmStatus, CancelJobRequest, Fault, GripperAction, GripperState, HeightmapFrame,
@@ -394,17 +395,6 @@ pub(super) fn encode_snapshot(requests_before: u64, s: &JobSnapshot) -> Vec<u8> 
         .u64(c.limit_holds)
         .u8(s.stopping as u8);
     e.0
-}
-
-/// Why a snapshot record does not decode.
-#[derive(Debug, thiserror::Error)]
-pub enum SnapshotError {
-    /// The job's record.
-    #[error("the job's record: {0}")]
-    Job(#[from] JobRecordError),
-    /// The rest is too short, or holds a code that names nothing.
-    #[error("truncated, or an unknown code")]
-    Malformed,
 }
 
 /// A snapshot record read back ([`encode_snapshot`]).

@@ -1,6 +1,7 @@
 //! The run's identity, written in every segment's header: this machine's CPU, the catalog's
 //! digest, and the header of a run of a configuration.
 
+use super::RecordError;
 use super::format::RunHeader;
 use crate::digest::Fnv;
 use std::path::Path;
@@ -42,13 +43,17 @@ pub fn catalog_digest(c: &herb_sim::Catalog) -> u64 {
 pub fn header_for(
     cfg: &crate::config::Config,
     catalog: &herb_sim::Catalog,
-) -> Result<RunHeader, String> {
+) -> Result<RunHeader, RecordError> {
     use herb_decide::PolicySpec;
-    let abs = |p: &Path| std::fs::canonicalize(p).map_err(|e| format!("{}: {e}", p.display()));
+    let model = |p: &Path, source| RecordError::Model {
+        path: p.to_path_buf(),
+        source,
+    };
+    let abs = |p: &Path| std::fs::canonicalize(p).map_err(|e| model(p, e));
     let file = |p: &Path| {
         std::fs::read(p)
             .map(|b| crate::digest::of(&b))
-            .map_err(|e| format!("{}: {e}", p.display()))
+            .map_err(|e| model(p, e))
     };
     let mut c = cfg.clone();
     c.record.dir = None;
@@ -77,7 +82,7 @@ pub fn header_for(
         ),
         cpu: cpu_identity(),
         started_unix_s,
-        config_toml: toml::to_string(&c).map_err(|e| format!("configuration: {e}"))?,
+        config_toml: toml::to_string(&c)?,
         catalog: catalog_digest(catalog),
         policy,
         sequence: file(&cfg.models.sequence)?,

@@ -31,16 +31,18 @@
 //!
 //! # Modules
 //!
-//! The data model and its byte layout are in `format`, the run's identity (CPU, digests, the
+//! The data model and its byte layout are in `format`, the errors in `error`, the run's identity (CPU, digests, the
 //! header of a configuration) in `identity`, the loop's end, the writer thread and the
 //! segment files in `writer`, and reading a segment back in `reader`; everything public is
 //! re-exported here.
 
+mod error;
 mod format;
 mod identity;
 mod reader;
 mod writer;
 
+pub use error::{LogError, LogProblem, RecordError, SnapshotError};
 pub use format::{Entry, FORMAT, FRAME_META, LoopRec, MAGIC, OutDigest, RespRec, RunHeader};
 pub use identity::{catalog_digest, cpu_identity, header_for};
 pub use reader::Log;

@@ -1,6 +1,7 @@
 //! Reading a segment file back into a [`Log`]: the header, the snapshot it starts from, the
 //! loop's records in order, and the frames the planner was served with.
 
+use super::error::{LogError, LogProblem};
 use super::format::{
     Dec, Entry, FORMAT, FRAMING, Framed, MAGIC, RunHeader, decode_loop, decode_snapshot,
     frame_from, kind, read_record,
@@ -31,18 +32,18 @@ pub struct Log {
 impl Log {
     /// Reads a segment file. A torn or corrupt tail is not an error: what comes before it is
     /// returned, with [`Log::incomplete`] saying where it ends.
-    pub fn read(path: &Path) -> Result<Self, String> {
-        let data = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let bad = |what: &str| format!("{}: {what}", path.display());
+    pub fn read(path: &Path) -> Result<Self, LogError> {
+        let bad = |problem: LogProblem| LogError {
+            path: path.to_path_buf(),
+            problem,
+        };
+        let data = std::fs::read(path).map_err(|e| bad(LogProblem::Io(e)))?;
         if data.len() < 12 || &data[..8] != MAGIC {
-            return Err(bad("not a HERB run log"));
+            return Err(bad(LogProblem::NotALog));
         }
         let format = u32::from_le_bytes(data[8..12].try_into().unwrap());
         if format != FORMAT {
-            return Err(bad(&format!(
-                "run log format {format}, this herbd reads format {FORMAT} (replay it with the \
-                 herbd that wrote it)"
-            )));
+            return Err(bad(LogProblem::Format(format)));
         }
         let mut at = 12usize;
         let mut header = None;
@@ -80,12 +81,11 @@ impl Log {
             let mut d = Dec(payload);
             match k {
                 kind::HEADER => {
-                    header = Some(RunHeader::decode(payload).ok_or_else(|| bad("bad header"))?);
+                    header = Some(RunHeader::decode(payload).ok_or(bad(LogProblem::Header))?);
                 }
                 kind::SNAPSHOT => {
-                    log.snapshot = Some(
-                        decode_snapshot(payload).map_err(|e| bad(&format!("bad snapshot: {e}")))?,
-                    );
+                    log.snapshot =
+                        Some(decode_snapshot(payload).map_err(|e| bad(LogProblem::Snapshot(e)))?);
                 }
                 kind::GAP => {
                     let n = d.u64().unwrap_or(0);
@@ -95,33 +95,26 @@ impl Log {
                     break;
                 }
                 kind::PLAN_FRAME => {
-                    let (n, has, digest) = (
-                        d.u64().ok_or_else(|| bad("bad plan frame"))?,
-                        d.bool().ok_or_else(|| bad("bad plan frame"))?,
-                        d.u64().ok_or_else(|| bad("bad plan frame"))?,
-                    );
+                    let (n, has, digest) = (|| Some((d.u64()?, d.bool()?, d.u64()?)))()
+                        .ok_or_else(|| bad(LogProblem::PlanFrame))?;
                     log.plan_frames.insert(n, has.then_some(digest));
                 }
                 kind::FRAME_CELLS => {
-                    let digest = d.u64().ok_or_else(|| bad("bad frame"))?;
-                    let f = d
-                        .bytes()
-                        .and_then(frame_from)
-                        .ok_or_else(|| bad("bad frame"))?;
+                    let (digest, f) = (|| Some((d.u64()?, frame_from(d.bytes()?)?)))()
+                        .ok_or_else(|| bad(LogProblem::Frame))?;
                     log.frames.insert(digest, f);
                 }
                 kind::CYCLE..=kind::TICK | kind::ARM => {
-                    let e = decode_loop(k, payload)
-                        .ok_or_else(|| bad(&format!("malformed record of kind {k}")))?;
+                    let e = decode_loop(k, payload).ok_or_else(|| bad(LogProblem::Malformed(k)))?;
                     if let Entry::Cycle(_) = e {
                         cycles += 1;
                     }
                     log.entries.push(e);
                 }
-                other => return Err(bad(&format!("unknown record kind {other}"))),
+                other => return Err(bad(LogProblem::UnknownKind(other))),
             }
         }
-        log.header = header.ok_or_else(|| bad("no header"))?;
+        log.header = header.ok_or_else(|| bad(LogProblem::NoHeader))?;
         Ok(log)
     }
 }

@@ -126,12 +126,17 @@ fn a_recording_reads_back_record_for_record_and_bit_for_bit() {
     );
     // Not a log.
     std::fs::write(&torn, b"hello").unwrap();
-    assert!(Log::read(&torn).unwrap_err().contains("not a HERB run log"));
+    assert!(
+        Log::read(&torn)
+            .unwrap_err()
+            .to_string()
+            .contains("not a HERB run log")
+    );
     // A log of another format: named, with its version, never read as this one.
     let mut old = data.clone();
     old[8..12].copy_from_slice(&1u32.to_le_bytes());
     std::fs::write(&torn, &old).unwrap();
-    let e = Log::read(&torn).unwrap_err();
+    let e = Log::read(&torn).unwrap_err().to_string();
     assert!(
         e.contains(&torn.display().to_string()) && e.contains("run log format 1"),
         "{e}"

@@ -2,6 +2,7 @@
 //! writer thread that encodes and writes the records, and the segment files (rotation between
 //! jobs, deletion of the oldest beyond `keep_mb`).
 
+use super::RecordError;
 use super::format::{
     Enc, FORMAT, LoopRec, MAGIC, RunHeader, encode_loop, encode_snapshot, frame_bytes, kind,
     write_record,
@@ -83,16 +84,18 @@ pub struct Recording {
     /// For the planner thread ([`crate::planner::spawn`]).
     pub frames: crate::planner::FrameLog,
     /// The writer; set `stop` and join it after the loop ended. Returns the segment files.
-    pub writer: std::thread::JoinHandle<Result<Vec<PathBuf>, String>>,
+    pub writer: std::thread::JoinHandle<Result<Vec<PathBuf>, RecordError>>,
     /// Tells the writer to drain, flush, sync and end.
     pub stop: Arc<AtomicBool>,
 }
 
 /// Starts recording into `opts.dir` (created if needed): the first segment is opened (and its
 /// header written) before this returns, so a bad folder is reported at start.
-pub fn start(opts: RecordOptions, header: RunHeader) -> Result<Recording, String> {
-    std::fs::create_dir_all(&opts.dir)
-        .map_err(|e| format!("run log folder {}: {e}", opts.dir.display()))?;
+pub fn start(opts: RecordOptions, header: RunHeader) -> Result<Recording, RecordError> {
+    std::fs::create_dir_all(&opts.dir).map_err(|source| RecordError::Folder {
+        path: opts.dir.clone(),
+        source,
+    })?;
     let (tx, mut rx) = rtrb::RingBuffer::<LoopRec>::new(LOOP_RING);
     let (snaps, mut snaps_rx) = rtrb::RingBuffer::<(u64, JobSnapshot)>::new(2);
     let (ftx, frx) = mpsc::channel::<PlanFrame>();
@@ -102,7 +105,7 @@ pub fn start(opts: RecordOptions, header: RunHeader) -> Result<Recording, String
     let (want_w, stop_w) = (want.clone(), stop.clone());
     let writer = std::thread::Builder::new()
         .name("herbd-record".into())
-        .spawn(move || -> Result<Vec<PathBuf>, String> {
+        .spawn(move || -> Result<Vec<PathBuf>, RecordError> {
             let mut header = header;
             let mut files = vec![seg.path.clone()];
             loop {
@@ -141,7 +144,7 @@ pub fn start(opts: RecordOptions, header: RunHeader) -> Result<Recording, String
                 std::thread::sleep(WRITER_PERIOD);
             }
         })
-        .map_err(|e| format!("cannot start the run-log writer: {e}"))?;
+        .map_err(RecordError::Thread)?;
     let frames: crate::planner::FrameLog = Box::new(move |n, f| {
         let _ = ftx.send((n, f.map(frame_bytes)));
     });
@@ -176,10 +179,12 @@ struct Segment {
 }
 
 impl Segment {
-    fn open(dir: &Path, h: &RunHeader) -> Result<Self, String> {
+    fn open(dir: &Path, h: &RunHeader) -> Result<Self, RecordError> {
         let path = dir.join(format!("RUN-{}-{:04}.log", h.started_unix_s, h.segment));
-        let f =
-            std::fs::File::create(&path).map_err(|e| format!("run log {}: {e}", path.display()))?;
+        let f = match std::fs::File::create(&path) {
+            Ok(f) => f,
+            Err(source) => return Err(RecordError::Segment { path, source }),
+        };
         let mut s = Self {
             path,
             w: BufWriter::with_capacity(1 << 20, f),
@@ -192,24 +197,27 @@ impl Segment {
         Ok(s)
     }
 
-    fn err(&self, e: std::io::Error) -> String {
-        format!("run log {}: {e}", self.path.display())
+    fn err(&self, source: std::io::Error) -> RecordError {
+        RecordError::Segment {
+            path: self.path.clone(),
+            source,
+        }
     }
 
-    fn raw(&mut self, b: &[u8]) -> Result<(), String> {
+    fn raw(&mut self, b: &[u8]) -> Result<(), RecordError> {
         self.w.write_all(b).map_err(|e| self.err(e))?;
         self.bytes += b.len() as u64;
         Ok(())
     }
 
-    fn write(&mut self, k: u8, p: &[u8]) -> Result<(), String> {
+    fn write(&mut self, k: u8, p: &[u8]) -> Result<(), RecordError> {
         let n = write_record(&mut self.w, k, p).map_err(|e| self.err(e))?;
         self.bytes += n;
         Ok(())
     }
 
     /// The frame request `n` was served with; its cells the first time in this segment.
-    fn plan_frame(&mut self, n: u64, f: Option<&[u8]>) -> Result<(), String> {
+    fn plan_frame(&mut self, n: u64, f: Option<&[u8]>) -> Result<(), RecordError> {
         let digest = f.map_or(0, crate::digest::of);
         if let Some(b) = f
             && self.seen.insert(digest)
@@ -223,11 +231,11 @@ impl Segment {
         self.write(kind::PLAN_FRAME, &e.0)
     }
 
-    fn flush(&mut self) -> Result<(), String> {
+    fn flush(&mut self) -> Result<(), RecordError> {
         self.w.flush().map_err(|e| self.err(e))
     }
 
-    fn close(&mut self) -> Result<(), String> {
+    fn close(&mut self) -> Result<(), RecordError> {
         self.flush()?;
         self.w.get_ref().sync_all().map_err(|e| self.err(e))
     }
