@@ -15,6 +15,23 @@ use crate::project::{Depth, Intrinsics};
 use herb_core::frames::BOX_HEIGHT;
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
+/// What the fit did not find in the image.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum FitError {
+    /// Fewer than 1000 pixels with a depth in range.
+    #[error("{0} valid depth pixels: too few")]
+    TooFewPixels(usize),
+    /// No plane through three of the pixels.
+    #[error("no plane found")]
+    NoPlane,
+    /// No level with a populated level `BOX_HEIGHT` below it.
+    #[error("no rim found BOX_HEIGHT above a floor: is the empty box's rim in view?")]
+    NoRim,
+    /// Fewer than 100 points at the rim's level.
+    #[error("{0} rim points: too few")]
+    TooFewRimPoints(usize),
+}
+
 /// Points within this distance of a plane are its inliers (m).
 const PLANE_TOL_M: f64 = 0.003;
 /// Height bins for the level search (m).
@@ -63,10 +80,10 @@ pub fn fit_pose(
     min_m: f64,
     max_m: f64,
     x_hint: Vector3<f64>,
-) -> Result<Isometry3<f64>, String> {
+) -> Result<Isometry3<f64>, FitError> {
     let pts = points(depth, intr, min_m, max_m);
     if pts.len() < 1000 {
-        return Err(format!("{} valid depth pixels: too few", pts.len()));
+        return Err(FitError::TooFewPixels(pts.len()));
     }
     // 1. Dominant plane: RANSAC on a deterministic subsample.
     let sample: Vec<&Vector3<f64>> = pts.iter().step_by((pts.len() / 4000).max(1)).collect();
@@ -97,7 +114,7 @@ pub fn fit_pose(
             best = Some((count, n, *a));
         }
     }
-    let (_, n0, p0) = best.ok_or("no plane found")?;
+    let (_, n0, p0) = best.ok_or(FitError::NoPlane)?;
     let inliers: Vec<&Vector3<f64>> = pts
         .iter()
         .filter(|p| (**p - p0).dot(&n0).abs() < PLANE_TOL_M)
@@ -132,7 +149,7 @@ pub fn fit_pose(
     let rim_bin = (0..bins as isize)
         .rev()
         .find(|&i| populated(i) >= min_count && populated(i - box_bins) >= min_count)
-        .ok_or("no rim found BOX_HEIGHT above a floor: is the empty box's rim in view?")?;
+        .ok_or(FitError::NoRim)?;
     let rim_h = level(rim_bin as usize);
     // Refine the rim level: mean height of the points near it.
     let near: Vec<f64> = heights
@@ -150,7 +167,7 @@ pub fn fit_pose(
         .map(|(p, h)| p - n * (h - floor_h))
         .collect();
     if rim.len() < 100 {
-        return Err(format!("{} rim points: too few", rim.len()));
+        return Err(FitError::TooFewRimPoints(rim.len()));
     }
     let c = rim.iter().fold(Vector3::zeros(), |a, p| a + p) / rim.len() as f64;
     let mut cov = Matrix3::zeros();

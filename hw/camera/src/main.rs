@@ -102,10 +102,10 @@ fn calibrate(
                     return Err(format!("{} of {frames} images in {timeout_s} s (camera info: {})", depths.len(), intr.is_some()));
                 }
                 m = next(&mut infos) => if let Next::Msg(ci) = m {
-                    intr = Some(Intrinsics::from_k(ci.width, ci.height, &ci.K)?);
+                    intr = Some(Intrinsics::from_k(ci.width, ci.height, &ci.K).map_err(|e| e.to_string())?);
                 },
                 m = next(&mut images) => if let (Next::Msg(img), Some(i)) = (m, intr) {
-                    let d = Depth::from_image(&img.encoding, img.is_bigendian, img.width, img.height, img.step, &img.data, &i)?;
+                    let d = Depth::from_image(&img.encoding, img.is_bigendian, img.width, img.height, img.step, &img.data, &i).map_err(|e| e.to_string())?;
                     depths.push((0..(i.width * i.height) as usize).map(|k| d.depth_m(k).unwrap_or(f64::NAN)).collect());
                 },
             }
@@ -131,9 +131,11 @@ fn calibrate(
         4 * intr.width,
         &median,
         &intr,
-    )?;
+    )
+    .map_err(|e| e.to_string())?;
     let pose =
-        herb_camera::calibrate::fit_pose(&depth, &intr, cfg.depth.min_m, cfg.depth.max_m, hint)?;
+        herb_camera::calibrate::fit_pose(&depth, &intr, cfg.depth.min_m, cfg.depth.max_m, hint)
+            .map_err(|e| e.to_string())?;
     let (t, q) = (pose.translation.vector, pose.rotation.coords);
     Ok(format!(
         "# herb-camera calibrate: {frames} images of the empty box\n[pose]\ntranslation = [{:.5}, {:.5}, {:.5}]\nrotation = [{:.6}, {:.6}, {:.6}, {:.6}]\n",
@@ -312,7 +314,7 @@ async fn session(
                 let checked = intr
                     .ok_or_else(|| "no camera info yet".to_string())
                     .and_then(|i| {
-                        let d = Depth::from_image(&img.encoding, img.is_bigendian, img.width, img.height, img.step, &img.data, &i)?;
+                        let d = Depth::from_image(&img.encoding, img.is_bigendian, img.width, img.height, img.step, &img.data, &i).map_err(|e| e.to_string())?;
                         let stamp = herb_ros1::time::to_monotonic(&img.header.stamp, monotonic_ns(), SystemTime::now(), max_age_ns).map_err(|e| e.to_string())?;
                         Ok((i, d, stamp))
                     });

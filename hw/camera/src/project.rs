@@ -12,6 +12,68 @@ use herb_core::frames::{BOX_HALF_X, BOX_HALF_Y};
 use herb_core::heightmap::GridSpec;
 use nalgebra::{Isometry3, Point3};
 
+/// What is unusable in a camera info or a depth image.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum InputError {
+    /// K does not have nine values.
+    #[error("K has {0} values, expected 9")]
+    KLength(usize),
+    /// An image size of zero or more than 4096 pixels.
+    #[error("image size {width} x {height}")]
+    ImageSize {
+        /// Width (pixels).
+        width: u32,
+        /// Height (pixels).
+        height: u32,
+    },
+    /// Focal lengths not positive, or a value not finite.
+    #[error("K: fx {fx} fy {fy} cx {cx} cy {cy} unusable")]
+    UnusableK {
+        /// Focal length along u.
+        fx: f64,
+        /// Focal length along v.
+        fy: f64,
+        /// Principal point u.
+        cx: f64,
+        /// Principal point v.
+        cy: f64,
+    },
+    /// An encoding other than 16UC1 (or mono16) and 32FC1.
+    #[error("encoding {0:?}: expected 16UC1 or 32FC1")]
+    Encoding(String),
+    /// Big-endian pixels.
+    #[error("big-endian depth")]
+    BigEndian,
+    /// An image whose size is not the camera info's.
+    #[error("image {width} x {height}, camera info {info_width} x {info_height}")]
+    SizeMismatch {
+        /// The image's width.
+        width: u32,
+        /// The image's height.
+        height: u32,
+        /// The camera info's width.
+        info_width: u32,
+        /// The camera info's height.
+        info_height: u32,
+    },
+    /// A row step other than the width's pixels.
+    #[error("row step {step}, expected {expected}")]
+    RowStep {
+        /// The image's row step (bytes).
+        step: u32,
+        /// Width times bytes per pixel.
+        expected: usize,
+    },
+    /// Data of another length than the rows.
+    #[error("{len} bytes of data, expected {expected}")]
+    DataLength {
+        /// The data's length.
+        len: usize,
+        /// Step times height.
+        expected: usize,
+    },
+}
+
 /// Pinhole intrinsics of the depth image (from `sensor_msgs/CameraInfo`'s K).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Intrinsics {
@@ -31,9 +93,9 @@ pub struct Intrinsics {
 
 impl Intrinsics {
     /// From a CameraInfo's size and row-major K; `Err` names what is unusable.
-    pub fn from_k(width: u32, height: u32, k: &[f64]) -> Result<Self, String> {
+    pub fn from_k(width: u32, height: u32, k: &[f64]) -> Result<Self, InputError> {
         if k.len() != 9 {
-            return Err(format!("K has {} values, expected 9", k.len()));
+            return Err(InputError::KLength(k.len()));
         }
         let i = Self {
             width,
@@ -44,15 +106,17 @@ impl Intrinsics {
             cy: k[5],
         };
         if width == 0 || height == 0 || width > 4096 || height > 4096 {
-            return Err(format!("image size {width} x {height}"));
+            return Err(InputError::ImageSize { width, height });
         }
         let usable =
             [i.fx, i.fy, i.cx, i.cy].iter().all(|v| v.is_finite()) && i.fx > 0.0 && i.fy > 0.0;
         if !usable {
-            return Err(format!(
-                "K: fx {} fy {} cx {} cy {} unusable",
-                i.fx, i.fy, i.cx, i.cy
-            ));
+            return Err(InputError::UnusableK {
+                fx: i.fx,
+                fy: i.fy,
+                cx: i.cx,
+                cy: i.cy,
+            });
         }
         Ok(i)
     }
@@ -79,33 +143,34 @@ impl<'a> Depth<'a> {
         step: u32,
         data: &'a [u8],
         intr: &Intrinsics,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, InputError> {
         let bytes = match encoding {
             "16UC1" | "mono16" => 2,
             "32FC1" => 4,
-            e => return Err(format!("encoding {e:?}: expected 16UC1 or 32FC1")),
+            e => return Err(InputError::Encoding(e.to_owned())),
         };
         if is_bigendian != 0 {
-            return Err("big-endian depth".into());
+            return Err(InputError::BigEndian);
         }
         if (width, height) != (intr.width, intr.height) {
-            return Err(format!(
-                "image {width} x {height}, camera info {} x {}",
-                intr.width, intr.height
-            ));
+            return Err(InputError::SizeMismatch {
+                width,
+                height,
+                info_width: intr.width,
+                info_height: intr.height,
+            });
         }
         if step as usize != width as usize * bytes {
-            return Err(format!(
-                "row step {step}, expected {}",
-                width as usize * bytes
-            ));
+            return Err(InputError::RowStep {
+                step,
+                expected: width as usize * bytes,
+            });
         }
         if data.len() != step as usize * height as usize {
-            return Err(format!(
-                "{} bytes of data, expected {}",
-                data.len(),
-                step as usize * height as usize
-            ));
+            return Err(InputError::DataLength {
+                len: data.len(),
+                expected: step as usize * height as usize,
+            });
         }
         Ok(if bytes == 2 {
             Self::Millimetres(data)
