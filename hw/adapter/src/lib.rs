@@ -15,10 +15,11 @@ use herb_ipc::{
 pub mod guard;
 
 /// The end of an adapter process: its final summary (JSON) on stdout and, if asked, in the
-/// `report` file; or its error on stderr. Exit code 0, or 2 on an error or an unwritable report.
-pub fn finish(
+/// `report` file; or its error (any error the process ends with) on stderr. Exit code 0, or 2
+/// on an error or an unwritable report.
+pub fn finish<E: std::fmt::Display>(
     name: &str,
-    result: Result<serde_json::Value, String>,
+    result: Result<serde_json::Value, E>,
     report: Option<&std::path::Path>,
 ) -> std::process::ExitCode {
     use std::process::ExitCode;
@@ -41,12 +42,12 @@ pub fn finish(
 }
 
 /// The result of an adapter whose hardware side (a ROS thread, a world thread) ended with
-/// `side`: the `summary`, or the side's error with the summary printed first (so the figures of
-/// a run that failed are not lost).
-pub fn summary_or_error(
+/// `side`: the `summary`, or the side's error (whatever its type) with the summary printed
+/// first (so the figures of a run that failed are not lost).
+pub fn summary_or_error<E>(
     summary: serde_json::Value,
-    side: Result<(), String>,
-) -> Result<serde_json::Value, String> {
+    side: Result<(), E>,
+) -> Result<serde_json::Value, E> {
     match side {
         Ok(()) => Ok(summary),
         Err(e) => {
