@@ -4,7 +4,7 @@
 
 use herb_decide::PolicySpec;
 use herb_robot::cell::CellConfig;
-pub use herb_robot::config_file::ConfigFile;
+pub use herb_robot::config_file::{ConfigError, ConfigFile, Invalid};
 use herb_robot::motion::JointLimits;
 pub use herb_robot::rt::RtConfig;
 use serde::{Deserialize, Serialize};
@@ -255,41 +255,38 @@ pub fn secs_to_ns(s: f64) -> u64 {
 }
 
 impl ConfigFile for Config {
-    fn validate(&self) -> Result<(), String> {
+    fn validate(&self) -> Result<(), Invalid> {
         herb_ipc::Services::new(&self.ipc_prefix).map_err(|e| e.to_string())?;
         let l = &self.loop_;
         if !(l.rate_hz.is_finite() && (10.0..=10_000.0).contains(&l.rate_hz)) {
-            return Err(format!("loop.rate_hz {} outside 10..=10000", l.rate_hz));
+            return Err(format!("loop.rate_hz {} outside 10..=10000", l.rate_hz).into());
         }
         if l.spin_us as f64 * 1e-6 >= 1.0 / l.rate_hz {
-            return Err(format!(
-                "loop.spin_us {} is not shorter than the period",
-                l.spin_us
-            ));
+            return Err(
+                format!("loop.spin_us {} is not shorter than the period", l.spin_us).into(),
+            );
         }
         if !(l.report_interval_s.is_finite() && l.report_interval_s >= 0.1) {
-            return Err(format!(
-                "loop.report_interval_s {} below 0.1",
-                l.report_interval_s
-            ));
+            return Err(format!("loop.report_interval_s {} below 0.1", l.report_interval_s).into());
         }
         if !(l.max_trajectory_s.is_finite() && (1.0..=600.0).contains(&l.max_trajectory_s)) {
             return Err(format!(
                 "loop.max_trajectory_s {} outside 1..=600",
                 l.max_trajectory_s
-            ));
+            )
+            .into());
         }
         if !(0..=99).contains(&self.rt.fifo_priority) {
-            return Err(format!(
-                "rt.fifo_priority {} outside 0..=99",
-                self.rt.fifo_priority
-            ));
+            return Err(
+                format!("rt.fifo_priority {} outside 0..=99", self.rt.fifo_priority).into(),
+            );
         }
         if self.recovery.grasp_retries > 5 {
             return Err(format!(
                 "recovery.grasp_retries {} outside 0..=5",
                 self.recovery.grasp_retries
-            ));
+            )
+            .into());
         }
         let t = &self.timeouts;
         for (name, v) in [
@@ -301,7 +298,7 @@ impl ConfigFile for Config {
             ("fresh_heightmap_s", t.fresh_heightmap_s),
         ] {
             if !(v.is_finite() && (0.001..=600.0).contains(&v)) {
-                return Err(format!("timeouts.{name} {v} outside 0.001..=600 s"));
+                return Err(format!("timeouts.{name} {v} outside 0.001..=600 s").into());
             }
         }
         if !(self.models.clearance_m.is_finite() && (0.0..=0.05).contains(&self.models.clearance_m))
@@ -309,19 +306,20 @@ impl ConfigFile for Config {
             return Err(format!(
                 "models.clearance_m {} outside 0..=0.05",
                 self.models.clearance_m
-            ));
+            )
+            .into());
         }
         let r = &self.record;
         if r.segment_mb == 0 || r.keep_mb < r.segment_mb {
             return Err(format!(
                 "record.segment_mb {} must be at least 1 and at most record.keep_mb {}",
                 r.segment_mb, r.keep_mb
-            ));
+            )
+            .into());
         }
         self.cell.validate()?;
-        self.limits
-            .validate_baxter_left()
-            .map_err(|e| format!("limits: {e}"))
+        self.limits.validate_baxter_left()?;
+        Ok(())
     }
 }
 
@@ -362,8 +360,11 @@ mod tests {
         assert_eq!(c.loop_.rate_hz, 500.0);
         assert_eq!(c.ipc_prefix, "t1");
         let e = Config::from_toml("[loop]\nrate_hz = 0.0\n", "cfg.toml").unwrap_err();
+        let e = e.to_string();
         assert!(e.contains("cfg.toml") && e.contains("rate_hz"), "{e}");
-        let e = Config::from_toml("[loop]\nrate = 5\n", "x").unwrap_err();
+        let e = Config::from_toml("[loop]\nrate = 5\n", "x")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("unknown field"), "{e}");
         assert!(Config::from_toml("[limits]\nlower = [0.0]\n", "x").is_err());
         let mut c = Config::default();
@@ -371,14 +372,20 @@ mod tests {
         assert!(
             c.validate()
                 .unwrap_err()
+                .to_string()
                 .contains("leaves the arm's limits")
         );
         c = Config::default();
         c.limits.jerk[4] = f64::NAN;
-        assert!(c.validate().unwrap_err().contains("jerk"));
+        assert!(c.validate().unwrap_err().to_string().contains("jerk"));
         c = Config::default();
         c.timeouts.joint_state_s = -1.0;
-        assert!(c.validate().unwrap_err().contains("joint_state_s"));
+        assert!(
+            c.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("joint_state_s")
+        );
         c = Config::default();
         c.ipc_prefix = "/x".into();
         assert!(c.validate().is_err());
@@ -389,12 +396,16 @@ mod tests {
             Some("/var/lib/herb".into())
         );
         assert_eq!(c.journal.folder(None), None);
-        let e = Config::from_toml("[journal]\non_restart = \"retry\"\n", "x").unwrap_err();
+        let e = Config::from_toml("[journal]\non_restart = \"retry\"\n", "x")
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("on_restart") || e.contains("unknown variant"),
             "{e}"
         );
-        let e = Config::from_toml("[models]\npolicy = \"\"\n", "x").unwrap_err();
+        let e = Config::from_toml("[models]\npolicy = \"\"\n", "x")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("policy: empty"), "{e}");
         let c = Config::from_toml("[models]\npolicy = \"m/p.onnx\"\n", "x").unwrap();
         assert_eq!(c.models.policy, PolicySpec::Onnx("m/p.onnx".into()));

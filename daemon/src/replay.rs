@@ -85,7 +85,7 @@ pub enum ReplayError {
     Config(toml::de::Error),
     /// The recorded configuration does not validate (with this build's rules).
     #[error("the recorded configuration: {0}")]
-    Invalid(String),
+    Invalid(herb_robot::config_file::Invalid),
     /// The catalog cannot be built.
     #[error("catalog: {0}")]
     Catalog(herb_sim::SimError),

@@ -45,25 +45,33 @@ impl Default for CellConfig {
     }
 }
 
+/// A `[cell]` table that cannot be used ([`CellConfig::validate`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CellError {
+    /// A pose with a number that is not finite.
+    #[error("cell: poses must be finite")]
+    NotFinite,
+    /// `grasp_depth` out of range (m).
+    #[error("cell.grasp_depth {0} outside 0..=0.1 m")]
+    GraspDepth(f64),
+    /// `transit_clearance` out of range (m).
+    #[error("cell.transit_clearance {0} outside 0..=0.3 m")]
+    TransitClearance(f64),
+}
+
 impl CellConfig {
     /// Checks that every number is finite and the depths are in range.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), CellError> {
         let yaws = [self.box_yaw, self.pick_yaw];
         let mut all = self.box_origin.iter().chain(&self.pick_origin).chain(&yaws);
         if all.any(|v| !v.is_finite()) {
-            return Err("cell: poses must be finite".into());
+            return Err(CellError::NotFinite);
         }
         if !(0.0..=0.1).contains(&self.grasp_depth) {
-            return Err(format!(
-                "cell.grasp_depth {} outside 0..=0.1 m",
-                self.grasp_depth
-            ));
+            return Err(CellError::GraspDepth(self.grasp_depth));
         }
         if !(0.0..=0.3).contains(&self.transit_clearance) {
-            return Err(format!(
-                "cell.transit_clearance {} outside 0..=0.3 m",
-                self.transit_clearance
-            ));
+            return Err(CellError::TransitClearance(self.transit_clearance));
         }
         Ok(())
     }

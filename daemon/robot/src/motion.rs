@@ -55,29 +55,32 @@ impl JointLimits {
 
     /// Checks that every limit is finite, positive where it must be, and that each position
     /// range is non-empty and inside `hard` (e.g. the URDF limits).
-    pub fn validate(&self, hard_lower: &[f64; DOF], hard_upper: &[f64; DOF]) -> Result<(), String> {
-        for i in 0..DOF {
-            let (lo, hi) = (self.lower[i], self.upper[i]);
+    pub fn validate(
+        &self,
+        hard_lower: &[f64; DOF],
+        hard_upper: &[f64; DOF],
+    ) -> Result<(), LimitsError> {
+        for joint in 0..DOF {
+            let (lo, hi) = (self.lower[joint], self.upper[joint]);
             if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-                return Err(format!(
-                    "joint {i}: position range [{lo}, {hi}] is empty or not finite"
-                ));
+                return Err(LimitsError::EmptyRange { joint, lo, hi });
             }
-            if lo < hard_lower[i] || hi > hard_upper[i] {
-                return Err(format!(
-                    "joint {i}: position range [{lo}, {hi}] leaves the arm's limits [{}, {}]",
-                    hard_lower[i], hard_upper[i]
-                ));
+            if lo < hard_lower[joint] || hi > hard_upper[joint] {
+                return Err(LimitsError::OutsideArm {
+                    joint,
+                    lo,
+                    hi,
+                    arm_lo: hard_lower[joint],
+                    arm_hi: hard_upper[joint],
+                });
             }
-            for (name, v) in [
-                ("velocity", self.velocity[i]),
-                ("acceleration", self.acceleration[i]),
-                ("jerk", self.jerk[i]),
+            for (what, value) in [
+                ("velocity", self.velocity[joint]),
+                ("acceleration", self.acceleration[joint]),
+                ("jerk", self.jerk[joint]),
             ] {
-                if !(v.is_finite() && v > 0.0) {
-                    return Err(format!(
-                        "joint {i}: {name} limit {v} must be finite and > 0"
-                    ));
+                if !(value.is_finite() && value > 0.0) {
+                    return Err(LimitsError::NotPositive { joint, what, value });
                 }
             }
         }
@@ -85,7 +88,7 @@ impl JointLimits {
     }
 
     /// [`Self::validate`] against the URDF limits of Baxter's left arm.
-    pub fn validate_baxter_left(&self) -> Result<(), String> {
+    pub fn validate_baxter_left(&self) -> Result<(), LimitsError> {
         let j = crate::kinematics::LEFT_ARM;
         self.validate(&j.map(|s| s.lower), &j.map(|s| s.upper))
     }
@@ -94,6 +97,47 @@ impl JointLimits {
     pub fn contains(&self, q: &[f64; DOF]) -> bool {
         (0..DOF).all(|i| q[i] >= self.lower[i] && q[i] <= self.upper[i])
     }
+}
+
+/// Joint limits that cannot be used ([`JointLimits::validate`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LimitsError {
+    /// An empty or non-finite position range.
+    #[error("joint {joint}: position range [{lo}, {hi}] is empty or not finite")]
+    EmptyRange {
+        /// Joint index.
+        joint: usize,
+        /// Its lower limit (rad).
+        lo: f64,
+        /// Its upper limit (rad).
+        hi: f64,
+    },
+    /// A position range outside the arm's own.
+    #[error(
+        "joint {joint}: position range [{lo}, {hi}] leaves the arm's limits [{arm_lo}, {arm_hi}]"
+    )]
+    OutsideArm {
+        /// Joint index.
+        joint: usize,
+        /// Its lower limit (rad).
+        lo: f64,
+        /// Its upper limit (rad).
+        hi: f64,
+        /// The arm's lower limit (rad).
+        arm_lo: f64,
+        /// The arm's upper limit (rad).
+        arm_hi: f64,
+    },
+    /// A speed, acceleration or jerk limit that is not a positive number.
+    #[error("joint {joint}: {what} limit {value} must be finite and > 0")]
+    NotPositive {
+        /// Joint index.
+        joint: usize,
+        /// `velocity`, `acceleration` or `jerk`.
+        what: &'static str,
+        /// The limit.
+        value: f64,
+    },
 }
 
 /// One sample: position, velocity, acceleration.

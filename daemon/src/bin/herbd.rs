@@ -59,7 +59,7 @@ struct Cli {
 
 fn config(cli: &Cli) -> Result<Config, String> {
     let mut c = match &cli.config {
-        Some(p) => Config::load(p)?,
+        Some(p) => Config::load(p).map_err(|e| e.to_string())?,
         None => Config::default(),
     };
     if let Some(v) = cli.rate_hz {

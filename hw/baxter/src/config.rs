@@ -2,7 +2,7 @@
 //! command is checked against, so the adapter and herbd agree) and its own file (the ROS
 //! master, rates, modes, topic names, gripper settings). Unknown keys are errors, as in herbd.
 
-use herb_robot::config_file::{ConfigFile, in_range};
+use herb_robot::config_file::{ConfigFile, Invalid, in_range};
 use herb_robot::motion::JointLimits;
 use serde::Deserialize;
 
@@ -26,11 +26,9 @@ impl Default for HerbdView {
 }
 
 impl ConfigFile for HerbdView {
-    fn validate(&self) -> Result<(), String> {
+    fn validate(&self) -> Result<(), Invalid> {
         herb_ipc::Services::new(&self.ipc_prefix).map_err(|e| e.to_string())?;
-        self.limits
-            .validate_baxter_left()
-            .map_err(|e| format!("limits: {e}"))
+        Ok(self.limits.validate_baxter_left()?)
     }
 }
 
@@ -214,21 +212,21 @@ impl Default for Topics {
 }
 
 impl ConfigFile for BaxterConfig {
-    fn validate(&self) -> Result<(), String> {
+    fn validate(&self) -> Result<(), Invalid> {
         let r = &self.ros;
         herb_ros1::check_master_uri("ros.master_uri", &r.master_uri).map_err(|e| e.to_string())?;
         herb_ros1::check_name("ros.node_name", &r.node_name).map_err(|e| e.to_string())?;
         in_range("ros.master_check_s", r.master_check_s, 0.01, 10.0)?;
         if !r.ip.is_empty() && r.ip.parse::<std::net::Ipv4Addr>().is_err() {
-            return Err(format!("ros.ip {:?} is not an IPv4 address", r.ip));
+            return Err(format!("ros.ip {:?} is not an IPv4 address", r.ip).into());
         }
         if r.hostname.chars().any(|c| c.is_whitespace() || c == '/') {
-            return Err(format!("ros.hostname {:?} is not a host name", r.hostname));
+            return Err(format!("ros.hostname {:?} is not a host name", r.hostname).into());
         }
         let a = &self.arm;
         for (i, j) in a.joints.iter().enumerate() {
             if j.is_empty() || a.joints[..i].contains(j) {
-                return Err(format!("arm.joints: {j:?} is empty or repeated"));
+                return Err(format!("arm.joints: {j:?} is empty or repeated").into());
             }
         }
         in_range("arm.command_rate_hz", a.command_rate_hz, 1.0, 800.0)?;
@@ -245,7 +243,8 @@ impl ConfigFile for BaxterConfig {
             return Err(format!(
                 "gripper: closed_position {} < closed_below {} <= open_position {} must hold",
                 g.closed_position, g.closed_below, g.open_position
-            ));
+            )
+            .into());
         }
         in_range("gripper.resend_s", g.resend_s, 0.01, 10.0)?;
         in_range(
@@ -279,22 +278,31 @@ mod tests {
     fn the_defaults_are_valid_and_bad_values_are_named() {
         BaxterConfig::default().validate().unwrap();
         HerbdView::default().validate().unwrap();
-        let e = BaxterConfig::from_toml("[arm]\ncommand_rate_hz = 900.0\n", "t.toml").unwrap_err();
+        let e = BaxterConfig::from_toml("[arm]\ncommand_rate_hz = 900.0\n", "t.toml")
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("t.toml") && e.contains("arm.command_rate_hz"),
             "{e}"
         );
-        let e = BaxterConfig::from_toml("[arm]\nbogus = 1\n", "t.toml").unwrap_err();
+        let e = BaxterConfig::from_toml("[arm]\nbogus = 1\n", "t.toml")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("bogus"), "{e}");
-        let e = BaxterConfig::from_toml("[ros]\nmaster_uri = \"localhost\"\n", "t").unwrap_err();
+        let e = BaxterConfig::from_toml("[ros]\nmaster_uri = \"localhost\"\n", "t")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("ros.master_uri"), "{e}");
         let e = BaxterConfig::from_toml(
             "[gripper]\nclosed_below = 100.0\nopen_position = 50.0\n",
             "t",
         )
-        .unwrap_err();
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("closed_below"), "{e}");
-        let e = BaxterConfig::from_toml("[arm]\nmode = \"torque\"\n", "t").unwrap_err();
+        let e = BaxterConfig::from_toml("[arm]\nmode = \"torque\"\n", "t")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("torque"), "{e}");
         let c = BaxterConfig::from_toml("[arm]\nmode = \"raw_position\"\n", "t").unwrap();
         assert_eq!(c.arm.mode.code(), 4);

@@ -45,16 +45,17 @@ struct Cli {
 }
 
 fn run(cli: Cli) -> Result<serde_json::Value, String> {
-    let mut herbd = HerbdView::load_or_default(cli.config.as_deref())?;
+    let mut herbd = HerbdView::load_or_default(cli.config.as_deref()).map_err(|e| e.to_string())?;
     if let Some(p) = &cli.prefix {
         herbd.ipc_prefix = p.clone();
     }
-    herbd.validate()?;
-    let mut cfg = BaxterConfig::load_or_default(cli.baxter.as_deref())?;
+    herbd.validate().map_err(|e| e.to_string())?;
+    let mut cfg =
+        BaxterConfig::load_or_default(cli.baxter.as_deref()).map_err(|e| e.to_string())?;
     if let Some(u) = &cli.master_uri {
         cfg.ros.master_uri = u.clone();
     }
-    cfg.validate()?;
+    cfg.validate().map_err(|e| e.to_string())?;
     if !(cli.rate_hz.is_finite() && (10.0..=10_000.0).contains(&cli.rate_hz)) {
         return Err(format!("--rate-hz {} outside 10..=10000", cli.rate_hz));
     }

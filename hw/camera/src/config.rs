@@ -3,7 +3,7 @@
 //! key. The IPC prefix comes from herbd's file (`--config`), as for every adapter.
 
 use crate::project::Params;
-use herb_robot::config_file::{ConfigFile, in_range};
+use herb_robot::config_file::{ConfigFile, Invalid, in_range};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use serde::Deserialize;
 
@@ -155,7 +155,7 @@ impl CameraConfig {
 }
 
 impl ConfigFile for CameraConfig {
-    fn validate(&self) -> Result<(), String> {
+    fn validate(&self) -> Result<(), Invalid> {
         herb_ros1::check_master_uri("ros.master_uri", &self.ros.master_uri)
             .map_err(|e| e.to_string())?;
         for (name, topic) in [
@@ -173,7 +173,8 @@ impl ConfigFile for CameraConfig {
         if !(norm.is_finite() && (0.5..=2.0).contains(&norm)) {
             return Err(format!(
                 "pose.rotation = {q:?}: not a quaternion [x, y, z, w] (norm {norm})"
-            ));
+            )
+            .into());
         }
         in_range("depth.min_m", self.depth.min_m, 0.01, 10.0)?;
         in_range("depth.max_m", self.depth.max_m, self.depth.min_m, 10.0)?;
@@ -228,7 +229,7 @@ mod tests {
             ("[pose]\nbogus = 1\n", "bogus"),
         ] {
             let e = CameraConfig::from_toml(text, "c.toml").unwrap_err();
-            assert!(e.contains(key), "{text}: {e}");
+            assert!(e.to_string().contains(key), "{text}: {e}");
         }
     }
 }

@@ -159,10 +159,10 @@ impl Default for HerbdPrefix {
 }
 
 impl ConfigFile for HerbdPrefix {
-    fn validate(&self) -> Result<(), String> {
+    fn validate(&self) -> Result<(), herb_robot::config_file::Invalid> {
         Services::new(&self.ipc_prefix)
             .map(|_| ())
-            .map_err(|e| e.to_string())
+            .map_err(|e| e.to_string().into())
     }
 }
 
@@ -358,16 +358,18 @@ async fn session(
 }
 
 fn run(cli: Cli) -> Result<serde_json::Value, String> {
-    let mut herbd = HerbdPrefix::load_or_default(cli.config.as_deref())?;
+    let mut herbd =
+        HerbdPrefix::load_or_default(cli.config.as_deref()).map_err(|e| e.to_string())?;
     if let Some(p) = &cli.prefix {
         herbd.ipc_prefix = p.clone();
     }
-    herbd.validate()?;
-    let mut cfg = CameraConfig::load_or_default(cli.camera.as_deref())?;
+    herbd.validate().map_err(|e| e.to_string())?;
+    let mut cfg =
+        CameraConfig::load_or_default(cli.camera.as_deref()).map_err(|e| e.to_string())?;
     if let Some(u) = &cli.master_uri {
         cfg.ros.master_uri = u.clone();
     }
-    cfg.validate()?;
+    cfg.validate().map_err(|e| e.to_string())?;
     let spec = GridSpec::for_box(cfg.heightmap.cell_m).map_err(|e| e.to_string())?;
     let services = Services::new(&herbd.ipc_prefix).map_err(|e| e.to_string())?;
     let stop = Arc::new(AtomicBool::new(false));
@@ -459,7 +461,8 @@ fn main() -> ExitCode {
                 }
                 c
             })
-            .and_then(|c| c.validate().map(|()| c));
+            .and_then(|c| c.validate().map(|()| c).map_err(Into::into))
+            .map_err(|e| e.to_string());
         return match cfg.and_then(|c| calibrate(&c, frames, &x_hint, timeout_s)) {
             Ok(toml) => {
                 print!("{toml}");

@@ -6,6 +6,7 @@
 
 use herb_robot::cell::CellConfig;
 pub use herb_robot::config_file::ConfigFile;
+use herb_robot::config_file::Invalid;
 use herb_robot::motion::JointLimits;
 use serde::Deserialize;
 use std::path::PathBuf;
@@ -46,11 +47,9 @@ impl Default for LoopbackConfig {
 
 /// Checks the prefix, the cell and the limits (herbd's checks of the same tables).
 impl ConfigFile for LoopbackConfig {
-    fn validate(&self) -> Result<(), String> {
+    fn validate(&self) -> Result<(), Invalid> {
         herb_ipc::Services::new(&self.ipc_prefix).map_err(|e| e.to_string())?;
         self.cell.validate()?;
-        self.limits
-            .validate_baxter_left()
-            .map_err(|e| format!("limits: {e}"))
+        Ok(self.limits.validate_baxter_left()?)
     }
 }

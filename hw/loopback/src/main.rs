@@ -359,11 +359,12 @@ fn publish_frame(camera: &CameraPort, seq: u64, r: &Released) {
 }
 
 fn run(cli: Cli) -> Result<serde_json::Value, String> {
-    let mut cfg = LoopbackConfig::load_or_default(cli.config.as_deref())?;
+    let mut cfg =
+        LoopbackConfig::load_or_default(cli.config.as_deref()).map_err(|e| e.to_string())?;
     if let Some(p) = &cli.prefix {
         cfg.ipc_prefix = p.clone();
     }
-    cfg.validate()?;
+    cfg.validate().map_err(|e| e.to_string())?;
     if !(cli.rate_hz.is_finite() && (10.0..=10_000.0).contains(&cli.rate_hz)) {
         return Err(format!("--rate-hz {} outside 10..=10000", cli.rate_hz));
     }
