@@ -173,9 +173,10 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             });
         }
     }
-    let ros_result = ros_thread
-        .join()
-        .unwrap_or_else(|_| Err("the ROS thread panicked".into()));
+    let ros_result = match ros_thread.join() {
+        Ok(r) => r.map_err(|e| e.to_string()),
+        Err(_) => Err("the ROS thread panicked".to_string()),
+    };
     let (c, command_latency, offsets) = {
         let s = lock(&shared);
         (

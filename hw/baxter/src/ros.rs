@@ -8,10 +8,12 @@ use crate::config::{BaxterConfig, Mode};
 use herb_adapter::guard::{GuardSettings, JumpGuard, REFUSAL_HOLD_NS, Refusal};
 use herb_ipc::{ArmBlocker, DOF, GripperAction, monotonic_ns};
 use herb_ros1::baxter_core_msgs::{AssemblyState, EndEffectorState, JointCommand};
-use herb_ros1::node::{MasterView, Next, announce_again, connect, master_view, next, topic_of};
+use herb_ros1::node::{
+    MasterView, Next, RegisterError, announce_again, connect, master_view, next, topic_of,
+};
 use herb_ros1::sensor_msgs::JointState as RosJointState;
 use herb_ros1::std_msgs::{Bool, Float64};
-use roslibrust::ros1::MasterClient;
+use roslibrust::ros1::{MasterClient, NodeError, RosMasterError};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -101,6 +103,44 @@ pub fn lock(shared: &Mutex<Shared>) -> std::sync::MutexGuard<'_, Shared> {
     shared.lock().unwrap_or_else(|e| e.into_inner())
 }
 
+/// What ends the ROS side (and then the process).
+#[derive(Debug, thiserror::Error)]
+pub enum RosError {
+    /// The tokio runtime could not be built.
+    #[error("tokio runtime: {0}")]
+    Runtime(#[source] std::io::Error),
+    /// Advertising or subscribing to a topic failed.
+    #[error("{action} {topic}: {source}")]
+    Topic {
+        /// `advertise` or `subscribe`.
+        action: &'static str,
+        /// The topic.
+        topic: String,
+        /// The node's error.
+        source: NodeError,
+    },
+    /// Publishing on a topic failed.
+    #[error("publish {topic}: {source}")]
+    Publish {
+        /// The topic.
+        topic: String,
+        /// The publisher's error.
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// The node's URI could not be had.
+    #[error("node URI: {0}")]
+    NodeUri(#[source] NodeError),
+    /// No client of the master could be made.
+    #[error("master client: {0}")]
+    MasterClient(#[source] RosMasterError),
+    /// A subscription closed.
+    #[error("subscription {0} closed")]
+    Closed(String),
+    /// Registering again with a restarted master failed.
+    #[error(transparent)]
+    Register(#[from] RegisterError),
+}
+
 /// Runs the ROS side until `stop` is set; an error ends it (the process then exits).
 /// `velocity`: herbd's joint speed limits (rad/s), which the jump guard's bound is made from.
 pub fn run(
@@ -109,11 +149,11 @@ pub fn run(
     enable: bool,
     shared: Arc<Mutex<Shared>>,
     stop: Arc<AtomicBool>,
-) -> Result<(), String> {
+) -> Result<(), RosError> {
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
-        .map_err(|e| format!("tokio runtime: {e}"))?;
+        .map_err(RosError::Runtime)?;
     rt.block_on(async {
         let mut carry = Carry {
             guard: JumpGuard::new(GuardSettings::from_limits(
@@ -159,9 +199,23 @@ enum End {
 /// a new node is made if no robot state arrived within this long.
 const REANNOUNCE_GRACE_NS: u64 = 2_000_000_000;
 
-fn ros_err(what: &str, topic: &str) -> impl FnOnce(roslibrust::ros1::NodeError) -> String {
-    let (what, topic) = (what.to_string(), topic.to_string());
-    move |e| format!("{what} {topic}: {e}")
+fn ros_err(action: &'static str, topic: &str) -> impl FnOnce(NodeError) -> RosError {
+    let topic = topic.to_string();
+    move |source| RosError::Topic {
+        action,
+        topic,
+        source,
+    }
+}
+
+fn publish_err<E: std::error::Error + Send + Sync + 'static>(
+    topic: &str,
+) -> impl FnOnce(E) -> RosError {
+    let topic = topic.to_string();
+    move |e| RosError::Publish {
+        topic,
+        source: Box::new(e),
+    }
 }
 
 /// One registration with the master: advertise, subscribe, then bridge until `stop` is set
@@ -172,7 +226,7 @@ async fn session(
     shared: &Mutex<Shared>,
     stop: &AtomicBool,
     carry: &mut Carry,
-) -> Result<End, String> {
+) -> Result<End, RosError> {
     let guard = &mut carry.guard;
     let refused_until = &mut carry.refused_until;
     let Some(nh) = connect(&cfg.ros.master_uri, &cfg.ros.node_name, "herb-baxter", stop).await
@@ -198,7 +252,7 @@ async fn session(
             data: cfg.arm.command_timeout_s,
         })
         .await
-        .map_err(|e| format!("publish {}: {e}", t.command_timeout))?;
+        .map_err(publish_err(&t.command_timeout))?;
     let ratio_pub = if cfg.arm.mode == Mode::Position {
         let p = nh
             .advertise::<Float64>(&t.speed_ratio, 1, true)
@@ -208,7 +262,7 @@ async fn session(
             data: cfg.arm.speed_ratio,
         })
         .await
-        .map_err(|e| format!("publish {}: {e}", t.speed_ratio))?;
+        .map_err(publish_err(&t.speed_ratio))?;
         Some(p)
     } else {
         None
@@ -234,13 +288,10 @@ async fn session(
         .subscribe::<EndEffectorState>(&t.gripper_state, SUBSCRIBER_QUEUE)
         .await
         .map_err(ros_err("subscribe", &t.gripper_state))?;
-    let client_uri = nh
-        .get_client_uri()
-        .await
-        .map_err(|e| format!("node URI: {e}"))?;
+    let client_uri = nh.get_client_uri().await.map_err(RosError::NodeUri)?;
     let master = MasterClient::new(&cfg.ros.master_uri, client_uri, &cfg.ros.node_name)
         .await
-        .map_err(|e| format!("master client: {e}"))?;
+        .map_err(RosError::MasterClient)?;
 
     // What this node registered, to register it again with a restarted master.
     let subscribed = [
@@ -319,14 +370,14 @@ async fn session(
                         s.counters.joint_states_rejected += 1;
                         eprintln!("herb-baxter: joint state undecodable: {e}");
                     }
-                    Next::Closed => return Err(format!("subscription {} closed", t.joint_states)),
+                    Next::Closed => return Err(RosError::Closed(t.joint_states.clone())),
                 }
             }
             m = next(&mut robot) => match m {
                 Next::Msg(m) => assembly = Some((m, monotonic_ns())),
                 Next::Lagged(n) => lock(shared).counters.lagged += n,
                 Next::Bad(e) => eprintln!("herb-baxter: robot state undecodable: {e}"),
-                Next::Closed => return Err(format!("subscription {} closed", t.robot_state)),
+                Next::Closed => return Err(RosError::Closed(t.robot_state.clone())),
             },
             m = next(&mut gripper) => match m {
                 Next::Msg(m) => {
@@ -336,7 +387,7 @@ async fn session(
                 }
                 Next::Lagged(n) => lock(shared).counters.lagged += n,
                 Next::Bad(e) => eprintln!("herb-baxter: gripper state undecodable: {e}"),
-                Next::Closed => return Err(format!("subscription {} closed", t.gripper_state)),
+                Next::Closed => return Err(RosError::Closed(t.gripper_state.clone())),
             },
             _ = check.tick() => {
                 let view = master_view(&master, &t.joint_states, &cfg.ros.node_name, check_period).await;
@@ -352,7 +403,7 @@ async fn session(
                 }
                 if view == MasterView::Forgotten {
                     eprintln!("herb-baxter: the ROS master restarted and forgot this node: registering again");
-                    let known = announce_again(&master, &subscribed, &published).await.map_err(|e| e.to_string())?;
+                    let known = announce_again(&master, &subscribed, &published).await?;
                     lock(shared).counters.reregistered += 1;
                     announced_at = known.then(monotonic_ns);
                 }
@@ -407,7 +458,7 @@ async fn session(
                     && now.saturating_sub(last_enable) >= ENABLE_PERIOD_NS
                 {
                     last_enable = now;
-                    p.publish(&Bool { data: true }).await.map_err(|e| format!("publish {}: {e}", t.enable))?;
+                    p.publish(&Bool { data: true }).await.map_err(publish_err(&t.enable))?;
                 }
                 if blocker.is_some() {
                     continue;
@@ -418,7 +469,7 @@ async fn session(
                         Ok(()) => {
                             refusing = false;
                             command.command.copy_from_slice(&c.position);
-                            cmd_pub.publish(&command).await.map_err(|e| format!("publish {}: {e}", t.joint_command))?;
+                            cmd_pub.publish(&command).await.map_err(publish_err(&t.joint_command))?;
                             let mut s = lock(shared);
                             s.counters.commands_sent += 1;
                             s.max_command_offset_rad = guard.max_offset_rad;
@@ -442,7 +493,7 @@ async fn session(
                     driver.request(a);
                 }
                 if let Some(c) = driver.poll(now) {
-                    grip_pub.publish(&c).await.map_err(|e| format!("publish {}: {e}", t.gripper_command))?;
+                    grip_pub.publish(&c).await.map_err(publish_err(&t.gripper_command))?;
                     lock(shared).counters.gripper_commands_sent += 1;
                 }
             }
