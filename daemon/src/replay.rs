@@ -28,7 +28,7 @@ pub struct ReplayOptions {
 }
 
 /// The decision made for the explained object, re-made on its recorded heightmap.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct Explained {
     /// Planner request number.
     pub request: u64,
@@ -37,7 +37,7 @@ pub struct Explained {
     /// The heightmap it was decided on.
     pub frame: Box<HeightmapFrame>,
     /// The policy's decision (action, release position with z, yaw), or why there was none.
-    pub decision: Result<herb_decide::Decision, String>,
+    pub decision: Result<herb_decide::Decision, herb_decide::DecideError>,
 }
 
 /// What a replay reproduced.
@@ -276,7 +276,7 @@ pub fn replay(log: &Log, opts: &ReplayOptions) -> Result<(Outcome, Replayed), Re
                             request: k,
                             object: *object,
                             frame: Box::new(*f),
-                            decision: d.map_err(|e| e.to_string()),
+                            decision: d,
                         });
                     }
                 }
