@@ -18,6 +18,7 @@ pub mod boxed;
 pub mod env;
 pub mod eval;
 pub mod reserve;
+pub mod search;
 pub mod teacher;
 pub mod world;
 

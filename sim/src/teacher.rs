@@ -144,6 +144,20 @@ pub fn rollout(
     remaining: &[TypeIdx],
     first: Placement,
 ) -> Result<CandidateOutcome> {
+    let o = rollout_until(lattice, reward, world, remaining, first, None)?;
+    Ok(o.expect("a rollout without a deadline always finishes"))
+}
+
+/// [`rollout`] that gives up when `deadline` passes (checked before each placement): `None`
+/// then, the rollout unfinished.
+pub fn rollout_until(
+    lattice: &mut Lattice,
+    reward: RewardMode,
+    world: &PackingWorld,
+    remaining: &[TypeIdx],
+    first: Placement,
+    deadline: Option<std::time::Instant>,
+) -> Result<Option<CandidateOutcome>> {
     let mut w = world.clone();
     let mut out = CandidateOutcome {
         placement: first,
@@ -156,6 +170,9 @@ pub fn rollout(
         failed: false,
     };
     for (i, &ty) in remaining.iter().enumerate() {
+        if deadline.is_some_and(|d| std::time::Instant::now() >= d) {
+            return Ok(None);
+        }
         let p = if i == 0 {
             first
         } else {
@@ -165,7 +182,7 @@ pub fn rollout(
                 None => {
                     out.ret -= 1.0;
                     out.failed = true;
-                    return Ok(out);
+                    return Ok(Some(out));
                 }
             }
         };
@@ -177,14 +194,14 @@ pub fn rollout(
         out.ret += r;
         if !o.inside {
             out.failed = true;
-            return Ok(out);
+            return Ok(Some(out));
         }
         out.sum_c += o.compactness;
         out.sum_s += o.stable as u8 as f32;
         out.packed += 1;
     }
     out.success = true;
-    Ok(out)
+    Ok(Some(out))
 }
 
 /// A decision rule over the placement lattice, for evaluation and data collection.

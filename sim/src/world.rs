@@ -158,6 +158,29 @@ pub struct PlacedObject {
     pub body: RigidBodyHandle,
 }
 
+/// The pile of a twin ([`PackingWorld::twin`]): what a heightmap says of the objects already in
+/// the box, which the twin cannot move.
+#[derive(Debug, Clone)]
+struct Pile {
+    /// The heightmap the twin was built from: the floor of every render.
+    heightmap: Heightmap,
+    /// The volume under the heightmap (m^3): what the pile adds to C's numerator.
+    volume: f32,
+    /// The bounds of the occupied cells (none when the box is empty).
+    bounds: Option<(Vector, Vector)>,
+}
+
+/// Cells lower than this (m) are the floor, not the pile.
+const PILE_FLOOR_M: f32 = 0.002;
+
+/// The cell of a twin's pile collider (m): the heightmap max-pooled to about this, the
+/// placement lattice's own cell.
+const PILE_COLLIDER_CELL_M: f32 = 0.0125;
+
+/// The pile collider's heights are rounded up to this (m), so that a row's cells of about one
+/// height make one cuboid.
+const PILE_STEP_M: f32 = 0.002;
+
 /// The packing world. Deterministic: the same calls give bit-identical states.
 pub struct PackingWorld {
     cfg: WorldConfig,
@@ -167,6 +190,7 @@ pub struct PackingWorld {
     heightmap: Heightmap,
     verts: Vec<Vector>,
     zscratch: ZScratch,
+    pile: Option<Pile>,
 }
 
 impl std::fmt::Debug for PackingWorld {
@@ -210,6 +234,7 @@ impl Clone for PackingWorld {
             heightmap: self.heightmap.clone(),
             verts: Vec::with_capacity(self.verts.capacity()),
             zscratch: self.zscratch.clone(),
+            pile: self.pile.clone(),
         }
     }
 }
@@ -233,7 +258,97 @@ impl PackingWorld {
             heightmap: Heightmap::new(spec),
             verts: Vec::with_capacity(max_verts),
             zscratch,
+            pile: None,
         };
+        w.render_heightmap();
+        Ok(w)
+    }
+
+    /// A twin of a box seen only as `pile`, a heightmap (a camera's, or any world's): the box's
+    /// walls and floor, and the pile as one static heightfield collider through the cells'
+    /// centres, which objects placed in the twin land on and settle against but cannot move.
+    /// Its heightmap starts as `pile`; C counts the volume under the pile (the objects' own
+    /// volume and the voids hidden under them: the twin's C is above the real one) and its
+    /// occupied cells' bounds beside the twin's own objects; the success volume checks the twin's own
+    /// objects. What the search rolls out in: built from what herbd has in a real cell, never
+    /// from a simulator's state. `pile` must be valid and on the world's grid.
+    pub fn twin(catalog: SharedCatalog, cfg: WorldConfig, pile: &Heightmap) -> Result<Self> {
+        let mut w = Self::new(catalog, cfg)?;
+        pile.validate()?;
+        let spec = *w.heightmap.spec();
+        if *pile.spec() != spec {
+            return Err(SimError::Heightmap(format!(
+                "twin: a {} x {} heightmap of {} m cells for a world of {} x {} cells of {} m",
+                pile.spec().nx,
+                pile.spec().ny,
+                pile.spec().cell,
+                spec.nx,
+                spec.ny,
+                spec.cell
+            )));
+        }
+        let (nx, ny, cell) = (spec.nx, spec.ny, spec.cell);
+        let mut volume = 0.0f32;
+        let mut bounds: Option<(Vector, Vector)> = None;
+        for row in 0..ny {
+            for col in 0..nx {
+                let h = pile.data()[row * nx + col];
+                volume += h.max(0.0) * cell * cell;
+                if h > PILE_FLOOR_M {
+                    let (x, y) = spec.cell_centre(col, row);
+                    let lo = Vector::new(x - 0.5 * cell, y - 0.5 * cell, 0.0);
+                    let hi = Vector::new(x + 0.5 * cell, y + 0.5 * cell, h);
+                    bounds = Some(match bounds {
+                        Some((l, u)) => (l.min(lo), u.max(hi)),
+                        None => (lo, hi),
+                    });
+                }
+            }
+        }
+        // The collider: the pile max-pooled to cells of about PILE_COLLIDER_CELL_M (never
+        // below the heightmap: objects land on it, not in it), heights rounded up to
+        // PILE_STEP_M, each row's runs of one height merged into one static cuboid from the
+        // floor up. Objects settle on flat tops, as cheaply as on the real objects' hulls.
+        let f = ((PILE_COLLIDER_CELL_M / cell).round() as usize).max(1);
+        let (px, py) = (nx.div_ceil(f), ny.div_ceil(f));
+        let pooled = |bi: usize, bj: usize| {
+            let mut top = 0.0f32;
+            for row in bi * f..((bi + 1) * f).min(ny) {
+                for col in bj * f..((bj + 1) * f).min(nx) {
+                    top = top.max(pile.data()[row * nx + col]);
+                }
+            }
+            (top / PILE_STEP_M).ceil() * PILE_STEP_M
+        };
+        let (x_min, y_max) = (spec.x_min(), spec.y_max());
+        let body = w.phys.insert_body(RigidBodyBuilder::fixed());
+        for bi in 0..py {
+            let y0 = y_max - (bi * f) as f32 * cell;
+            let y1 = y_max - (((bi + 1) * f).min(ny)) as f32 * cell;
+            let mut bj = 0;
+            while bj < px {
+                let h = pooled(bi, bj);
+                let mut end = bj + 1;
+                while end < px && pooled(bi, end) == h {
+                    end += 1;
+                }
+                if h > PILE_FLOOR_M {
+                    let x0 = x_min + (bj * f) as f32 * cell;
+                    let x1 = x_min + ((end * f).min(nx)) as f32 * cell;
+                    let c = ColliderBuilder::cuboid(0.5 * (x1 - x0), 0.5 * (y0 - y1), 0.5 * h)
+                        .translation(Vector::new(0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.5 * h))
+                        .friction(w.cfg.friction)
+                        .restitution(0.0);
+                    w.phys.insert_collider(c, Some(body));
+                }
+                bj = end;
+            }
+        }
+        w.pile = Some(Pile {
+            heightmap: pile.clone(),
+            volume,
+            bounds,
+        });
         w.render_heightmap();
         Ok(w)
     }
@@ -297,6 +412,7 @@ impl PackingWorld {
     /// Removes every object: an empty box again, bit-identical to a new world.
     pub fn reset(&mut self) {
         self.phys = Self::empty_physics(&self.cfg);
+        self.pile = None;
         self.placed.clear();
         self.render_heightmap();
     }
@@ -510,14 +626,26 @@ impl PackingWorld {
 
     /// [`Self::scan`], also describing each object into `report` when given.
     fn scan_into(&mut self, render: bool, mut report: Option<&mut Vec<ObjectReport>>) -> Scan {
-        if render {
-            self.heightmap.clear();
-        }
         let volume_ok = SuccessVolume::new(self.cfg.inside_tolerance_m);
         let mut first_outside = None;
         let mut violation = None;
         let (mut lo, mut hi) = (Vector::splat(f32::MAX), Vector::splat(f32::MIN));
         let mut volume = 0.0f32;
+        match &self.pile {
+            Some(p) => {
+                if render {
+                    self.heightmap
+                        .data_mut()
+                        .copy_from_slice(p.heightmap.data());
+                }
+                volume = p.volume;
+                if let Some((l, u)) = p.bounds {
+                    (lo, hi) = (l, u);
+                }
+            }
+            None if render => self.heightmap.clear(),
+            None => {}
+        }
         for (i, p) in self.placed.iter().enumerate() {
             let pose = *self.phys.bodies[p.body].position();
             let shape = self.catalog.shape(p.ty);

@@ -11,11 +11,12 @@ use herb_sim::{PackingEnv, RewardMode, SharedCatalog, WorldConfig};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 mod plot;
 
 use herb_decide::{Method, MethodSettings, Order, PolicySpec, SequenceModel};
+use herb_sim::search::{Budget, SearchSettings, TwinKind};
 
 /// The replays `herb-sim pack` shows.
 const REPLAYS: [Method; 3] = [Method::Human, Method::HumanPose, Method::Random];
@@ -137,6 +138,22 @@ struct EvalArgs {
     /// that sees only the next object could at best learn.
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     lookahead_horizon: Option<u64>,
+    /// Rollouts the search may run per decision (its budget as a count: rows reproduce).
+    #[arg(long, default_value_t = 8)]
+    search_rollouts: usize,
+    /// The search's budget as a time per decision (s) instead of a count of rollouts.
+    #[arg(long)]
+    search_time_s: Option<f64>,
+    /// Candidates the search considers at most, in lattice BLBF's order.
+    #[arg(long, default_value_t = 8)]
+    search_k: usize,
+    /// Objects per search rollout, the candidate's included (to the job's end when absent).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    search_horizon: Option<u64>,
+    /// The world the search's rollouts run in: `twin` (built from the heightmap, as in a real
+    /// cell) or `exact` (a clone of the evaluation's world: the twin's fidelity bound).
+    #[arg(long, default_value = "twin", value_parser = ["twin", "exact"])]
+    search_world: String,
     /// Base seed (episode i uses seed + i).
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -377,7 +394,20 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
         lookahead_k: a.lookahead_k,
         lookahead_reward,
         lookahead_horizon: a.lookahead_horizon.map(|h| h as usize),
-        clearance_m: cfg.clearance_m,
+        search: SearchSettings {
+            k: a.search_k,
+            budget: match a.search_time_s {
+                Some(s) => Budget::Time(Duration::from_secs_f64(s)),
+                None => Budget::Rollouts(a.search_rollouts),
+            },
+            horizon: a.search_horizon.map(|h| h as usize),
+            reward: lookahead_reward,
+            twin: match a.search_world.as_str() {
+                "exact" => TwinKind::ExactClone,
+                _ => TwinKind::Heightmap,
+            },
+        },
+        world: cfg.clone(),
     };
     // One run per (row, policy): herb once per policy, the others once.
     let models_dir = Path::new(PolicySpec::DEFAULT_MODELS_DIR);
@@ -415,6 +445,13 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
         // the teacher names its k.
         let shown = match (m, &policy) {
             (_, Some(_)) => name.clone(),
+            (Method::Search, _) => {
+                let budget = match a.search_time_s {
+                    Some(s) => format!("{s} s"),
+                    None => format!("{} rollouts", a.search_rollouts),
+                };
+                format!("search ({budget}, k = {}, {})", a.search_k, a.search_world)
+            }
             (Method::Lookahead, _) => {
                 let horizon = a
                     .lookahead_horizon

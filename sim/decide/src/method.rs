@@ -43,11 +43,15 @@ pub enum Method {
     /// The geometric lookahead teacher: the best of k lattice candidates by a physics-free
     /// lattice-BLBF rollout (HERB's order by default).
     GeoLookahead,
+    /// The search: lattice candidates in lattice BLBF's order, the best by the return of a
+    /// rollout to the job's end in a twin built from the heightmap, within a budget
+    /// ([`herb_sim::search`]; HERB's order by default).
+    Search,
 }
 
 impl Method {
     /// Every method, in the order of the tables.
-    pub const ALL: [Method; 13] = [
+    pub const ALL: [Method; 14] = [
         Self::Herb,
         Self::Blbf,
         Self::Human,
@@ -61,6 +65,7 @@ impl Method {
         Self::Lookahead,
         Self::LatticeReserve,
         Self::GeoLookahead,
+        Self::Search,
     ];
 
     /// Name on the command line, in the bindings and in the tables.
@@ -79,6 +84,7 @@ impl Method {
             Self::Lookahead => "lookahead",
             Self::LatticeReserve => "lattice-reserve",
             Self::GeoLookahead => "geo-lookahead",
+            Self::Search => "search",
         }
     }
 

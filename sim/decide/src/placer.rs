@@ -8,7 +8,8 @@ use crate::policy::{PackitSo3, Policy};
 use crate::{Decider, PolicySpec};
 use herb_sim::boxed::{Episode, participant};
 use herb_sim::eval::{Decision, PlaceError, Placer, ReplayPlacer};
-use herb_sim::{PackingEnv, RewardMode, SharedCatalog};
+use herb_sim::search::{Search, SearchSettings};
+use herb_sim::{PackingEnv, RewardMode, SharedCatalog, WorldConfig};
 use std::path::PathBuf;
 
 impl<P: Policy + ?Sized> Placer for Decider<P> {
@@ -108,9 +109,11 @@ pub struct MethodSettings {
     pub lookahead_reward: RewardMode,
     /// Objects per rollout of the lookahead teacher (`None`: to the episode's end).
     pub lookahead_horizon: Option<usize>,
-    /// Gap above the estimated resting height at release (m), for the decision core's
-    /// policies.
-    pub clearance_m: f32,
+    /// The search's settings ([`Method::Search`]).
+    pub search: SearchSettings,
+    /// The world's configuration: the release clearance of the decision core's policies and
+    /// the physics of the search's twins.
+    pub world: WorldConfig,
 }
 
 impl Default for MethodSettings {
@@ -121,7 +124,8 @@ impl Default for MethodSettings {
             lookahead_k: 8,
             lookahead_reward: RewardMode::CompactnessStability { alpha: 0.6 },
             lookahead_horizon: None,
-            clearance_m: herb_sim::WorldConfig::default().clearance_m,
+            search: SearchSettings::default(),
+            world: WorldConfig::default(),
         }
     }
 }
@@ -136,7 +140,8 @@ impl Method {
         catalog: &SharedCatalog,
         settings: &MethodSettings,
     ) -> Result<Box<dyn Placer>> {
-        let decider = |p: Box<dyn Policy>| Decider::new(p, catalog.clone(), settings.clearance_m);
+        let decider =
+            |p: Box<dyn Policy>| Decider::new(p, catalog.clone(), settings.world.clearance_m);
         if let Some(replay) = self.replay() {
             return ReplayPlacer::new(replay)
                 .map(|p| Box::new(p) as Box<dyn Placer>)
@@ -170,6 +175,11 @@ impl Method {
             }
             Self::Blbf => Box::new(decider(Box::new(crate::Blbf::new()))),
             Self::PackitSo3 => Box::new(PackitSo3::new()),
+            Self::Search => Box::new(Search::new(
+                catalog.clone(),
+                settings.world.clone(),
+                settings.search,
+            )),
             other => {
                 return Err(DecideError::Method {
                     method: other.name(),

@@ -1,0 +1,132 @@
+//! The search's twin: a box known only by its heightmap ([`PackingWorld::twin`]), and the
+//! search over it ([`herb_sim::search`]).
+
+mod common;
+
+use herb_sim::env::RewardMode;
+use herb_sim::lattice::Lattice;
+use herb_sim::search::{Budget, Search, SearchSettings, TwinKind};
+use herb_sim::{Heightmap, PackingWorld, SharedCatalog, WorldConfig};
+
+const IDS: [&str; 6] = ["003", "005", "013", "007", "011", "004"];
+
+/// FIXTURE: a world with six objects at fixed, scattered positions (`common::pile`).
+fn exact(c: &SharedCatalog) -> PackingWorld {
+    common::pile(c, &IDS)
+}
+
+#[test]
+fn a_twin_starts_from_the_heightmap_and_objects_land_on_its_pile_as_on_the_real_one() {
+    let c = common::primitives();
+    let mut real = exact(&c);
+    let mut twin = PackingWorld::twin(c.clone(), WorldConfig::default(), real.heightmap()).unwrap();
+    assert_eq!(
+        twin.heightmap(),
+        real.heightmap(),
+        "the twin starts from its heightmap"
+    );
+    assert!(twin.placed().is_empty(), "the pile is not objects");
+    // The pile counts in C, by the volume under the heightmap: at least the objects' own
+    // volume (it includes the voids the camera cannot see under them).
+    let (cr, ct) = (real.compactness(), twin.compactness());
+    assert!(cr > 0.0 && ct >= cr, "C real {cr} twin {ct}");
+    // The next object, released where the lattice BLBF rule puts it, settles at about the same
+    // height in both, and both say whether it ended inside alike.
+    let ty = c.by_id("006").unwrap();
+    let mut lattice = Lattice::new(&c);
+    lattice.compute(real.heightmap(), &c, ty);
+    let p = lattice.blbf().expect("a feasible placement");
+    real.place(ty, p.x, p.y, p.theta()).unwrap();
+    let ot = twin.place(ty, p.x, p.y, p.theta()).unwrap();
+    // The twin checks its own objects only: compare the new object's own verdict.
+    let new_inside = |w: &mut PackingWorld| w.report().last().unwrap().violation.is_none();
+    assert_eq!(new_inside(&mut real), new_inside(&mut twin));
+    assert_eq!(ot.inside, new_inside(&mut twin));
+    let top = |w: &PackingWorld| w.heightmap().max();
+    assert!(
+        (top(&real) - top(&twin)).abs() < 0.01,
+        "top real {} twin {}",
+        top(&real),
+        top(&twin)
+    );
+}
+
+#[test]
+fn a_twin_refuses_a_heightmap_of_another_grid_or_with_bad_cells() {
+    let c = common::primitives();
+    let spec = herb_sim::GridSpec::for_box(0.005).unwrap();
+    let other = Heightmap::new(spec);
+    let e = PackingWorld::twin(c.clone(), WorldConfig::default(), &other).unwrap_err();
+    assert!(e.to_string().contains("twin:"), "{e}");
+    let mut bad = exact(&c).heightmap().clone();
+    bad.data_mut()[7] = f32::NAN;
+    let e = PackingWorld::twin(c, WorldConfig::default(), &bad).unwrap_err();
+    assert!(e.to_string().contains("finite"), "{e}");
+}
+
+#[test]
+fn the_search_is_anytime_and_never_worse_than_its_prior_on_its_own_rollouts() {
+    let c = common::primitives();
+    let world = exact(&c);
+    let remaining: Vec<_> = ["006", "010", "003"].map(|i| c.by_id(i).unwrap()).to_vec();
+    let settings = |budget| SearchSettings {
+        k: 4,
+        budget,
+        horizon: None,
+        reward: RewardMode::cs(0.6).unwrap(),
+        twin: TwinKind::Heightmap,
+    };
+    let mut s = Search::new(
+        c.clone(),
+        WorldConfig::default(),
+        settings(Budget::Rollouts(4)),
+    );
+    let p = s
+        .decide(world.heightmap(), &remaining, None)
+        .unwrap()
+        .unwrap();
+    let r = s.report().clone();
+    assert_eq!(r.finished.len(), 4.min(r.candidates));
+    let chosen = r.chosen.unwrap();
+    let best = r
+        .finished
+        .iter()
+        .map(|(_, o)| o.ret)
+        .fold(f32::MIN, f32::max);
+    let (_, o) = r.finished.iter().find(|(i, _)| *i == chosen).unwrap();
+    assert_eq!(o.ret, best, "the best finished return is chosen");
+    assert_eq!(o.placement, p);
+    // Deterministic with a count of rollouts.
+    let mut again = Search::new(
+        c.clone(),
+        WorldConfig::default(),
+        settings(Budget::Rollouts(4)),
+    );
+    assert_eq!(
+        again.decide(world.heightmap(), &remaining, None).unwrap(),
+        Some(p)
+    );
+    // A budget of zero rollouts returns the prior's first (lattice BLBF's), said so.
+    let mut none = Search::new(
+        c.clone(),
+        WorldConfig::default(),
+        settings(Budget::Rollouts(0)),
+    );
+    let first = none.decide(world.heightmap(), &remaining, None).unwrap();
+    let mut lattice = Lattice::new(&c);
+    lattice.compute(world.heightmap(), &c, remaining[0]);
+    assert_eq!(first, lattice.blbf());
+    assert!(none.report().finished.is_empty());
+    assert_eq!(none.report().chosen, Some(0));
+    // A deadline already passed: no rollout finishes, the prior's first again.
+    let mut late = Search::new(
+        c.clone(),
+        WorldConfig::default(),
+        settings(Budget::Time(Default::default())),
+    );
+    assert_eq!(
+        late.decide(world.heightmap(), &remaining, None).unwrap(),
+        lattice.blbf()
+    );
+    assert!(late.report().finished.is_empty());
+}
