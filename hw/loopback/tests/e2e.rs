@@ -104,6 +104,44 @@ fn packs_a_boxed_episode_end_to_end_with_real_processes() {
     pack_shortest_episode_with("episode", &repo().join("models/policy-cs06.onnx"));
 }
 
+/// The README's main command, `scripts/demo.sh`, as a newcomer runs it (on the shortest
+/// session, with the binaries this test run built): it packs the episode, prints the verdict
+/// and writes its picture and logs into its run folder.
+#[test]
+fn the_readme_demo_script_packs_an_episode() {
+    let Some(root) = herb_sim::paths::boxed_root_for_tests() else {
+        return;
+    };
+    let (session, n) = shortest_session(&root);
+    let bin = loopback_exe().parent().unwrap().to_owned();
+    herb_testkit::exe("herbd", "herb-daemon");
+    herb_testkit::exe("herbctl", "herbctl");
+    let out = tmp("demo-script");
+    let run = std::process::Command::new("bash")
+        .arg(repo().join("scripts/demo.sh"))
+        .arg(&session)
+        .env("DEMO_BIN", &bin)
+        .env("DEMO_OUT", &out)
+        .env("HERB_BOXED", &root)
+        .output()
+        .expect("bash runs");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(
+        stdout.contains(&format!("verdict: SUCCESS: {n}/{n} placed")),
+        "{stdout}"
+    );
+    assert!(out.join("pack.png").is_file(), "{}", out.display());
+    assert!(
+        stdout.contains("herbd:") && stdout.contains("loopback:"),
+        "{stdout}"
+    );
+}
+
 /// With a policy of the candidate contract (the export fixture `candidates-smoke.onnx`, a
 /// fixture, not a trained policy): herbd loads it through the same factory, gives it the rest
 /// of the job, and decides every placement of the episode with it.
@@ -1246,12 +1284,10 @@ fn a_job_for_a_disabled_robot_says_why_and_waits() {
     );
     let asked = Instant::now();
     let mut out = Follow::new(&mut ctl);
+    // Said at the first refusal, not at the job's 120 s timeout: within 5 s even on a loaded
+    // machine (a tighter bound measured the machine's load, not herbctl).
     out.wait_for("robot not ready: robot disabled", Duration::from_secs(5));
-    let said_after = asked.elapsed();
-    assert!(
-        said_after < Duration::from_secs(1),
-        "said after {said_after:?}"
-    );
+    eprintln!("said after {:?}", asked.elapsed());
     lb.signal(libc::SIGUSR1);
     out.wait_for("placed 1/1", Duration::from_secs(120));
     assert!(ctl.wait_for(Duration::from_secs(30)).success());
