@@ -189,7 +189,7 @@ pub fn spawn(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::job::{ObjectPhase, Placement};
+    use crate::job::ObjectPhase;
 
     fn dir(tag: &str) -> PathBuf {
         let d = std::env::temp_dir().join(format!("herb-journal-{}-{tag}", std::process::id()));
@@ -199,22 +199,7 @@ mod tests {
     }
 
     fn job() -> JobRecord {
-        let mut r = JobRecord::NONE;
-        r.job_id = 7;
-        r.count = 3;
-        r.objects[..3].copy_from_slice(&[4, 5, 6]);
-        r.ordered = true;
-        r.order[..3].copy_from_slice(&[6, 4, 5]);
-        r.index = 1;
-        r.done = 1;
-        r.holding = true;
-        r.phase = ObjectPhase::Carrying;
-        r.placement = Some(Placement {
-            index: 1,
-            pose: [0.01, -0.02, 0.05, 1.5],
-            release_q: [0.1, -0.2, 0.3, 0.4, 0.5, 0.6, 0.7],
-        });
-        r
+        JobRecord::fixture()
     }
 
     #[test]

@@ -48,64 +48,36 @@ const HALF_PI: f64 = std::f64::consts::FRAC_PI_2;
 pub const LEFT_ARM_MOUNT: ([f64; 3], [f64; 3]) =
     ([0.024645, 0.219645, 0.118588], [0.0, 0.0, 0.7854]);
 
-/// The seven joints `left_s0` .. `left_w2` (axis z each).
+/// A joint of the table below: name, origin (xyz, rpy), limits and velocity limit.
+const fn joint(
+    name: &'static str,
+    xyz: [f64; 3],
+    rpy: [f64; 3],
+    lower: f64,
+    upper: f64,
+    max_velocity: f64,
+) -> JointSpec {
+    JointSpec {
+        name,
+        xyz,
+        rpy,
+        lower,
+        upper,
+        max_velocity,
+    }
+}
+
+/// The seven joints `left_s0` .. `left_w2` (axis z each), as the URDF gives them: name, origin
+/// xyz (m) and rpy (rad), lower and upper limit (rad), velocity limit (rad/s).
+#[rustfmt::skip]
 pub const LEFT_ARM: [JointSpec; DOF] = [
-    JointSpec {
-        name: "left_s0",
-        xyz: [0.055695, 0.0, 0.011038],
-        rpy: [0.0, 0.0, 0.0],
-        lower: -1.70167993878,
-        upper: 1.70167993878,
-        max_velocity: 1.5,
-    },
-    JointSpec {
-        name: "left_s1",
-        xyz: [0.069, 0.0, 0.27035],
-        rpy: [-HALF_PI, 0.0, 0.0],
-        lower: -2.147,
-        upper: 1.047,
-        max_velocity: 1.5,
-    },
-    JointSpec {
-        name: "left_e0",
-        xyz: [0.102, 0.0, 0.0],
-        rpy: [HALF_PI, 0.0, HALF_PI],
-        lower: -3.05417993878,
-        upper: 3.05417993878,
-        max_velocity: 1.5,
-    },
-    JointSpec {
-        name: "left_e1",
-        xyz: [0.069, 0.0, 0.26242],
-        rpy: [-HALF_PI, -HALF_PI, 0.0],
-        lower: -0.05,
-        upper: 2.618,
-        max_velocity: 1.5,
-    },
-    JointSpec {
-        name: "left_w0",
-        xyz: [0.10359, 0.0, 0.0],
-        rpy: [HALF_PI, 0.0, HALF_PI],
-        lower: -3.059,
-        upper: 3.059,
-        max_velocity: 4.0,
-    },
-    JointSpec {
-        name: "left_w1",
-        xyz: [0.01, 0.0, 0.2707],
-        rpy: [-HALF_PI, -HALF_PI, 0.0],
-        lower: -HALF_PI,
-        upper: 2.094,
-        max_velocity: 4.0,
-    },
-    JointSpec {
-        name: "left_w2",
-        xyz: [0.115975, 0.0, 0.0],
-        rpy: [HALF_PI, 0.0, HALF_PI],
-        lower: -3.059,
-        upper: 3.059,
-        max_velocity: 4.0,
-    },
+    joint("left_s0", [0.055695, 0.0, 0.011038], [0.0, 0.0, 0.0], -1.70167993878, 1.70167993878, 1.5),
+    joint("left_s1", [0.069, 0.0, 0.27035], [-HALF_PI, 0.0, 0.0], -2.147, 1.047, 1.5),
+    joint("left_e0", [0.102, 0.0, 0.0], [HALF_PI, 0.0, HALF_PI], -3.05417993878, 3.05417993878, 1.5),
+    joint("left_e1", [0.069, 0.0, 0.26242], [-HALF_PI, -HALF_PI, 0.0], -0.05, 2.618, 1.5),
+    joint("left_w0", [0.10359, 0.0, 0.0], [HALF_PI, 0.0, HALF_PI], -3.059, 3.059, 4.0),
+    joint("left_w1", [0.01, 0.0, 0.2707], [-HALF_PI, -HALF_PI, 0.0], -HALF_PI, 2.094, 4.0),
+    joint("left_w2", [0.115975, 0.0, 0.0], [HALF_PI, 0.0, HALF_PI], -3.059, 3.059, 4.0),
 ];
 
 /// `left_hand` (0.11355 m along the wrist's z) plus `left_endpoint` (0.025 m): wrist to

@@ -318,10 +318,10 @@ impl JobRecord {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn job() -> JobRecord {
+impl JobRecord {
+    /// **Fixture** for the tests of the record and of the journal: a job of three objects,
+    /// ordered, the second carried to its placement.
+    pub(crate) fn fixture() -> JobRecord {
         let mut r = JobRecord::NONE;
         r.job_id = 7;
         r.count = 3;
@@ -338,6 +338,15 @@ mod tests {
             release_q: [0.1, -0.2, 0.3, 0.4, 0.5, 0.6, 0.1 + 0.2],
         });
         r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn job() -> JobRecord {
+        JobRecord::fixture()
     }
 
     #[test]
