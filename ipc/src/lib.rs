@@ -306,22 +306,51 @@ impl JointCommand {
     }
 }
 
-/// What the gripper should do.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum GripperAction {
-    /// Open (release).
-    Open = 0,
-    /// Close (grasp).
-    Close = 1,
+/// Declares a wire enum: `repr(u32)` with the codes 0, 1, 2... in the order written (checked
+/// at compile time), and its `from_code`, so that each enum lists its variants once.
+macro_rules! wire_enum {
+    (
+        $(#[$meta:meta])*
+        pub enum $name:ident ($what:literal) {
+            $($(#[$vmeta:meta])* $variant:ident = $code:literal,)+
+        }
+    ) => {
+        $(#[$meta])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+        #[repr(u32)]
+        pub enum $name {
+            $($(#[$vmeta])* $variant = $code,)+
+        }
+
+        impl $name {
+            #[doc = concat!("The ", $what, " for a wire code, if defined.")]
+            pub fn from_code(c: u32) -> Option<Self> {
+                [$(Self::$variant),+].get(c as usize).copied()
+            }
+        }
+
+        const _: () = {
+            let mut next = 0u32;
+            $(
+                assert!($code == next, "wire codes are 0, 1, 2... in order");
+                next += 1;
+            )+
+            let _ = next;
+        };
+    };
 }
 
-impl GripperAction {
-    /// The action for a wire code, if defined.
-    pub fn from_code(c: u32) -> Option<Self> {
-        [Self::Open, Self::Close].get(c as usize).copied()
+wire_enum! {
+    /// What the gripper should do.
+    pub enum GripperAction ("action") {
+        /// Open (release).
+        Open = 0,
+        /// Close (grasp).
+        Close = 1,
     }
 }
+
+impl GripperAction {}
 
 /// A gripper command from `herbd`, published when it changes and repeated every 100 ms.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
@@ -378,45 +407,29 @@ impl GripperState {
     }
 }
 
-/// Why the arm adapter withholds joint state (the robot must not be moved), as it tells herbd
-/// on the `arm_status` service.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum ArmBlocker {
-    /// The robot may move: joint states flow.
-    None = 0,
-    /// The robot is disabled (an operator, or never enabled).
-    Disabled = 1,
-    /// The robot's emergency stop is pressed (or was, and the robot was not enabled since).
-    EStop = 2,
-    /// The robot reports an error.
-    RobotError = 3,
-    /// The adapter lost its middleware's master (ROS 1).
-    MasterLost = 4,
-    /// The robot stopped reporting its state to the adapter.
-    RobotSilent = 5,
-    /// The adapter's jump guard refused a command far from the measured position: joint state
-    /// is withheld for a moment so that herbd halts and resumes from the measured state.
-    CommandRefused = 6,
+wire_enum! {
+    /// Why the arm adapter withholds joint state (the robot must not be moved), as it tells herbd
+    /// on the `arm_status` service.
+    pub enum ArmBlocker ("blocker") {
+        /// The robot may move: joint states flow.
+        None = 0,
+        /// The robot is disabled (an operator, or never enabled).
+        Disabled = 1,
+        /// The robot's emergency stop is pressed (or was, and the robot was not enabled since).
+        EStop = 2,
+        /// The robot reports an error.
+        RobotError = 3,
+        /// The adapter lost its middleware's master (ROS 1).
+        MasterLost = 4,
+        /// The robot stopped reporting its state to the adapter.
+        RobotSilent = 5,
+        /// The adapter's jump guard refused a command far from the measured position: joint state
+        /// is withheld for a moment so that herbd halts and resumes from the measured state.
+        CommandRefused = 6,
+    }
 }
 
 impl ArmBlocker {
-    /// The blocker for a wire code, if defined.
-    pub fn from_code(c: u32) -> Option<Self> {
-        use ArmBlocker::*;
-        [
-            None,
-            Disabled,
-            EStop,
-            RobotError,
-            MasterLost,
-            RobotSilent,
-            CommandRefused,
-        ]
-        .get(c as usize)
-        .copied()
-    }
-
     /// The fault herbd reports when joint states stop while the adapter says this.
     pub fn fault(self) -> Fault {
         match self {
@@ -509,105 +522,105 @@ impl HeightmapFrame {
     }
 }
 
-/// Where a job is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum JobState {
-    /// No job.
-    Idle = 0,
-    /// Packing.
-    Running = 1,
-    /// Braking to a standstill after a fault or a stop request.
-    Braking = 2,
-    /// Stopped on a fault; resumes when the fault clears.
-    Faulted = 3,
-    /// Every object placed.
-    Done = 4,
-    /// Ended early (an object could not be placed).
-    Failed = 5,
-    /// Ended on a client's request ([`CancelJobRequest`]).
-    Cancelled = 6,
+wire_enum! {
+    /// Where a job is.
+    pub enum JobState ("state") {
+        /// No job.
+        Idle = 0,
+        /// Packing.
+        Running = 1,
+        /// Braking to a standstill after a fault or a stop request.
+        Braking = 2,
+        /// Stopped on a fault; resumes when the fault clears.
+        Faulted = 3,
+        /// Every object placed.
+        Done = 4,
+        /// Ended early (an object could not be placed).
+        Failed = 5,
+        /// Ended on a client's request ([`CancelJobRequest`]).
+        Cancelled = 6,
+    }
 }
 
-/// What a [`Status`] message reports.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum StatusEvent {
-    /// Periodic (10 Hz) state report.
-    Heartbeat = 0,
-    /// A job was accepted and ordered.
-    Accepted = 1,
-    /// An object's placement was decided (`pose`, `decision_ns`).
-    Decided = 2,
-    /// An object was released at its placement.
-    Placed = 3,
-    /// A fault (`fault`) was detected; the arm brakes.
-    Fault = 4,
-    /// The brake finished: the arm stands still.
-    Braked = 5,
-    /// The fault cleared and the job goes on.
-    Resumed = 6,
-    /// Every object was placed.
-    JobDone = 7,
-    /// The job ended early (`fault` says why).
-    JobFailed = 8,
-    /// `herbd` is stopping (signal); the last message it sends.
-    Shutdown = 9,
-    /// The job was cancelled ([`CancelJobRequest`]): the arm braked and retreated (or, if it
-    /// was faulted, stands where it stopped); objects not yet placed stay unpacked.
-    JobCancelled = 10,
-    /// An object was given up (`fault` says why, e.g. [`Fault::MissedGrasp`] after its
-    /// retries): it stays unpacked and the job goes on with the next one.
-    Skipped = 11,
+wire_enum! {
+    /// What a [`Status`] message reports.
+    pub enum StatusEvent ("event") {
+        /// Periodic (10 Hz) state report.
+        Heartbeat = 0,
+        /// A job was accepted and ordered.
+        Accepted = 1,
+        /// An object's placement was decided (`pose`, `decision_ns`).
+        Decided = 2,
+        /// An object was released at its placement.
+        Placed = 3,
+        /// A fault (`fault`) was detected; the arm brakes.
+        Fault = 4,
+        /// The brake finished: the arm stands still.
+        Braked = 5,
+        /// The fault cleared and the job goes on.
+        Resumed = 6,
+        /// Every object was placed.
+        JobDone = 7,
+        /// The job ended early (`fault` says why).
+        JobFailed = 8,
+        /// `herbd` is stopping (signal); the last message it sends.
+        Shutdown = 9,
+        /// The job was cancelled ([`CancelJobRequest`]): the arm braked and retreated (or, if it
+        /// was faulted, stands where it stopped); objects not yet placed stay unpacked.
+        JobCancelled = 10,
+        /// An object was given up (`fault` says why, e.g. [`Fault::MissedGrasp`] after its
+        /// retries): it stays unpacked and the job goes on with the next one.
+        Skipped = 11,
+    }
 }
 
-/// Why the daemon stopped or failed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum Fault {
-    /// None.
-    None = 0,
-    /// Joint states stopped arriving.
-    JointStateTimeout = 1,
-    /// Gripper states stopped arriving.
-    GripperStateTimeout = 2,
-    /// Heightmaps stopped arriving.
-    HeightmapTimeout = 3,
-    /// The gripper did not reach the commanded state in time.
-    Gripper = 4,
-    /// A waypoint was out of reach (inverse kinematics).
-    Unreachable = 5,
-    /// The placement decision failed (policy, bad heightmap).
-    Decision = 6,
-    /// Trajectory generation failed.
-    Motion = 7,
-    /// A stop was requested (SIGINT/SIGTERM).
-    Stop = 8,
-    /// The object was lost from the gripper (e.g. the adapter restarted); it is picked again.
-    ObjectLost = 9,
-    /// The placement lattice held no feasible placement for the next object (the box is
-    /// full for it): the job ends, failed, with this reason.
-    NoFeasiblePlacement = 10,
-    /// herbd restarted (crashed or was killed) with this job unfinished and found it in its
-    /// job journal: the job resumes from the measured robot state, or is abandoned when
-    /// configured so (`journal.on_restart = "abandon"`).
-    Restarted = 11,
-    /// Joint states stopped: the adapter says the robot is disabled.
-    RobotDisabled = 12,
-    /// Joint states stopped: the adapter says the robot's emergency stop is pressed.
-    RobotEStop = 13,
-    /// Joint states stopped: the adapter says the robot reports an error.
-    RobotError = 14,
-    /// Joint states stopped: the adapter lost its middleware's master (ROS 1).
-    MasterLost = 15,
-    /// Joint states stopped: the adapter says the robot stopped reporting.
-    RobotSilent = 16,
-    /// The gripper closed on nothing (or did not grip in time): it is opened, and the pick is
-    /// tried again or the object skipped (`[recovery]`).
-    MissedGrasp = 17,
-    /// Joint states stopped: the adapter refused a command too far from the measured position
-    /// (its jump guard) and halted the arm; the job resumes from the measured state.
-    CommandRefused = 18,
+wire_enum! {
+    /// Why the daemon stopped or failed.
+    pub enum Fault ("fault") {
+        /// None.
+        None = 0,
+        /// Joint states stopped arriving.
+        JointStateTimeout = 1,
+        /// Gripper states stopped arriving.
+        GripperStateTimeout = 2,
+        /// Heightmaps stopped arriving.
+        HeightmapTimeout = 3,
+        /// The gripper did not reach the commanded state in time.
+        Gripper = 4,
+        /// A waypoint was out of reach (inverse kinematics).
+        Unreachable = 5,
+        /// The placement decision failed (policy, bad heightmap).
+        Decision = 6,
+        /// Trajectory generation failed.
+        Motion = 7,
+        /// A stop was requested (SIGINT/SIGTERM).
+        Stop = 8,
+        /// The object was lost from the gripper (e.g. the adapter restarted); it is picked again.
+        ObjectLost = 9,
+        /// The placement lattice held no feasible placement for the next object (the box is
+        /// full for it): the job ends, failed, with this reason.
+        NoFeasiblePlacement = 10,
+        /// herbd restarted (crashed or was killed) with this job unfinished and found it in its
+        /// job journal: the job resumes from the measured robot state, or is abandoned when
+        /// configured so (`journal.on_restart = "abandon"`).
+        Restarted = 11,
+        /// Joint states stopped: the adapter says the robot is disabled.
+        RobotDisabled = 12,
+        /// Joint states stopped: the adapter says the robot's emergency stop is pressed.
+        RobotEStop = 13,
+        /// Joint states stopped: the adapter says the robot reports an error.
+        RobotError = 14,
+        /// Joint states stopped: the adapter lost its middleware's master (ROS 1).
+        MasterLost = 15,
+        /// Joint states stopped: the adapter says the robot stopped reporting.
+        RobotSilent = 16,
+        /// The gripper closed on nothing (or did not grip in time): it is opened, and the pick is
+        /// tried again or the object skipped (`[recovery]`).
+        MissedGrasp = 17,
+        /// Joint states stopped: the adapter refused a command too far from the measured position
+        /// (its jump guard) and halted the arm; the job resumes from the measured state.
+        CommandRefused = 18,
+    }
 }
 
 impl Fault {
@@ -635,68 +648,11 @@ impl Fault {
             Fault::CommandRefused => "the adapter refused a command far from the arm",
         }
     }
-
-    /// The fault for a wire code, if defined.
-    pub fn from_code(c: u32) -> Option<Self> {
-        use Fault::*;
-        [
-            None,
-            JointStateTimeout,
-            GripperStateTimeout,
-            HeightmapTimeout,
-            Gripper,
-            Unreachable,
-            Decision,
-            Motion,
-            Stop,
-            ObjectLost,
-            NoFeasiblePlacement,
-            Restarted,
-            RobotDisabled,
-            RobotEStop,
-            RobotError,
-            MasterLost,
-            RobotSilent,
-            MissedGrasp,
-            CommandRefused,
-        ]
-        .get(c as usize)
-        .copied()
-    }
 }
 
-impl JobState {
-    /// The state for a wire code, if defined.
-    pub fn from_code(c: u32) -> Option<Self> {
-        use JobState::*;
-        [Idle, Running, Braking, Faulted, Done, Failed, Cancelled]
-            .get(c as usize)
-            .copied()
-    }
-}
+impl JobState {}
 
-impl StatusEvent {
-    /// The event for a wire code, if defined.
-    pub fn from_code(c: u32) -> Option<Self> {
-        use StatusEvent::*;
-        [
-            Heartbeat,
-            Accepted,
-            Decided,
-            Placed,
-            Fault,
-            Braked,
-            Resumed,
-            JobDone,
-            JobFailed,
-            Shutdown,
-            JobCancelled,
-            Skipped,
-        ]
-        .get(c as usize)
-        .copied()
-    }
-}
+impl StatusEvent {}
 
 /// Job progress, per-object results and faults from `herbd`, to any client.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
@@ -779,55 +735,36 @@ pub struct PackJobRequest {
 }
 payload!(PackJobRequest);
 
-/// Why a job was rejected.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum RejectReason {
-    /// Accepted.
-    None = 0,
-    /// A job is running; jobs are not queued.
-    Busy = 1,
-    /// No objects.
-    Empty = 2,
-    /// More than [`MAX_JOB_OBJECTS`] objects.
-    TooMany = 3,
-    /// An object index is not in the catalog (`detail`: its position).
-    UnknownObject = 4,
-    /// The request failed validation (wrong version, zero job id...).
-    Malformed = 5,
-    /// The daemon is stopping.
-    ShuttingDown = 6,
-    /// The robot adapter is not connected (no fresh joint and gripper states).
-    NotReady = 7,
-    /// A cancel named a job that is not running (finished, never started, or another one).
-    NoSuchJob = 8,
-    /// The gripper holds an object (a cancelled job's, or put there by hand): a job starts
-    /// only with an empty gripper, so that nothing but its own objects is ever placed.
-    /// `detail`: the held object's catalog type if known, else `NO_OBJECT`. Take it out (the
-    /// loopback: `herbctl reset`) and submit again.
-    Holding = 9,
-}
-
-impl RejectReason {
-    /// The reason for a wire code, if defined.
-    pub fn from_code(c: u32) -> Option<Self> {
-        use RejectReason::*;
-        [
-            None,
-            Busy,
-            Empty,
-            TooMany,
-            UnknownObject,
-            Malformed,
-            ShuttingDown,
-            NotReady,
-            NoSuchJob,
-            Holding,
-        ]
-        .get(c as usize)
-        .copied()
+wire_enum! {
+    /// Why a job was rejected.
+    pub enum RejectReason ("reason") {
+        /// Accepted.
+        None = 0,
+        /// A job is running; jobs are not queued.
+        Busy = 1,
+        /// No objects.
+        Empty = 2,
+        /// More than [`MAX_JOB_OBJECTS`] objects.
+        TooMany = 3,
+        /// An object index is not in the catalog (`detail`: its position).
+        UnknownObject = 4,
+        /// The request failed validation (wrong version, zero job id...).
+        Malformed = 5,
+        /// The daemon is stopping.
+        ShuttingDown = 6,
+        /// The robot adapter is not connected (no fresh joint and gripper states).
+        NotReady = 7,
+        /// A cancel named a job that is not running (finished, never started, or another one).
+        NoSuchJob = 8,
+        /// The gripper holds an object (a cancelled job's, or put there by hand): a job starts
+        /// only with an empty gripper, so that nothing but its own objects is ever placed.
+        /// `detail`: the held object's catalog type if known, else `NO_OBJECT`. Take it out (the
+        /// loopback: `herbctl reset`) and submit again.
+        Holding = 9,
     }
 }
+
+impl RejectReason {}
 
 impl PackJobRequest {
     /// A request for `objects` (at most [`MAX_JOB_OBJECTS`]; more are cut, and then
