@@ -225,6 +225,17 @@ pub fn apply<'a>(env: &'a mut PackingEnv, d: Decision) -> Result<StepResult<'a>>
     }
 }
 
+/// The decision releasing the environment's next object at lattice placement `p`, at the
+/// world's release pose (its z estimate is part of the timed decision); `None` without `p` or
+/// once the episode is over. The lattice rules and the search decide through this.
+pub fn release_at(env: &mut PackingEnv, p: Option<crate::lattice::Placement>) -> Option<Decision> {
+    let (p, object) = (p?, env.next_object()?);
+    let rotation = Rotation::from_rotation_z(p.theta());
+    Some(Decision::Pose(
+        env.world_mut().release_pose(object, p.x, p.y, rotation),
+    ))
+}
+
 /// A human replay in the world ([`Replay::Human`], [`Replay::HumanPose`], [`Replay::Random`]).
 #[derive(Debug, Clone)]
 pub struct ReplayPlacer {

@@ -18,7 +18,6 @@ use crate::heightmap::Heightmap;
 use crate::lattice::{Lattice, Placement};
 use crate::teacher::{CandidateOutcome, rollout_until};
 use crate::world::{PackingWorld, WorldConfig};
-use rapier3d::math::Rotation;
 use std::time::{Duration, Instant};
 
 /// What the search may spend on one decision.
@@ -209,15 +208,8 @@ impl crate::eval::Placer for Search {
         &mut self,
         env: &mut PackingEnv,
     ) -> std::result::Result<Option<crate::eval::Decision>, crate::eval::PlaceError> {
-        let Some(object) = env.next_object() else {
-            return Ok(None);
-        };
         let exact = (self.settings.twin == TwinKind::ExactClone).then(|| env.world());
         let p = Search::decide(self, env.world().heightmap(), env.remaining(), exact)?;
-        let Some(p) = p else { return Ok(None) };
-        let pose =
-            env.world_mut()
-                .release_pose(object, p.x, p.y, Rotation::from_rotation_z(p.theta()));
-        Ok(Some(crate::eval::Decision::Pose(pose)))
+        Ok(crate::eval::release_at(env, p))
     }
 }

@@ -22,7 +22,7 @@ use crate::heightmap::Heightmap;
 use crate::lattice::{Lattice, Placement};
 use crate::reserve::Reserve;
 use crate::world::PackingWorld;
-use rapier3d::math::{Rotation, Vector};
+use rapier3d::math::Vector;
 
 /// What the rollout after one candidate placement achieved.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -283,16 +283,8 @@ impl crate::eval::Placer for LatticeRule {
         &mut self,
         env: &mut PackingEnv,
     ) -> std::result::Result<Option<crate::eval::Decision>, crate::eval::PlaceError> {
-        let Some(object) = env.next_object() else {
-            return Ok(None);
-        };
-        let Some(p) = LatticeRule::decide(self, env)? else {
-            return Ok(None);
-        };
-        let pose =
-            env.world_mut()
-                .release_pose(object, p.x, p.y, Rotation::from_rotation_z(p.theta()));
-        Ok(Some(crate::eval::Decision::Pose(pose)))
+        let p = LatticeRule::decide(self, env)?;
+        Ok(crate::eval::release_at(env, p))
     }
 }
 
