@@ -8,11 +8,11 @@
 //! position by forward kinematics. The fitted `[cell]` lines are printed to paste into
 //! `/etc/herb/herbd.toml`.
 
+use herb_core::frames::{BOX_HALF_X, BOX_HALF_Y};
 use herb_ipc::bus::Bus;
 use herb_ipc::{JointState, Services, monotonic_ns};
 use herb_robot::calibrate::{CalibrationError, box_from_corners, cell_toml, tip_in_base};
 use herb_robot::kinematics::Arm;
-use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y};
 use std::io::{BufRead, Write};
 use std::time::{Duration, Instant};
 

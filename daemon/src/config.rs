@@ -110,7 +110,7 @@ impl Default for ModelsConfig {
             policy: PolicySpec::Blbf,
             sequence: PathBuf::from("models/sequence.json"),
             boxed: None,
-            clearance_m: herb_sim::WorldConfig::default().clearance_m as f64,
+            clearance_m: herb_core::frames::RELEASE_CLEARANCE_M as f64,
         }
     }
 }

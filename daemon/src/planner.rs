@@ -9,6 +9,7 @@
 
 use crate::config::Config;
 pub use crate::plan::{MAX_SEGMENTS, MotionPlan, Request, Response, Segment};
+use herb_core::{SharedCatalog, TypeIdx};
 use herb_decide::DecideError;
 use herb_decide::Order;
 use herb_decide::sequence::SequenceModel;
@@ -18,7 +19,6 @@ use herb_ipc::{Fault, GripperAction, HeightmapFrame, MAX_JOB_OBJECTS, Services};
 use herb_robot::cell::{CellConfig, lift_to, plan_waypoints};
 use herb_robot::kinematics::{Arm, DOF, IkOptions};
 use herb_robot::motion::MotionPlanner;
-use herb_sim::{SharedCatalog, TypeIdx};
 use iceoryx2::prelude::ipc;
 use iceoryx2::sample::Sample;
 use std::sync::Arc;
@@ -231,7 +231,7 @@ impl PlannerCore {
         buf.pose = pose;
         let h = self.catalog.shape(ty).extents().z as f64;
         let place = pose.map(|v| v as f64);
-        let clear_top = herb_sim::frames::SUCCESS_TOP_Z as f64;
+        let clear_top = herb_core::frames::SUCCESS_TOP_Z as f64;
         let w = plan_waypoints(&self.cell, &self.arm, &self.ik, h, place, &from, clear_top)
             .map_err(|_| Fault::Unreachable)?;
         let transit = self.cell.transit_z(h, clear_top);
@@ -273,7 +273,7 @@ impl PlannerCore {
         let h = held.map_or(0.0, |t| self.catalog.shape(TypeIdx(t)).extents().z as f64);
         let transit = self
             .cell
-            .transit_z(h, herb_sim::frames::SUCCESS_TOP_Z as f64);
+            .transit_z(h, herb_core::frames::SUCCESS_TOP_Z as f64);
         if let Some(up) = lift_to(&self.arm, &self.ik, &from, transit) {
             self.motion
                 .point_to_point(&from, &up, &mut buf.setpoints)

@@ -88,7 +88,7 @@ pub enum ReplayError {
     Invalid(herb_robot::config_file::Invalid),
     /// The catalog cannot be built.
     #[error("catalog: {0}")]
-    Catalog(herb_sim::SimError),
+    Catalog(herb_core::SimError),
     /// The catalog or a model differs from the recorded digests (and `force` was not given):
     /// what differs.
     #[error("{} (--force replays anyway)", .0.join("; "))]
@@ -169,9 +169,9 @@ fn rebuild(log: &Log, opts: &ReplayOptions) -> Result<(Config, PlannerCore), Rep
         cfg.models.boxed = Some(b.clone());
     }
     cfg.validate().map_err(ReplayError::Invalid)?;
-    let root = herb_sim::paths::boxed_root(cfg.models.boxed.as_deref());
-    let meshes = herb_sim::paths::mesh_source(None, root.as_deref());
-    let catalog = herb_sim::Catalog::builtin(&meshes).map_err(ReplayError::Catalog)?;
+    let root = herb_core::paths::boxed_root(cfg.models.boxed.as_deref());
+    let meshes = herb_core::paths::mesh_source(None, root.as_deref());
+    let catalog = herb_core::Catalog::builtin(&meshes).map_err(ReplayError::Catalog)?;
     let mut differ = Vec::new();
     if catalog_digest(&catalog) != h.catalog {
         differ.push(format!(

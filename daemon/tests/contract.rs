@@ -1,9 +1,9 @@
 //! Contract constants defined on both sides of the IPC boundary agree: the
 //! wire's copies in `herb_ipc` and their sources in the simulation and the robot code.
 
+use herb_core::heightmap::HEIGHT_RANGE_M;
+use herb_core::{GridSpec, ObsLayout};
 use herb_robot::kinematics::{DOF, LEFT_ARM};
-use herb_sim::heightmap::HEIGHT_RANGE_M;
-use herb_sim::{GridSpec, ObsLayout};
 
 #[test]
 fn the_wire_carries_the_arm_joints_the_heights_and_the_grid_the_daemon_uses() {

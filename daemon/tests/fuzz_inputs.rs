@@ -7,10 +7,10 @@
 //! property runs a quarter of them, each case builds a model); `scripts/fuzz.sh` runs them with
 //! a larger budget.
 
+use herb_core::Catalog;
+use herb_core::paths::MeshSource;
 use herb_daemon::config::{Config, ConfigFile};
 use herb_decide::{PolicySpec, SequenceModel, load_policy};
-use herb_sim::Catalog;
-use herb_sim::paths::MeshSource;
 use proptest::prelude::*;
 use std::path::{Path, PathBuf};
 

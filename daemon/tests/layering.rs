@@ -44,10 +44,28 @@ const RULES: &[(&str, &[&str])] = &[
             "herb-robot",
             "herb-adapter",
             "herb-decide",
+            "herb-methods",
             "herb-daemon",
         ],
     ),
-    ("herb-decide", SIM_SIDE_NEVER),
+    // The decision core herbd ships: the policies, the order and the Decider, on the domain
+    // core alone (no physics engine, no pictures).
+    (
+        "herb-decide",
+        &[
+            "rapier3d",
+            "plotters",
+            "herb-sim",
+            "herb-methods",
+            "iceoryx2",
+            "ruckig",
+            "herb-ipc",
+            "herb-robot",
+            "herb-adapter",
+            "herb-daemon",
+        ],
+    ),
+    ("herb-methods", SIM_SIDE_NEVER),
     ("herb-sim-cli", SIM_SIDE_NEVER),
     ("herb-sim-py", SIM_SIDE_NEVER),
     (
@@ -55,13 +73,18 @@ const RULES: &[(&str, &[&str])] = &[
         &[
             "herb-sim",
             "herb-decide",
+            "herb-methods",
             "herb-robot",
             "herb-adapter",
             "herb-daemon",
         ],
     ),
-    // herbd: no pictures (herbctl, its own crate, draws them).
-    ("herb-daemon", &["plotters"]),
+    // herbd: no pictures (herbctl, its own crate, draws them), and no physics engine: it
+    // decides through the decision core, and the evaluation's registry is not its business.
+    (
+        "herb-daemon",
+        &["plotters", "rapier3d", "herb-sim", "herb-methods"],
+    ),
     // The Rust client library: the wire and iceoryx2 only; no physics engine, policies'
     // runtime or pictures, and none of the crates that bring them.
     (
@@ -74,6 +97,7 @@ const RULES: &[(&str, &[&str])] = &[
             "herb-sim",
             "herb-picture",
             "herb-decide",
+            "herb-methods",
             "herb-robot",
             "herb-daemon",
         ],

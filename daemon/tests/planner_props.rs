@@ -9,15 +9,15 @@
 //! Budget: `PROPTEST_CASES` cases (a quarter of proptest's default 256 in CI, each case plans
 //! a whole pick and place); `scripts/fuzz.sh` runs more.
 
+use herb_core::observation::ObsLayout;
+use herb_core::paths::MeshSource;
+use herb_core::{Catalog, GridSpec, TypeIdx};
 use herb_daemon::config::Config;
 use herb_daemon::plan::{MotionPlan, Request, Response};
 use herb_daemon::planner::PlannerCore;
 use herb_decide::{DecisionInput, Order, Policy, SequenceModel};
 use herb_ipc::{Fault, HeightmapFrame, MAX_JOB_OBJECTS};
 use herb_robot::kinematics::LEFT_TOP_DOWN_NOMINAL;
-use herb_sim::observation::ObsLayout;
-use herb_sim::paths::MeshSource;
-use herb_sim::{Catalog, GridSpec, TypeIdx};
 use proptest::prelude::*;
 use std::path::Path;
 use std::sync::Arc;

@@ -61,7 +61,7 @@ impl Default for WorldConfig {
     fn default() -> Self {
         Self {
             heightmap_cell_m: ObsLayout::CELL_M,
-            clearance_m: 0.002,
+            clearance_m: crate::frames::RELEASE_CLEARANCE_M,
             dt: 1.0 / 60.0,
             settle_cap_s: 3.0,
             time_until_sleep_s: 0.2,

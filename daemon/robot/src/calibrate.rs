@@ -7,10 +7,10 @@
 //! points and [`cell_toml`] renders the result as lines to paste under `[cell]`. The pick
 //! station's `pick_origin` is the tip touching the centre of its surface, as is.
 //!
-//! Corner order, in the box frame B (x along the long side, `herb_sim::frames`): corner 1 at
+//! Corner order, in the box frame B (x along the long side, `herb_core::frames`): corner 1 at
 //! (-x, -y), corner 2 at (+x, -y) (along the long side from corner 1), corner 3 at (+x, +y),
 //! optionally corner 4 at (-x, +y); that is, counter-clockwise seen from above. The box's
-//! inner length and width (`2 * BOX_HALF_X`, `2 * BOX_HALF_Y` in `herb_sim::frames`) are
+//! inner length and width (`2 * BOX_HALF_X`, `2 * BOX_HALF_Y` in `herb_core::frames`) are
 //! parameters here: this crate does not depend on the simulator.
 
 use crate::kinematics::{Arm, DOF};

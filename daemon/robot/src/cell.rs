@@ -3,8 +3,8 @@
 //! box and pick-station poses to simulate them).
 //!
 //! Frames: Baxter's `base` (z up); the box frame B (origin at the centre of the box's inner
-//! floor, x along the long side, `herb_sim::frames`) sits at `box_origin` turned by `box_yaw`.
-//! Objects wait at the pick station in their canonical resting orientation (`herb_sim`
+//! floor, x along the long side, `herb_core::frames`) sits at `box_origin` turned by `box_yaw`.
+//! Objects wait at the pick station in their canonical resting orientation (`herb_core`
 //! catalog), centred on `pick_origin` (a point on the station's surface), turned by
 //! `pick_yaw`. Grasps are top-down at the object's top, `grasp_depth` below it.
 
@@ -108,7 +108,7 @@ impl CellConfig {
 
     /// Tool z (in `base`) for sideways moves while carrying an object of height `h`, whose
     /// bottom must clear `clear_top` above the box floor (the success volume's top,
-    /// `herb_sim::frames::SUCCESS_TOP_Z`) and the pick station by `transit_clearance`.
+    /// `herb_core::frames::SUCCESS_TOP_Z`) and the pick station by `transit_clearance`.
     pub fn transit_z(&self, h: f64, clear_top: f64) -> f64 {
         let floor = self.box_origin[2] + clear_top;
         floor.max(self.pick_origin[2] + h) + self.transit_clearance + h - self.depth(h)

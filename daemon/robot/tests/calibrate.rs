@@ -2,10 +2,10 @@
 //! (4 and 3), bad corner sets rejected with the reason, the `[cell]` lines parsed back, and
 //! the touched tip through IK and FK.
 
+use herb_core::frames::{BOX_HALF_X, BOX_HALF_Y};
 use herb_robot::calibrate::{CalibrationError, box_from_corners, cell_toml, tip_in_base};
 use herb_robot::cell::CellConfig;
 use herb_robot::kinematics::{Arm, IkOptions, LEFT_TOP_DOWN_NOMINAL};
-use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

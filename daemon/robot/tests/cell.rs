@@ -2,12 +2,12 @@
 //! floor to the rim, any yaw) and every grasp of every catalog object plans to joint targets
 //! within the configured limits, and the planned poses are where the object should go.
 
+use herb_core::Catalog;
+use herb_core::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT};
+use herb_core::paths::MeshSource;
 use herb_robot::cell::{CellConfig, plan_waypoints};
 use herb_robot::kinematics::{Arm, IkOptions, LEFT_TOP_DOWN_NOMINAL};
 use herb_robot::motion::JointLimits;
-use herb_sim::Catalog;
-use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT};
-use herb_sim::paths::MeshSource;
 use nalgebra::{Point3, Vector3};
 
 fn arm(l: &JointLimits) -> Arm {
@@ -39,7 +39,7 @@ fn every_placement_over_the_box_is_reachable() {
                             h,
                             [x, y, z, yaw],
                             &LEFT_TOP_DOWN_NOMINAL,
-                            herb_sim::frames::SUCCESS_TOP_Z as f64,
+                            herb_core::frames::SUCCESS_TOP_Z as f64,
                         )
                         .unwrap_or_else(|e| {
                             panic!(

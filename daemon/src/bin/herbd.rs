@@ -2,13 +2,13 @@
 //! `herb_daemon::config` for the configuration.
 
 use clap::Parser;
+use herb_core::{Catalog, paths};
 use herb_daemon::config::{Config, ConfigFile, OnRestart};
 use herb_daemon::controller::{Controller, LoopStats, Ports, Shared};
 use herb_daemon::notify::{Notice, Notifier};
 use herb_daemon::{journal, logfmt, planner, record};
 use herb_ipc::bus::{Bus, daemon_node_name, live_nodes_named};
 use herb_ipc::{Fault, JobState, Services, Status, StatusEvent};
-use herb_sim::{Catalog, paths};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;

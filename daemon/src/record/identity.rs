@@ -24,10 +24,10 @@ pub fn cpu_identity() -> String {
 }
 
 /// The digest of a catalog: every type's id and the extents of its shape.
-pub fn catalog_digest(c: &herb_sim::Catalog) -> u64 {
+pub fn catalog_digest(c: &herb_core::Catalog) -> u64 {
     let mut h = Fnv::new();
     for i in 0..c.len() {
-        let t = herb_sim::TypeIdx(i as u16);
+        let t = herb_core::TypeIdx(i as u16);
         h.bytes(c.spec(t).id.as_bytes());
         let e = c.shape(t).extents();
         for v in [e.x, e.y, e.z] {
@@ -42,7 +42,7 @@ pub fn catalog_digest(c: &herb_sim::Catalog) -> u64 {
 /// of its own, and the digests of what it loads.
 pub fn header_for(
     cfg: &crate::config::Config,
-    catalog: &herb_sim::Catalog,
+    catalog: &herb_core::Catalog,
 ) -> Result<RunHeader, RecordError> {
     use herb_decide::PolicySpec;
     let model = |p: &Path, source| RecordError::Model {
@@ -65,7 +65,7 @@ pub fn header_for(
             file(&p)?
         }
     };
-    c.models.boxed = herb_sim::paths::boxed_root(cfg.models.boxed.as_deref())
+    c.models.boxed = herb_core::paths::boxed_root(cfg.models.boxed.as_deref())
         .map(|p| std::fs::canonicalize(&p).unwrap_or(p));
     let started_unix_s = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)

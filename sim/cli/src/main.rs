@@ -15,7 +15,8 @@ use std::time::{Duration, Instant};
 
 mod plot;
 
-use herb_decide::{Method, MethodSettings, Order, PolicySpec, SequenceModel};
+use herb_decide::{Order, PolicySpec, SequenceModel};
+use herb_methods::{Method, MethodSettings};
 use herb_sim::search::{Budget, SearchSettings, TwinKind};
 
 /// The replays `herb-sim pack` shows.
@@ -284,7 +285,7 @@ fn sequence_cmd(data: &DataArgs, a: SequenceArgs) -> AnyResult<()> {
     let episodes: Vec<Episode> = sessions.iter().map(|s| s.episode(&catalog)).collect();
     let model = herb_decide::SequenceModel::fit(
         &catalog,
-        &episodes,
+        episodes.iter().map(|e| &e.objects[..]),
         "BoxED sessions/*/PickPlace_dataset.json: each instance at its first placement, \
              in the human order (herb_sim::boxed::Session::episode)",
     );

@@ -26,6 +26,10 @@ pub const SUCCESS_TOP_Z: f32 = BOX_HEIGHT + SUCCESS_MARGIN_Z;
 /// The default widening of the success volume for contact penetration (m).
 pub const INSIDE_TOLERANCE_M: f32 = 0.01;
 
+/// Gap added above an object's estimated resting height before it is released (m): the
+/// world's and herbd's default.
+pub const RELEASE_CLEARANCE_M: f32 = 0.002;
+
 /// Unity world axes to B axes (B x = world -z, B y = world +x, B z = world +y); det = -1.
 const M_UNITY_TO_B: [[f32; 3]; 3] = [[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
 

@@ -1,11 +1,11 @@
 //! The candidate placement policy: an ONNX network that scores the placement lattice's
-//! candidates (`herb_sim::lattice`, `herb_sim::features`), run by tract.
+//! candidates (`herb_core::lattice`, `herb_core::features`), run by tract.
 //!
 //! # Model I/O contract (the candidate contract)
 //!
 //! Three inputs, `f32`, in this order: `context` `[1, CONTEXT_LEN]`, `candidates`
 //! `[1, MAX_CANDIDATES, CANDIDATE_LEN]`, `mask` `[1, MAX_CANDIDATES]` (1 for a real candidate,
-//! 0 for padding), filled by [`herb_sim::features::DecisionFeatures`]; one output `logits`
+//! 0 for padding), filled by [`herb_core::features::DecisionFeatures`]; one output `logits`
 //! `[1, MAX_CANDIDATES]`. The policy takes the real candidate with the highest logit (the
 //! padding is masked again here, whatever the model does) and returns its placement as an
 //! action. Loading checks names, types and shapes and refuses a model that differs, naming
@@ -20,10 +20,10 @@
 
 use crate::error::{DecideError, ModelReadError, Result};
 use crate::policy::{DecisionInput, Policy, check_action};
-use herb_sim::features::{CANDIDATE_LEN, CONTEXT_LEN, CandidateLayout, DecisionFeatures};
-use herb_sim::lattice::{Lattice, MAX_CANDIDATES, Placement};
-use herb_sim::observation::placement_to_action;
-use herb_sim::{Catalog, Heightmap, TypeIdx};
+use herb_core::features::{CANDIDATE_LEN, CONTEXT_LEN, CandidateLayout, DecisionFeatures};
+use herb_core::lattice::{Lattice, MAX_CANDIDATES, Placement};
+use herb_core::observation::placement_to_action;
+use herb_core::{Catalog, Heightmap, TypeIdx};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tract_onnx::prelude::*;

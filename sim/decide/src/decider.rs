@@ -9,10 +9,10 @@
 
 use crate::error::{DecideError, Result};
 use crate::policy::{DecisionInput, Policy, check_action};
-use herb_sim::observation::{Projections, action_to_placement};
-use herb_sim::zestimate::{ZScratch, estimate_z_rotated};
-use herb_sim::{GridSpec, Heightmap, ObsLayout, SharedCatalog, TypeIdx};
-use rapier3d::math::{Pose, Rotation, Vector};
+use herb_core::observation::{Projections, action_to_placement};
+use herb_core::zestimate::{ZScratch, estimate_z_rotated};
+use herb_core::{GridSpec, Heightmap, ObsLayout, SharedCatalog, TypeIdx};
+use parry3d::math::{Pose, Rotation, Vector};
 
 /// A heightmap as it arrives (a camera frame, the simulation's map): row-major cells of a grid
 /// over the box interior, heights above the inner floor (m).

@@ -60,7 +60,7 @@ pub enum DecideError {
     },
     /// An error from the packing world.
     #[error(transparent)]
-    Sim(#[from] herb_sim::SimError),
+    Sim(#[from] herb_core::SimError),
 }
 
 /// A name that names nothing: an unknown method or order, an empty policy.

@@ -3,28 +3,25 @@
 //! policies behind one trait). Used by `herbd`, by the evaluation (`herb-sim eval`) and by
 //! training.
 //!
-//! The observation layout, the z estimate and the object catalog are `herb-sim`'s (one
-//! implementation each); this crate only decides.
+//! The observation layout, the z estimate and the object catalog are `herb-core`'s (one
+//! implementation each); this crate only decides. It links no physics engine: the registry of
+//! every evaluated method (`herb-methods`) and the search's physics (`herb-sim`) sit on top.
 
 #![warn(missing_docs)]
 
 pub mod candidate;
 pub mod decider;
 pub mod error;
-pub mod method;
 pub mod onnx;
 pub mod order;
-pub mod placer;
 pub mod policy;
 pub mod sequence;
 
 pub use candidate::CandidatePolicy;
 pub use decider::{Decider, Decision, HeightmapView};
 pub use error::{DecideError, ModelReadError, NameError, Result};
-pub use method::Method;
 pub use onnx::OnnxPolicy;
 pub use order::Order;
-pub use placer::{HeldOutPlacer, MethodSettings};
 pub use policy::{Blbf, DecisionInput, PackitSo3, Policy};
 pub use sequence::{SequenceModel, beam3, beam3_last};
 
@@ -129,7 +126,7 @@ impl std::fmt::Display for PolicySpec {
 /// unless resolved before). An ONNX model is loaded as a [`CandidatePolicy`] when its
 /// inputs are the candidate contract's and as an [`OnnxPolicy`] (the observation contract)
 /// otherwise; either refuses a model that breaks its contract.
-pub fn load_policy(spec: &PolicySpec, catalog: &herb_sim::Catalog) -> Result<Box<dyn Policy>> {
+pub fn load_policy(spec: &PolicySpec, catalog: &herb_core::Catalog) -> Result<Box<dyn Policy>> {
     let resolved = spec.resolved(std::path::Path::new(PolicySpec::DEFAULT_MODELS_DIR));
     let path = match &resolved {
         PolicySpec::Blbf => return Ok(Box::new(Blbf::new())),

@@ -1,7 +1,7 @@
 //! The ONNX placement policy, run by tract on the calling thread.
 //!
 //! Loading reads the file, checks it against the model I/O contract written down with the
-//! observation layout (`herb_sim::observation`, "Policy model I/O contract": one input `obs`
+//! observation layout (`herb_core::observation`, "Policy model I/O contract": one input `obs`
 //! `f32 [1, 2, 224, 224]`, one output `action` `f32 [1, 3]`), optimises it once and makes a
 //! runnable state. A file that is missing, truncated, not ONNX or of another shape is a
 //! [`DecideError::Model`] naming the file and what differs; tract panics while parsing a
@@ -15,7 +15,7 @@
 
 use crate::error::{DecideError, Result};
 use crate::policy::{DecisionInput, Policy, check_action, check_input};
-use herb_sim::ObsLayout;
+use herb_core::ObsLayout;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tract_onnx::prelude::*;
@@ -121,7 +121,7 @@ impl OnnxPolicy {
     }
 }
 
-/// Checks the model against the I/O contract (see `herb_sim::observation`).
+/// Checks the model against the I/O contract (see `herb_core::observation`).
 fn check_contract(raw: &InferenceModel) -> std::result::Result<(), String> {
     let ins = raw.input_outlets().map_err(|e| e.to_string())?;
     if ins.len() != 1 {

@@ -3,7 +3,7 @@
 
 use crate::error::{DecideError, NameError, Result};
 use crate::sequence::{SequenceModel, beam3, beam3_last};
-use herb_sim::{Catalog, TypeIdx};
+use herb_core::{Catalog, TypeIdx};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -133,7 +133,7 @@ impl std::str::FromStr for Order {
 }
 
 /// The member of `all` whose `name` is `s`; else an error naming `what` and listing the names.
-pub(crate) fn parse_name<T: Copy>(
+pub fn parse_name<T: Copy>(
     what: &'static str,
     s: &str,
     all: &[T],

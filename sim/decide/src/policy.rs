@@ -1,17 +1,17 @@
 //! Placement policies behind one trait: the observation in, an action `(x, y, theta)` in
-//! `[-1, 1]^3` out (mapped to the box by `herb_sim::observation::action_to_placement`).
+//! `[-1, 1]^3` out (mapped to the box by `herb_core::observation::action_to_placement`).
 //!
 //! A policy sees a [`DecisionInput`]: the observation tensor in the shared layout
-//! (`herb_sim::ObsLayout`), and, for policies that are not networks, the heightmap it was
+//! (`herb_core::ObsLayout`), and, for policies that are not networks, the heightmap it was
 //! built from and the next object. Decisions are checked before they leave: a non-finite or
 //! out-of-range action is a [`DecideError::Rejected`] naming the policy, never passed on.
 
 use crate::error::{DecideError, Result};
-use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y, SUCCESS_TOP_Z};
-use herb_sim::observation::placement_to_action;
-use herb_sim::zestimate::{ZScratch, bottom_footprint, estimate_z_rotated, rest_height};
-use herb_sim::{Catalog, GridSpec, Heightmap, ObjectShape, ObsLayout, TypeIdx};
-use rapier3d::math::{Mat3, Pose, Rotation, Vector};
+use herb_core::frames::{BOX_HALF_X, BOX_HALF_Y, SUCCESS_TOP_Z};
+use herb_core::observation::placement_to_action;
+use herb_core::zestimate::{ZScratch, bottom_footprint, estimate_z_rotated, rest_height};
+use herb_core::{Catalog, GridSpec, Heightmap, ObjectShape, ObsLayout, TypeIdx};
+use parry3d::math::{Mat3, Pose, Rotation, Vector};
 
 /// What a policy decides from.
 #[derive(Debug, Clone, Copy)]

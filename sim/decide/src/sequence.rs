@@ -47,8 +47,7 @@
 //! probability), then the largest by volume, then the lowest catalog index.
 
 use crate::error::{DecideError, Result};
-use herb_sim::boxed::Episode;
-use herb_sim::{Catalog, TypeIdx};
+use herb_core::{Catalog, TypeIdx};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -109,24 +108,31 @@ pub enum State {
 }
 
 impl SequenceModel {
-    /// Counts transitions in `episodes` (human order).
-    pub fn fit(catalog: &Catalog, episodes: &[Episode], provenance_source: &str) -> Self {
+    /// Counts transitions in `episodes`, each the object types of one human session in the
+    /// humans' order (BoxED's `Episode::objects`).
+    pub fn fit<'a>(
+        catalog: &Catalog,
+        episodes: impl IntoIterator<Item = &'a [TypeIdx]>,
+        provenance_source: &str,
+    ) -> Self {
         let n = catalog.len();
         let mut start = vec![0u32; n];
         let mut counts = vec![0u32; n * n];
         let mut transitions = 0;
-        for ep in episodes {
-            if let Some(first) = ep.objects.first() {
+        let mut count = 0;
+        for objects in episodes {
+            count += 1;
+            if let Some(first) = objects.first() {
                 start[first.0 as usize] += 1;
             }
-            for w in ep.objects.windows(2) {
+            for w in objects.windows(2) {
                 counts[w[0].0 as usize * n + w[1].0 as usize] += 1;
                 transitions += 1;
             }
         }
         let provenance = Provenance {
             source: provenance_source.to_owned(),
-            episodes: episodes.len(),
+            episodes: count,
             transitions,
             command: "cargo run --release --bin herb-sim -- sequence --out models/sequence.json"
                 .into(),

@@ -11,7 +11,7 @@ use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y, SUCCESS_TOP_Z};
 use herb_sim::observation::action_to_placement;
 use herb_sim::paths::MeshSource;
 use herb_sim::{Catalog, Heightmap, ObsLayout, TypeIdx};
-use rapier3d::math::Rotation;
+use parry3d::math::Rotation;
 use std::path::{Path, PathBuf};
 
 fn fixtures() -> PathBuf {

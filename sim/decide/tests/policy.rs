@@ -8,9 +8,9 @@ use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y};
 use herb_sim::observation::action_to_placement;
 use herb_sim::paths::MeshSource;
 use herb_sim::{Catalog, Heightmap, ObsLayout, TypeIdx};
+use parry3d::math::Rotation;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rapier3d::math::Rotation;
 
 fn catalog() -> Catalog {
     Catalog::builtin(&MeshSource::None("test".into())).expect("catalog")

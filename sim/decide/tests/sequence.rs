@@ -161,12 +161,7 @@ fn planning_is_deterministic_under_ties() {
 fn sequence_files_round_trip_and_bad_files_are_clear_errors() {
     let c = catalog();
     let (a, b, _) = abc(&c);
-    let ep = herb_sim::boxed::Episode {
-        name: "fixture".into(),
-        objects: vec![a, b, a],
-        human: vec![],
-    };
-    let m = SequenceModel::fit(&c, &[ep], "fixture episode");
+    let m = SequenceModel::fit(&c, [&[a, b, a][..]], "fixture episode");
     assert_eq!(m.p(State::Start, a), 1.0);
     assert_eq!(m.p(State::After(a), b), 1.0);
     assert_eq!(m.p(State::After(b), a), 1.0);
@@ -203,7 +198,11 @@ fn committed_sequence_model_matches_the_data() {
     let (sessions, bad) = herb_sim::boxed::load_all(&root, &c).unwrap();
     assert!(bad.is_empty());
     let episodes: Vec<_> = sessions.iter().map(|s| s.episode(&c)).collect();
-    let fitted = SequenceModel::fit(&c, &episodes, &committed.provenance().source);
+    let fitted = SequenceModel::fit(
+        &c,
+        episodes.iter().map(|e| &e.objects[..]),
+        &committed.provenance().source,
+    );
     assert_eq!(
         fitted.to_json(),
         committed.to_json(),

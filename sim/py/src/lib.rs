@@ -16,7 +16,8 @@
 //! The Gymnasium classes are in the Python package (`herb_sim/__init__.py`).
 
 use herb_decide::sequence::SequenceModel;
-use herb_decide::{Blbf, Decider, Method, Order};
+use herb_decide::{Blbf, Decider, Order};
+use herb_methods::Method;
 use herb_sim::features::{self, CANDIDATE_LEN, CONTEXT_LEN, DecisionFeatures};
 use herb_sim::lattice::{Lattice, MAX_CANDIDATES, Placement};
 use herb_sim::paths::{self, MeshSource};

@@ -2,23 +2,25 @@
 //! ([`herb_sim::eval::run_episode`]), and the registry's factory: [`Method::placer`] builds the
 //! placer of any method of Table I from one [`MethodSettings`].
 
-use crate::error::{DecideError, Result};
 use crate::method::Method;
-use crate::policy::{PackitSo3, Policy};
-use crate::{Decider, PolicySpec};
+use herb_decide::policy::{PackitSo3, Policy};
+use herb_decide::{DecideError, Decider, PolicySpec, Result};
 use herb_sim::boxed::{Episode, participant};
 use herb_sim::eval::{Decision, PlaceError, Placer, ReplayPlacer};
 use herb_sim::search::{Search, SearchSettings};
 use herb_sim::{PackingEnv, RewardMode, SharedCatalog, WorldConfig};
 use std::path::PathBuf;
 
-impl<P: Policy + ?Sized> Placer for Decider<P> {
+/// herbd's decision path ([`Decider`]) as a placer of the episode loop.
+pub struct DeciderPlacer<P: Policy + ?Sized = dyn Policy>(pub Decider<P>);
+
+impl<P: Policy + ?Sized> Placer for DeciderPlacer<P> {
     fn name(&self) -> String {
-        self.policy_name().into()
+        self.0.policy_name().into()
     }
 
     fn begin_episode(&mut self, _ep: &Episode, seed: u64) -> std::result::Result<(), PlaceError> {
-        Decider::begin_episode(self, seed);
+        self.0.begin_episode(seed);
         Ok(())
     }
 
@@ -32,8 +34,7 @@ impl<P: Policy + ?Sized> Placer for Decider<P> {
             return Ok(None);
         };
         let after = env.remaining().get(1..).unwrap_or(&[]);
-        match Decider::decide(
-            self,
+        match self.0.decide(
             env.world().heightmap().into(),
             object,
             env.step_index(),
@@ -46,7 +47,10 @@ impl<P: Policy + ?Sized> Placer for Decider<P> {
     }
 }
 
-impl Placer for PackitSo3 {
+/// The PackIt SO(3) heuristic as a placer of the episode loop.
+pub struct PackitPlacer(pub PackitSo3);
+
+impl Placer for PackitPlacer {
     fn name(&self) -> String {
         "packit-so3".into()
     }
@@ -62,7 +66,9 @@ impl Placer for PackitSo3 {
         };
         let world = env.world();
         let shape = world.catalog().shape(object);
-        let pose = PackitSo3::decide(self, world.heightmap(), shape, world.config().clearance_m);
+        let pose = self
+            .0
+            .decide(world.heightmap(), shape, world.config().clearance_m);
         Ok(pose.map(Decision::Pose))
     }
 }
@@ -70,20 +76,20 @@ impl Placer for PackitSo3 {
 /// A behaviour-cloning method: each episode placed by the model trained without its
 /// participant (even participants by the `heldout-even` model, odd ones by the other).
 pub struct HeldOutPlacer {
-    deciders: [Decider; 2],
+    deciders: [DeciderPlacer; 2],
     active: usize,
 }
 
 impl Placer for HeldOutPlacer {
     fn name(&self) -> String {
-        self.deciders[self.active].policy_name().into()
+        self.deciders[self.active].0.policy_name().into()
     }
 
     fn begin_episode(&mut self, ep: &Episode, seed: u64) -> std::result::Result<(), PlaceError> {
         let p = participant(&ep.name)
             .ok_or_else(|| format!("no participant number in the session name {:?}", ep.name))?;
         self.active = (p % 2) as usize;
-        self.deciders[self.active].begin_episode(seed);
+        self.deciders[self.active].0.begin_episode(seed);
         Ok(())
     }
 
@@ -140,8 +146,9 @@ impl Method {
         catalog: &SharedCatalog,
         settings: &MethodSettings,
     ) -> Result<Box<dyn Placer>> {
-        let decider =
-            |p: Box<dyn Policy>| Decider::new(p, catalog.clone(), settings.world.clearance_m);
+        let decider = |p: Box<dyn Policy>| {
+            DeciderPlacer(Decider::new(p, catalog.clone(), settings.world.clearance_m))
+        };
         if let Some(replay) = self.replay() {
             return ReplayPlacer::new(replay)
                 .map(|p| Box::new(p) as Box<dyn Placer>)
@@ -159,7 +166,8 @@ impl Method {
             return Ok(Box::new(rule));
         }
         if let Some(files) = self.bc_models(&settings.bc_models) {
-            let [even, odd] = files.map(|f| crate::load_policy(&PolicySpec::Onnx(f), catalog));
+            let [even, odd] =
+                files.map(|f| herb_decide::load_policy(&PolicySpec::Onnx(f), catalog));
             return Ok(Box::new(HeldOutPlacer {
                 deciders: [decider(even?), decider(odd?)],
                 active: 0,
@@ -171,10 +179,10 @@ impl Method {
                     method: self.name(),
                     message: "needs a policy (e.g. models/policy-cs06.onnx or cs06)".into(),
                 })?;
-                Box::new(decider(crate::load_policy(spec, catalog)?))
+                Box::new(decider(herb_decide::load_policy(spec, catalog)?))
             }
-            Self::Blbf => Box::new(decider(Box::new(crate::Blbf::new()))),
-            Self::PackitSo3 => Box::new(PackitSo3::new()),
+            Self::Blbf => Box::new(decider(Box::new(herb_decide::Blbf::new()))),
+            Self::PackitSo3 => Box::new(PackitPlacer(PackitSo3::new())),
             Self::Search => Box::new(Search::new(
                 catalog.clone(),
                 settings.world.clone(),

@@ -1,6 +1,6 @@
 //! The ways Table I places objects, named once for the CLI, the bindings and the tables.
 
-use crate::order::Order;
+use herb_decide::Order;
 use herb_sim::RewardMode;
 use herb_sim::catalog::Catalog;
 use herb_sim::eval::Replay;
@@ -25,7 +25,7 @@ pub enum Method {
     /// The humans' recorded poses checked against the success volume, without physics.
     HumanRecorded,
     /// The PackIt heuristic with its rotation search over the 24 axis-aligned orientations
-    /// ([`crate::PackitSo3`]), largest first (default order).
+    /// ([`herb_decide::PackitSo3`]), largest first (default order).
     PackitSo3,
     /// Behaviour cloning with a squared-error loss (`training/bc.py`), human order, each
     /// participant scored by the model trained without them.
@@ -182,9 +182,9 @@ impl std::fmt::Display for Method {
 }
 
 impl std::str::FromStr for Method {
-    type Err = crate::error::NameError;
+    type Err = herb_decide::NameError;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        crate::order::parse_name("method", s, &Self::ALL, Self::name)
+        herb_decide::order::parse_name("method", s, &Self::ALL, Self::name)
     }
 }

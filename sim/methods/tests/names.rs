@@ -1,7 +1,8 @@
 //! The names of methods, orders and policies: one spelling each, parsed back to the same value,
 //! and unknown names refused with the list of known ones.
 
-use herb_decide::{Method, Order, PolicySpec, Shipped};
+use herb_decide::{Order, PolicySpec, Shipped};
+use herb_methods::Method;
 use std::path::Path;
 
 #[test]

@@ -1,7 +1,8 @@
 //! The method registry: every registered method runs one BoxED episode through the one episode
 //! loop (`herb_sim::eval::run_episode`), built by the one factory (`Method::placer`).
 
-use herb_decide::{Method, MethodSettings, Order, PolicySpec, SequenceModel};
+use herb_decide::{Order, PolicySpec, SequenceModel};
+use herb_methods::{Method, MethodSettings};
 use herb_sim::eval::{self, EpisodeResult};
 use herb_sim::paths::{self, MeshSource};
 use herb_sim::{Catalog, PackingEnv, RewardMode, SharedCatalog, WorldConfig};
