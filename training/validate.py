@@ -12,8 +12,10 @@ choose between training runs without looking at the BoxED test episodes (Table I
 onnxruntime for ``--policy``. ``--rule`` runs a decision rule in Rust instead: ``blbf`` (the
 daemon's BLBF heuristic, through the same action mapping as a policy), ``lattice-blbf`` (BLBF
 restricted to the placement lattice), ``lattice-reserve`` (keeping room for later objects),
-``lookahead`` (the teacher, ``--k`` candidates, rollouts of ``--horizon`` objects or to the end)
-or ``geo-lookahead`` (the teacher's rollouts without physics).
+``lookahead`` (the teacher, ``--k`` candidates, rollouts of ``--horizon`` objects or to the end),
+``geo-lookahead`` (the teacher's rollouts without physics), ``search`` (herbd's decision-time
+search: ``--k`` candidates, ``--rollouts`` rollouts, in a twin built from the heightmap) or
+``search-exact`` (the same search in a clone of the episode's world: the twin's fidelity bound).
 """
 
 import argparse
@@ -52,13 +54,15 @@ def onnx_actor(path):
                                         for k in range(len(obs))]).astype(np.float32)
 
 
-def validate(act, episodes, seed, reward, boxed, rule=None, k=8, horizon=None, sequence=herb_sim.HERB_ORDER):
+def validate(act, episodes, seed, reward, boxed, rule=None, k=8, horizon=None, sequence=herb_sim.HERB_ORDER,
+             rollouts=None, twin="heightmap", threads=None):
     """Success rate and mean objects packed of ``act`` (a policy from ``onnx_actor``) or, with
     ``rule``, of a lattice rule stepped in Rust, on the validation episodes."""
     # One environment per episode; each counts its first episode only (autoreset keeps the
     # finished ones stepping, their later episodes are ignored), so short episodes are not
     # over-represented.
-    env = herb_sim.HerbVectorEnv(episodes, reward=reward, sequence=sequence, seed=seed, boxed=boxed)
+    extra = {} if threads is None else {"threads": threads}
+    env = herb_sim.HerbVectorEnv(episodes, reward=reward, sequence=sequence, seed=seed, boxed=boxed, **extra)
     obs = env.reset(seed=seed)[0]
     done = np.zeros(episodes, bool)
     packed = np.zeros(episodes, int)
@@ -66,7 +70,8 @@ def validate(act, episodes, seed, reward, boxed, rule=None, k=8, horizon=None, s
     while not done.all():
         if rule is not None:
             # Only environments still in their first episode: the teacher is costly.
-            obs, _, term, _, info = env.step_rule(rule, k, active=~done, horizon=horizon)
+            obs, _, term, _, info = env.step_rule(rule, k, active=~done, horizon=horizon,
+                                                  rollouts=rollouts, twin=twin)
         elif act is not None and act[0] == "candidates":
             _, term, info = env.step_candidates(act[1](*env.candidates()))
         elif act is not None:
@@ -87,7 +92,11 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--policy", action="append", default=[], help="ONNX policy (repeat)")
     ap.add_argument("--rule", action="append", default=[],
-                    choices=["blbf", "lattice-blbf", "lookahead", "lattice-reserve", "geo-lookahead"], help="decision rule (repeat)")
+                    choices=["blbf", "lattice-blbf", "lookahead", "lattice-reserve", "geo-lookahead", "search", "search-exact"],
+                    help="decision rule (repeat); search: the decision-time search in a twin built from "
+                         "the heightmap; search-exact: the same search in a clone of the world (the twin's "
+                         "fidelity bound)")
+    ap.add_argument("--rollouts", type=int, default=None, help="rollouts of the search per decision (default --k)")
     ap.add_argument("--k", type=int, default=8, help="candidates of the lookahead rules")
     ap.add_argument("--horizon", type=int, default=None,
                     help="objects per lookahead rollout, the candidate's included (default: to the end)")
@@ -99,6 +108,7 @@ def main():
                          "beam3-last: each search rooted at the last object chosen, HERB's earlier order; "
                          "beam3-start: old name of beam3, kept for one release)")
     ap.add_argument("--boxed", default=None)
+    ap.add_argument("--threads", type=int, default=None, help="worker threads (default: one per core)")
     a = ap.parse_args()
     if not 1 <= a.episodes <= 4096:
         raise SystemExit(f"--episodes {a.episodes}: need 1 to 4096")
@@ -112,10 +122,14 @@ def main():
         print(f"{p}: success {100 * s:.2f} %, objects packed {n:.2f}", flush=True)
     for r in a.rule:
         t = time.perf_counter()
+        rule = {"blbf": None, "search-exact": "search"}.get(r, r)
         s, n = validate(None, a.episodes, a.seed, a.reward, a.boxed,
-                        rule=None if r == "blbf" else r, k=a.k, horizon=a.horizon,
-                        sequence=a.sequence)
+                        rule=rule, k=a.k, horizon=a.horizon, sequence=a.sequence,
+                        rollouts=a.rollouts, twin="exact" if r == "search-exact" else "heightmap",
+                        threads=a.threads)
         label = f"{r} (k = {a.k})" if r in ("lookahead", "geo-lookahead") else r
+        if rule == "search":
+            label = f"{r} (k = {a.k}, {a.rollouts or a.k} rollouts)"
         if r == "lookahead" and a.horizon is not None:
             label = f"{r} (k = {a.k}, horizon {a.horizon})"
         print(f"{label}: success {100 * s:.2f} %, objects packed {n:.2f} "

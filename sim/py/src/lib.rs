@@ -21,6 +21,7 @@ use herb_methods::Method;
 use herb_sim::features::{self, CANDIDATE_LEN, CONTEXT_LEN, DecisionFeatures};
 use herb_sim::lattice::{Lattice, MAX_CANDIDATES, Placement};
 use herb_sim::paths::{self, MeshSource};
+use herb_sim::search::{Budget, Search, SearchSettings, TwinKind};
 use herb_sim::teacher::{LatticeRule, Lookahead};
 use herb_sim::{Catalog, ObsLayout, PackingEnv, RewardMode, SharedCatalog, TypeIdx, WorldConfig};
 use numpy::ndarray::{Array1, Array2, Array3, Array4};
@@ -77,6 +78,8 @@ struct Slot {
     expert: Decider<Blbf>,
     /// The lattice rule of [`VecEnv::step_rule`], made on first use.
     rule: Option<LatticeRule>,
+    /// The search of [`VecEnv::step_rule`] (`"search"`), made on first use.
+    search: Option<Search>,
     /// The candidate inputs of the current state, once computed.
     feats: DecisionFeatures,
     /// `feats` describe the current state.
@@ -313,6 +316,7 @@ impl VecEnv {
                         WorldConfig::default().clearance_m,
                     ),
                     rule: None,
+                    search: None,
                     feats: DecisionFeatures::default(),
                     feats_fresh: false,
                     lattice: None,
@@ -664,9 +668,13 @@ impl VecEnv {
     /// without a feasible placement ends its episode, failed, with reward -1. With `active`
     /// (`[N]` bool), only the environments marked true are stepped (the others report reward
     /// 0, not terminated, and keep their state). `horizon` limits the `lookahead` teacher's
-    /// rollouts to that many objects (see [`VecEnv::teacher`]). Returns as [`VecEnv::step`].
-    #[allow(clippy::type_complexity)]
-    #[pyo3(signature = (rule, k=8, active=None, horizon=None))]
+    /// rollouts to that many objects (see [`VecEnv::teacher`]). `search` is the decision-time
+    /// search (`herb_sim::search`): the first `k` lattice candidates in lattice BLBF's order,
+    /// each rolled out (`rollouts`, default `k`), in a twin built from the heightmap
+    /// (`twin="heightmap"`) or in a clone of the environment's world (`twin="exact"`).
+    /// Returns as [`VecEnv::step`].
+    #[allow(clippy::type_complexity, clippy::too_many_arguments)]
+    #[pyo3(signature = (rule, k=8, active=None, horizon=None, rollouts=None, twin="heightmap"))]
     fn step_rule<'py>(
         &mut self,
         py: Python<'py>,
@@ -674,6 +682,8 @@ impl VecEnv {
         k: usize,
         active: Option<PyReadonlyArray1<'py, bool>>,
         horizon: Option<usize>,
+        rollouts: Option<usize>,
+        twin: &str,
     ) -> PyResult<(
         Bound<'py, PyArray4<f32>>,
         Bound<'py, PyArray1<f32>>,
@@ -686,12 +696,31 @@ impl VecEnv {
         if horizon == Some(0) {
             return Err(value_err("horizon 0: need at least 1 object"));
         }
-        let horizon = horizon.unwrap_or(usize::MAX);
-        let method = match rule.parse::<Method>() {
-            Ok(m) if m.is_lattice_rule() => m,
+        let twin = match twin {
+            "heightmap" => TwinKind::Heightmap,
+            "exact" => TwinKind::ExactClone,
             _ => {
                 return Err(value_err(format!(
-                    "rule {rule:?}: expected lattice-blbf, lookahead, lattice-reserve or geo-lookahead"
+                    "twin {twin:?}: expected heightmap or exact"
+                )));
+            }
+        };
+        let search_settings = SearchSettings {
+            k,
+            budget: Budget::Rollouts(rollouts.unwrap_or(k)),
+            horizon,
+            reward: self
+                .slots
+                .first()
+                .map_or(RewardMode::Simple, |s| s.env.reward_mode()),
+            twin,
+        };
+        let horizon = horizon.unwrap_or(usize::MAX);
+        let method = match rule.parse::<Method>() {
+            Ok(m) if m.is_lattice_rule() || m == Method::Search => m,
+            _ => {
+                return Err(value_err(format!(
+                    "rule {rule:?}: expected lattice-blbf, lookahead, lattice-reserve, geo-lookahead or search"
                 )));
             }
         };
@@ -718,6 +747,22 @@ impl VecEnv {
                     .map(|(s, &on)| {
                         if !on {
                             return Ok(Out::default());
+                        }
+                        if method == Method::Search {
+                            let search = match &mut s.search {
+                                Some(x) if *x.settings() == search_settings => x,
+                                slot => slot.insert(Search::new(
+                                    catalog.clone(),
+                                    s.env.world().config().clone(),
+                                    search_settings,
+                                )),
+                            };
+                            let exact = (twin == TwinKind::ExactClone).then(|| s.env.world());
+                            let p = search
+                                .decide(s.env.world().heightmap(), s.env.remaining(), exact)
+                                .map_err(|e| e.to_string())?;
+                            let o = Self::place(s, p)?;
+                            return Self::finish_step(sampler, s, o, autoreset);
                         }
                         let fits = match (&s.rule, method) {
                             (Some(LatticeRule::Blbf(_)), Method::LatticeBlbf) => true,

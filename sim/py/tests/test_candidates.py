@@ -99,3 +99,18 @@ def test_step_rule_steps_only_the_active_environments():
     assert rew[0] == 1.0 and rew[2] == 1.0
     with pytest.raises(ValueError, match="active"):
         v.step_rule("lattice-blbf", active=np.array([True]))
+
+
+def test_step_rule_search_places_through_the_twin_and_the_exact_clone():
+    # The decision-time search through the bindings: each twin places the first object of
+    # every environment, and a bad twin name is a clear error.
+    for twin in ("heightmap", "exact"):
+        v = herb_sim.HerbVectorEnv(2, reward="simple", seed=5, threads=2, **FAST)
+        v.reset(seed=5)
+        _, rew, term, _, info = v.step_rule("search", k=2, rollouts=2, horizon=2, twin=twin)
+        assert (info["packed"] == 1).all(), (twin, info["packed"])
+        assert (rew == 1.0).all() and not term.any()
+    with pytest.raises(ValueError, match="twin"):
+        v.step_rule("search", k=2, twin="camera")
+    with pytest.raises(ValueError, match="search"):
+        v.step_rule("blbff")
