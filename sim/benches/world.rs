@@ -2,6 +2,8 @@
 //! release, settle, inside and compactness scan, heightmap render), heightmap render time, and
 //! memory per world.
 //!
+//! The search's rollout worlds are timed side by side: the exact clone and the heightmap twin.
+//!
 //! `cargo bench -p herb-sim --bench world`. Besides criterion's mean, every timed call is
 //! recorded in a histogram and p50/p99 are printed. Uses the BoxED meshes when present (mesh
 //! hulls), and the primitives in any case; the scenes are the humans' planar placements of the
@@ -122,6 +124,9 @@ fn hist() -> Histogram<u64> {
 }
 
 fn report(what: &str, h: &Histogram<u64>) {
+    if h.is_empty() {
+        return; // filtered out by criterion's name filter
+    }
     eprintln!(
         "{what}: n {} p50 {:.3} ms p99 {:.3} ms max {:.3} ms mean {:.3} ms",
         h.len(),
@@ -161,6 +166,9 @@ fn bench_placements(c: &mut Criterion, s: &Setup) {
         })
     });
     report(&format!("placement/{} (one core)", s.label), &h);
+    if h.is_empty() {
+        return;
+    }
     eprintln!(
         "placement/{}: {:.0} placements/s per core (1 / mean)",
         s.label,
@@ -238,11 +246,89 @@ fn memory(s: &Setup) {
     drop(w);
 }
 
+/// The search's rollout worlds, side by side in one run: the second half of each episode placed
+/// on its first half, in a clone of the world that packed the first half (the exact clone, the
+/// lookahead teacher's) and in the twin built from that world's heightmap alone
+/// ([`PackingWorld::twin`]). A clone or twin is made (untimed) for each pass; each placement
+/// (z estimate, release, settle, checks) is timed.
+fn bench_rollout_worlds(c: &mut Criterion, s: &Setup) {
+    let mut starts = Vec::new();
+    for ep in s.episodes.iter().take(10) {
+        let half = ep.len() / 2;
+        let mut w = PackingWorld::new(s.catalog.clone(), WorldConfig::default()).expect("world");
+        if ep[..half]
+            .iter()
+            .all(|&(t, x, y, th)| w.place(t, x, y, th).expect("place").inside)
+            && half < ep.len()
+        {
+            starts.push((w, &ep[half..]));
+        }
+    }
+    let mut rates = Vec::new();
+    for kind in ["exact", "twin"] {
+        let mut h = hist();
+        let mut steps = 0u64;
+        let mut k = 0usize;
+        c.bench_function(&format!("rollout-{kind}/{}", s.label), |b| {
+            b.iter_custom(|iters| {
+                let mut total = Duration::ZERO;
+                let mut done = 0;
+                while done < iters {
+                    let (start, rest) = &starts[k % starts.len()];
+                    k += 1;
+                    let mut w = match kind {
+                        "exact" => start.clone(),
+                        _ => PackingWorld::twin(
+                            s.catalog.clone(),
+                            WorldConfig::default(),
+                            start.heightmap(),
+                        )
+                        .expect("twin"),
+                    };
+                    for &(t, x, y, th) in rest.iter() {
+                        if done == iters {
+                            break;
+                        }
+                        let t0 = Instant::now();
+                        let o = w.place(t, x, y, th).expect("place");
+                        let dt = t0.elapsed();
+                        total += dt;
+                        done += 1;
+                        h.record(dt.as_nanos() as u64).ok();
+                        steps += o.settle_steps as u64;
+                        if !o.inside {
+                            break;
+                        }
+                    }
+                }
+                total
+            })
+        });
+        report(&format!("rollout-{kind}/{} (one core)", s.label), &h);
+        if h.is_empty() {
+            return;
+        }
+        let rate = 1e9 / h.mean();
+        eprintln!(
+            "rollout-{kind}/{}: {rate:.0} placements/s per core, {:.1} settle steps per placement",
+            s.label,
+            steps as f64 / h.len().max(1) as f64
+        );
+        rates.push(rate);
+    }
+    eprintln!(
+        "rollout/{}: the twin places {:.2} x as many objects per second as the exact clone",
+        s.label,
+        rates[1] / rates[0]
+    );
+}
+
 fn benches(c: &mut Criterion) {
     for s in setups() {
         memory(&s);
         bench_heightmap(c, &s);
         bench_placements(c, &s);
+        bench_rollout_worlds(c, &s);
     }
 }
 
