@@ -575,6 +575,8 @@ pub struct Summary {
     /// Decision latency over all placements (ms): mean, population std, p99; `None` for
     /// replays that make no decision.
     pub latency_ms: Option<(f64, f64, f64)>,
+    /// Decision latency quantiles over all placements (ms): p50, p95, p99; `None` as above.
+    pub latency_quantiles_ms: Option<[f64; 3]>,
 }
 
 /// Summarises results (errored episodes are counted apart and excluded).
@@ -596,11 +598,13 @@ pub fn summarize(method: &str, results: &[EpisodeOutcome]) -> Summary {
         ),
         stability_pct: 100.0 * stable as f64 / placements.max(1) as f64,
         failures: count_failures(&ok),
-        latency_ms: latency(&ok),
+        latency_ms: latency(&ok).map(|(m, sd, q)| (m, sd, q[2])),
+        latency_quantiles_ms: latency(&ok).map(|(_, _, q)| q),
     }
 }
 
-fn latency(ok: &[&EpisodeResult]) -> Option<(f64, f64, f64)> {
+/// Mean, population std and the p50, p95 and p99 (nearest rank) of every decision's latency.
+fn latency(ok: &[&EpisodeResult]) -> Option<(f64, f64, [f64; 3])> {
     let mut all: Vec<u64> = ok
         .iter()
         .flat_map(|r| r.decision_ns.iter().copied())
@@ -610,8 +614,8 @@ fn latency(ok: &[&EpisodeResult]) -> Option<(f64, f64, f64)> {
     }
     all.sort_unstable();
     let (m, sd) = mean_std(all.iter().map(|&n| n as f64 / 1e6));
-    let p99 = all[((all.len() - 1) as f64 * 0.99).round() as usize] as f64 / 1e6;
-    Some((m, sd, p99))
+    let q = |p: f64| all[((all.len() - 1) as f64 * p).round() as usize] as f64 / 1e6;
+    Some((m, sd, [q(0.5), q(0.95), q(0.99)]))
 }
 
 fn count_failures(ok: &[&EpisodeResult]) -> Vec<(String, usize)> {

@@ -526,6 +526,12 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
             r.method,
             causes.join(", ")
         ));
+        if let Some([p50, p95, p99]) = r.latency_quantiles_ms {
+            table.push_str(&format!(
+                "- {} decision time p50 / p95 / p99: {p50:.3} / {p95:.3} / {p99:.3} ms\n",
+                r.method
+            ));
+        }
     }
     if !bad.is_empty() {
         table.push_str(&format!(
