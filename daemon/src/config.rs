@@ -140,6 +140,51 @@ pub struct Config {
     pub journal: JournalConfig,
     /// What the cell does after a fault it can recover from by itself.
     pub recovery: RecoveryConfig,
+    /// How placements are decided.
+    pub decision: DecisionConfig,
+}
+
+/// How each placement is decided ([`crate::decision`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DecisionMethod {
+    /// The placement policy of `[models] policy` (BLBF or a learned policy): under a
+    /// millisecond.
+    #[default]
+    Policy,
+    /// The search: the lattice's best `k` candidates each rolled out to the job's end (or
+    /// `horizon` objects) in a physics twin built from the heightmap, within `budget_s`.
+    Search,
+}
+
+/// The decision worker ([`crate::decision`]): it decides while the arm picks.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DecisionConfig {
+    /// `policy` or `search`.
+    pub method: DecisionMethod,
+    /// The search's time per decision (s, 0 to 30): it returns the best candidate whose
+    /// rollout finished by then (with 0, lattice BLBF's first, said so by `allowed` 0).
+    pub budget_s: f64,
+    /// Candidates the search rolls out at most (1 to 64), best first by lattice BLBF's order.
+    pub k: usize,
+    /// Objects per rollout, the candidate's included (0: to the job's end).
+    pub horizon: usize,
+    /// A decision not back this long after it was asked for (s) faults the job (`Decision`):
+    /// a hung worker never holds the arm.
+    pub timeout_s: f64,
+}
+
+impl Default for DecisionConfig {
+    fn default() -> Self {
+        Self {
+            method: DecisionMethod::Policy,
+            budget_s: 1.0,
+            k: 8,
+            horizon: 0,
+            timeout_s: 10.0,
+        }
+    }
 }
 
 /// Recovery from faults the cell handles by itself.
@@ -228,6 +273,7 @@ impl Default for Config {
             record: RecordConfig::default(),
             journal: JournalConfig::default(),
             recovery: RecoveryConfig::default(),
+            decision: DecisionConfig::default(),
         }
     }
 }
@@ -306,6 +352,28 @@ impl ConfigFile for Config {
             return Err(format!(
                 "models.clearance_m {} outside 0..=0.05",
                 self.models.clearance_m
+            )
+            .into());
+        }
+        let d = &self.decision;
+        if !(d.budget_s.is_finite() && (0.0..=30.0).contains(&d.budget_s)) {
+            return Err(format!("decision.budget_s {} outside 0..=30", d.budget_s).into());
+        }
+        if !(1..=64).contains(&d.k) {
+            return Err(format!("decision.k {} outside 1..=64", d.k).into());
+        }
+        if d.horizon > herb_ipc::MAX_JOB_OBJECTS {
+            return Err(format!(
+                "decision.horizon {} above the {} objects of a job",
+                d.horizon,
+                herb_ipc::MAX_JOB_OBJECTS
+            )
+            .into());
+        }
+        if !(d.timeout_s.is_finite() && d.timeout_s > d.budget_s && d.timeout_s <= 600.0) {
+            return Err(format!(
+                "decision.timeout_s {} must exceed decision.budget_s {} (and be at most 600)",
+                d.timeout_s, d.budget_s
             )
             .into());
         }

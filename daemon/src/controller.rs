@@ -12,10 +12,11 @@
 //! The job state machine, its faults and its guarantees are described in [`crate::job`].
 
 use crate::config::Config;
+use crate::decision::DecisionLink;
 use crate::job::{Effects, Job, JobParams, JobRecord};
-use crate::plan::{MotionPlan, Request, Response};
+use crate::plan::{DecisionRequest, MotionPlan, Request};
 use crate::planner::PlannerLink;
-use crate::record::{FRAME_META, LoopRec, OutDigest, Recorder, RespRec};
+use crate::record::{DecisionRec, FRAME_META, LoopRec, OutDigest, Recorder, RespRec, Sent};
 use hdrhistogram::Histogram;
 use herb_ipc::bus::{Bus, CancelServer, JobServer, Pub, Sub};
 use herb_ipc::{
@@ -48,8 +49,14 @@ pub struct LoopStats {
     pub cycle_ns: Histogram<u64>,
     /// Wake-up lateness relative to the deadline.
     pub jitter_ns: Histogram<u64>,
-    /// Decision latency (one `herb_decide::Decider::decide` call).
+    /// Decision latency (one decision of the decision worker: a policy's `Decider::decide`
+    /// call, or a search).
     pub decision_ns: Histogram<u64>,
+    /// Time jobs that ended in the interval held objects at the lift pose waiting for their
+    /// decisions (ms).
+    pub decision_wait_ms: u64,
+    /// Jobs that ended in the interval.
+    pub jobs: u64,
     /// Deadlines missed (cycles skipped) in the interval.
     pub misses: u64,
     /// Cycles in the interval.
@@ -64,6 +71,8 @@ impl LoopStats {
             cycle_ns: h(),
             jitter_ns: h(),
             decision_ns: h(),
+            decision_wait_ms: 0,
+            jobs: 0,
             misses: 0,
             cycles: 0,
         }
@@ -74,6 +83,8 @@ impl LoopStats {
         self.cycle_ns.reset();
         self.jitter_ns.reset();
         self.decision_ns.reset();
+        self.decision_wait_ms = 0;
+        self.jobs = 0;
         self.misses = 0;
         self.cycles = 0;
     }
@@ -83,6 +94,8 @@ impl LoopStats {
         let _ = self.cycle_ns.add(&other.cycle_ns);
         let _ = self.jitter_ns.add(&other.jitter_ns);
         let _ = self.decision_ns.add(&other.decision_ns);
+        self.decision_wait_ms += other.decision_wait_ms;
+        self.jobs += other.jobs;
         self.misses += other.misses;
         self.cycles += other.cycles;
     }
@@ -169,34 +182,42 @@ struct Outbox<'a> {
     seq: &'a mut u64,
     ports: &'a mut OutPorts,
     planner: &'a mut PlannerLink,
+    decider: &'a mut DecisionLink,
     decision_ns: &'a mut Histogram<u64>,
+    decision_wait_ms: &'a mut u64,
+    jobs: &'a mut u64,
     counters: LoopCounters,
     request: Option<JobRequest>,
     cancel: Option<CancelRequest>,
     /// Digest of the machine's outputs this cycle (run log).
     digest: OutDigest,
-    /// Planner requests handed over so far.
-    sent: &'a mut u64,
+    /// Planner and decision requests handed over so far.
+    sent: &'a mut Sent,
     /// Statuses the log ring could not take this cycle.
     log_dropped: u64,
 }
 
 impl<'a> Outbox<'a> {
+    #[allow(clippy::too_many_arguments)]
     fn new(
         now: u64,
         seq: &'a mut u64,
         ports: &'a mut OutPorts,
         planner: &'a mut PlannerLink,
+        decider: &'a mut DecisionLink,
         stats: &'a mut LoopStats,
         counters: LoopCounters,
-        sent: &'a mut u64,
+        sent: &'a mut Sent,
     ) -> Self {
         Self {
             now,
             seq,
             ports,
             planner,
+            decider,
             decision_ns: &mut stats.decision_ns,
+            decision_wait_ms: &mut stats.decision_wait_ms,
+            jobs: &mut stats.jobs,
             counters,
             request: None,
             cancel: None,
@@ -248,9 +269,20 @@ impl Effects for Outbox<'_> {
         s.cycles = self.counters.cycles;
         s.deadline_misses = self.counters.misses;
         s.max_cycle_ns = self.counters.max_cycle;
-        s.rejected_inputs += self.planner.rejected_frames();
+        s.rejected_inputs += self.decider.rejected_frames();
         if s.event == StatusEvent::Decided as u32 && s.decision_ns > 0 {
             self.decision_ns.saturating_record(s.decision_ns);
+        }
+        if [
+            StatusEvent::JobDone,
+            StatusEvent::JobFailed,
+            StatusEvent::JobCancelled,
+        ]
+        .iter()
+        .any(|e| *e as u32 == s.event)
+        {
+            *self.jobs += 1;
+            *self.decision_wait_ms += s.decision_wait_ms as u64;
         }
         let _ = self.ports.status.send_copy(s);
         if s.event != StatusEvent::Heartbeat as u32
@@ -286,7 +318,14 @@ impl Effects for Outbox<'_> {
     fn plan(&mut self, request: Request) -> Result<(), Request> {
         self.digest.request(&request);
         self.planner.send(request)?;
-        *self.sent += 1;
+        self.sent.requests += 1;
+        Ok(())
+    }
+
+    fn decide(&mut self, request: DecisionRequest) -> Result<(), DecisionRequest> {
+        self.digest.decision_request(&request);
+        self.decider.send(request)?;
+        self.sent.decisions += 1;
         Ok(())
     }
 }
@@ -295,6 +334,7 @@ impl Effects for Outbox<'_> {
 pub struct Controller {
     ports: Ports,
     planner: PlannerLink,
+    decider: DecisionLink,
     shared: Arc<Shared>,
     stats: Box<LoopStats>,
     stats_tx: rtrb::Producer<Box<LoopStats>>,
@@ -307,10 +347,10 @@ pub struct Controller {
     counters: LoopCounters,
     /// The run log's loop end, if recording.
     recorder: Option<Recorder>,
-    /// Planner requests sent and responses received (a new run-log segment starts only when
-    /// none is outstanding).
-    sent: u64,
-    received: u64,
+    /// Planner and decision requests sent and responses received (a new run-log segment
+    /// starts only when none is outstanding).
+    sent: Sent,
+    received: Sent,
     /// The job journal's writer ring, if journaling ([`crate::journal`]).
     journal: Option<rtrb::Producer<JobRecord>>,
     /// The last record handed to the writer.
@@ -334,6 +374,7 @@ impl Controller {
         cfg: &Config,
         ports: Ports,
         planner: PlannerLink,
+        decider: DecisionLink,
         shared: Arc<Shared>,
         catalog_len: usize,
     ) -> (Self, StatsLink) {
@@ -353,6 +394,7 @@ impl Controller {
         let c = Self {
             ports,
             planner,
+            decider,
             shared,
             stats: Box::new(LoopStats::new()),
             stats_tx,
@@ -364,8 +406,8 @@ impl Controller {
             seq: 0,
             counters: LoopCounters::default(),
             recorder: None,
-            sent: 0,
-            received: 0,
+            sent: Sent::default(),
+            received: Sent::default(),
             journal: None,
             journaled: JobRecord::NONE,
         };
@@ -427,6 +469,7 @@ impl Controller {
                     &mut self.seq,
                     &mut self.ports.out,
                     &mut self.planner,
+                    &mut self.decider,
                     &mut self.stats,
                     self.counters,
                     &mut self.sent,
@@ -522,23 +565,26 @@ impl Controller {
             &mut self.seq,
             &mut p.out,
             &mut self.planner,
+            &mut self.decider,
             &mut self.stats,
             self.counters,
             &mut self.sent,
         );
         while let Ok(resp) = fx.planner.rx.pop() {
-            self.received += 1;
-            let decision_ns = match &resp {
-                Response::Planned(b) | Response::Braked(b) | Response::Failed { buf: b, .. } => {
-                    b.decision_ns
-                }
-                _ => 0,
-            };
+            self.received.requests += 1;
             log(LoopRec::Resp(RespRec {
                 digest: resp.digest(),
-                decision_ns,
             }));
             job.planner_response(resp, now, &mut fx);
+        }
+        while let Ok(d) = fx.decider.rx.pop() {
+            self.received.decisions += 1;
+            log(LoopRec::Decision(DecisionRec {
+                digest: d.digest(),
+                allowed: d.allowed,
+                decision_ns: d.decision_ns,
+            }));
+            job.decision_response(d, now, &mut fx);
         }
         while let Ok(Some(req)) = p.jobs.receive() {
             let r = *req.payload();

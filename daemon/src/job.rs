@@ -6,21 +6,30 @@
 //!
 //! 1. every joint state ([`Job::joint_state`]), gripper state ([`Job::gripper_state`]) and
 //!    heightmap frame ([`Job::heightmap`]) that arrived,
-//! 2. every planner response ([`Job::planner_response`]),
+//! 2. every planner response ([`Job::planner_response`]), then every decision
+//!    ([`Job::decision_response`]),
 //! 3. every pack-job request ([`Job::job_request`]), then every cancel request
 //!    ([`Job::cancel_request`]),
 //! 4. one [`Job::tick`] (stop request, health, one step of the current phase, commands),
 //!
 //! and the machine answers through [`Effects`]: replies, status events, joint and gripper
-//! commands and planner requests, in the order the shell must publish them. Unit tests
+//! commands, planner and decision requests, in the order the shell must publish them. Unit tests
 //! (`job/tests.rs`) drive it with scripted inputs and a fake clock.
 //!
 //! # Per object
 //!
-//! wait for a heightmap stamped after the last release -> the planner decides and plans
-//! (Beam-3 order at job start; policy; z; waypoints; IK; Ruckig) -> stream the samples, one per
-//! tick -> at the grasp, close the gripper and wait until it holds -> stream -> at the
-//! placement, open and wait -> report -> retreat -> next object.
+//! The pick starts as soon as the object is known and the arm is free, and the placement is
+//! decided meanwhile, off the loop and off the planner (the decision worker,
+//! [`crate::decision`], on a heightmap stamped after the last release):
+//!
+//! ask for the decision, and the planner for the pick (Beam-3 order at job start; waypoints; IK;
+//! Ruckig) -> stream the samples, one per tick -> at the grasp, close the gripper and wait until
+//! it holds -> lift -> once the decision is in (`Decided`), plan the place; if the arm got there
+//! first it holds the object at the lift pose and waits, and that wait is counted
+//! (`Status::decision_wait_ms`) -> stream -> at the placement, open and wait -> report ->
+//! retreat -> next object. A decision that fails (`NoFeasiblePlacement`, `Decision`) or does
+//! not come within `decision.timeout_s` ends the job, failed, at the arm's next standstill (an
+//! object already grasped is lifted first and stays held).
 //!
 //! # Faults
 //!
@@ -58,7 +67,7 @@
 //! release configuration, was released there before the crash: it is counted placed.
 
 use crate::config::{Timeouts, secs_to_ns};
-use crate::plan::{MotionPlan, Request, Response};
+use crate::plan::{DecisionRequest, DecisionResponse, Motion, MotionPlan, Request, Response};
 use herb_ipc::{
     ARM_STATUS_PERIOD_NS, ArmBlocker, ArmStatus, CancelJobRequest, Fault, GRIPPER_REPEAT_NS,
     GripperAction, GripperState, HEARTBEAT_PERIOD_NS, Header, HeightmapFrame, InOrder, JobState,
@@ -114,6 +123,9 @@ pub struct JobParams {
     pub catalog_len: usize,
     /// Picks tried again after a missed grasp before the object is skipped.
     pub grasp_retries: u32,
+    /// A decision not back this long after it was asked for faults the job
+    /// (`decision.timeout_s`).
+    pub decision_timeout_ns: u64,
 }
 
 impl JobParams {
@@ -125,6 +137,7 @@ impl JobParams {
             upper: cfg.limits.upper,
             catalog_len,
             grasp_retries: cfg.recovery.grasp_retries,
+            decision_timeout_ns: secs_to_ns(cfg.decision.timeout_s),
         }
     }
 }
@@ -146,18 +159,21 @@ pub trait Effects {
     /// Hands a request to the planner; gives it back when the planner's ring is full.
     #[allow(clippy::result_large_err)] // moved, not copied around: the machine takes it back
     fn plan(&mut self, request: Request) -> Result<(), Request>;
+    /// Hands a request to the decision worker; gives it back when its ring is full.
+    #[allow(clippy::result_large_err)] // moved, not copied around: the machine takes it back
+    fn decide(&mut self, request: DecisionRequest) -> Result<(), DecisionRequest>;
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Phase {
     Idle,
     Ordering,
-    WaitHeightmap {
-        since: u64,
-    },
-    /// A plan is being made; `since`: when this object began waiting for a frame newer than
-    /// the last release (the planner's own waits for one do not restart that clock).
-    Planning {
+    /// The current object's pick is to be asked for (when a trajectory buffer is home).
+    Starting,
+    /// A plan is being made.
+    Planning,
+    /// Holding the current object at the lift pose until its decision comes (since `since`).
+    AwaitDecision {
         since: u64,
     },
     Streaming {
@@ -219,8 +235,24 @@ pub struct Job {
     done: usize,
     release_stamp: u64,
     holding: bool,
-    /// The current object's decided placement and release configuration.
+    /// The current object's decided placement (journaled: a restart does not decide it again)
+    /// and, once its place is planned, its release configuration.
     placement: Option<Placement>,
+    /// The latency of the current object's decision (its `Placed` repeats it).
+    decision_ns: u64,
+    /// A decision request is out: the object index it is for, and when it was sent.
+    deciding: Option<(usize, u64)>,
+    /// A decision is to be asked for on a later tick (the worker's ring was full, or it saw
+    /// no fresh heightmap in time).
+    decide_due: bool,
+    /// When the current object began waiting for its decision (the fresh-heightmap clock).
+    decide_since: u64,
+    /// The current object's decision failed: the job ends at the arm's next standstill.
+    decision_failed: Option<Fault>,
+    /// The object in the gripper is held turned by a half turn (from its pick's plan).
+    flip: bool,
+    /// Time this job held objects at the lift pose waiting for decisions (ns).
+    wait_ns: u64,
     /// Missed grasps of the current object.
     missed: u32,
     /// The current object's `Decided` was sent.
@@ -395,6 +427,13 @@ impl Job {
             release_stamp: 0,
             holding: false,
             placement: None,
+            decision_ns: 0,
+            deciding: None,
+            decide_due: false,
+            decide_since: 0,
+            decision_failed: None,
+            flip: false,
+            wait_ns: 0,
             missed: 0,
             announced: false,
             fault: Fault::None,
@@ -519,7 +558,8 @@ impl Job {
             Phase::Streaming { .. } if self.moving() => self.begin_brake(fx),
             // At rest: retreat now.
             Phase::Ordering
-            | Phase::WaitHeightmap { .. }
+            | Phase::Starting
+            | Phase::AwaitDecision { .. }
             | Phase::Streaming { .. }
             | Phase::Gripper { .. } => self.retreat(fx),
             // Planning: when the plan comes back. Braking: when it ends. Faulted: next tick.
@@ -556,6 +596,9 @@ impl Job {
         self.objects = objects;
         self.ordered = false;
         self.placement = None;
+        self.forget_decision();
+        self.flip = false;
+        self.wait_ns = 0;
         self.count = n;
         self.index = 0;
         self.done = 0;
@@ -596,7 +639,7 @@ impl Job {
                 self.count = count;
                 self.ordered = true;
                 match self.phase {
-                    Phase::Ordering => self.phase = Phase::WaitHeightmap { since: now },
+                    Phase::Ordering => self.begin_object(fx, now),
                     Phase::Recovering { .. } | Phase::Abandoning => {
                         self.phase = Phase::Faulted {
                             healthy_since: None,
@@ -627,28 +670,23 @@ impl Job {
                 self.phase = Phase::Streaming { seg: 0, cursor: 0 };
             }
             Response::Planned(plan) => {
-                let planning = matches!(self.phase, Phase::Planning { .. });
+                let planning = matches!(self.phase, Phase::Planning);
                 if planning && !self.stopping && !self.cancelling {
                     if let Some(old) = self.active.take() {
                         self.recycle(old);
                     }
-                    let (ty, pose, dns) = (plan.object as u32, plan.pose, plan.decision_ns);
-                    let decided = plan.decided;
-                    self.placement = release_q(&plan).map(|release_q| Placement {
-                        index: plan.index as u16,
-                        pose,
-                        release_q,
-                    });
+                    // A place (or pick and place) knows where the gripper opens: journaled, so
+                    // that a restart tells a released object from a held one.
+                    if let Some(q) = release_q(&plan) {
+                        self.placement = Some(Placement {
+                            index: plan.index as u16,
+                            pose: plan.pose,
+                            release_q: Some(q),
+                        });
+                    }
+                    self.flip = plan.flip;
                     self.active = Some(plan);
                     self.phase = Phase::Streaming { seg: 0, cursor: 0 };
-                    // A replan of a decided placement (after a resume while holding the
-                    // object, a missed grasp) carries no new decision; a new decision of an
-                    // object already announced (it was lost) is not announced again: its
-                    // `Placed` carries the pose.
-                    if decided && !self.announced {
-                        self.announced = true;
-                        self.emit(fx, StatusEvent::Decided, ty, pose, dns);
-                    }
                 } else {
                     self.recycle(plan);
                     if planning && self.cancelling && !self.stopping {
@@ -674,14 +712,8 @@ impl Job {
             Response::Failed { fault, buf } => {
                 self.recycle(buf);
                 match self.phase {
-                    // The planner saw no valid frame newer than the release within its wait: not
-                    // a fault yet; wait on (the fresh-heightmap timeout, from when the object
-                    // began waiting, reports one).
-                    Phase::Planning { since } if fault == Fault::HeightmapTimeout => {
-                        self.phase = Phase::WaitHeightmap { since };
-                    }
-                    Phase::Planning { .. } if self.cancelling => self.retreat(fx),
-                    Phase::Planning { .. } => {
+                    Phase::Planning if self.cancelling => self.retreat(fx),
+                    Phase::Planning => {
                         self.fault = fault;
                         self.finish(fx, StatusEvent::JobFailed);
                     }
@@ -694,6 +726,57 @@ impl Job {
                     _ => {}
                 }
             }
+        }
+    }
+
+    /// One decision from the worker. A stale one (an earlier job's or object's, or one the
+    /// machine stopped waiting for) changes nothing.
+    pub fn decision_response(&mut self, d: DecisionResponse, now: u64, fx: &mut impl Effects) {
+        let awaited = self.job_id != 0
+            && d.job_id == self.job_id
+            && self.deciding.is_some_and(|(i, _)| i == d.index as usize)
+            && self.index == d.index as usize;
+        if !awaited {
+            return;
+        }
+        self.deciding = None;
+        match d.outcome {
+            Ok(pose) => {
+                self.placement = Some(Placement {
+                    index: self.index as u16,
+                    pose,
+                    release_q: None,
+                });
+                self.decision_ns = d.decision_ns;
+                // An object already announced (its place was planned before a fault or a
+                // restart) is not announced again: its `Placed` carries the pose.
+                if !self.announced {
+                    self.announced = true;
+                    self.emit(
+                        fx,
+                        StatusEvent::Decided,
+                        self.current_type(),
+                        pose,
+                        d.decision_ns,
+                    );
+                }
+                if let Phase::AwaitDecision { since } = self.phase {
+                    self.wait_ns += now.saturating_sub(since);
+                    self.request_place(fx, now);
+                }
+            }
+            // No valid frame newer than the release within the worker's wait: asked again,
+            // until the fresh-heightmap timeout (from when the object began waiting) says it
+            // is a fault.
+            Err(Fault::HeightmapTimeout) => {
+                if now.saturating_sub(self.decide_since) > self.p.timeouts.fresh_heightmap_ns {
+                    self.decide_since = now;
+                    self.raise(fx, Fault::HeightmapTimeout);
+                } else {
+                    self.decide_due = true;
+                }
+            }
+            Err(f) => self.decision_failed = Some(f),
         }
     }
 
@@ -747,7 +830,9 @@ impl Job {
         self.index = r.index as usize;
         self.done = r.done as usize;
         self.holding = r.holding;
+        self.flip = r.flip;
         self.placement = r.placement;
+        self.forget_decision();
         self.release_stamp = s.release_stamp;
         self.fault = s.fault;
         self.cancelling = false;
@@ -803,7 +888,12 @@ impl Job {
         let phase = match self.phase {
             Phase::Idle => ObjectPhase::Idle,
             Phase::Ordering => ObjectPhase::Ordering,
-            Phase::WaitHeightmap { .. } | Phase::Planning { .. } => ObjectPhase::Deciding,
+            Phase::Starting | Phase::Planning | Phase::AwaitDecision { .. } if self.holding => {
+                ObjectPhase::Carrying
+            }
+            Phase::Starting | Phase::Planning | Phase::AwaitDecision { .. } => {
+                ObjectPhase::Deciding
+            }
             Phase::Streaming { .. } | Phase::Gripper { .. } | Phase::Retreating { .. }
                 if self.holding =>
             {
@@ -831,6 +921,7 @@ impl Job {
             index: self.index as u16,
             done: self.done as u16,
             holding: self.holding,
+            flip: self.flip,
             phase,
             placement: self.placement.filter(|p| p.index as usize == self.index),
         }
@@ -869,7 +960,9 @@ impl Job {
         self.index = (r.index as usize).min(self.count);
         self.done = (r.done as usize).min(self.index);
         self.holding = r.holding;
+        self.flip = r.flip;
         self.placement = r.placement;
+        self.forget_decision();
         // A placement in the journal was announced before the crash.
         self.announced = r.placement.is_some_and(|p| p.index as usize == self.index);
         self.release_stamp = 0;
@@ -1027,49 +1120,153 @@ impl Job {
     fn finish(&mut self, fx: &mut impl Effects, end: StatusEvent) {
         self.phase = Phase::Idle;
         self.cancelling = false;
+        self.forget_decision();
         self.emit(fx, end, NO_OBJECT, [0.0; 4], 0);
         self.job_id = 0;
     }
 
-    /// Asks for object `index`'s plan; `since`: when it began waiting for a frame.
-    fn request_plan(&mut self, fx: &mut impl Effects, place_only: bool, since: u64) {
+    /// Drops the current object's decision and stops waiting for one (a late answer is then
+    /// stale).
+    fn forget_decision(&mut self) {
+        self.deciding = None;
+        self.decide_due = false;
+        self.decision_failed = None;
+    }
+
+    /// The current object's placement, decided already.
+    fn decided_pose(&self) -> Option<[f32; 4]> {
+        self.placement
+            .filter(|p| p.index as usize == self.index)
+            .map(|p| p.pose)
+    }
+
+    /// Starts the current object: its decision is asked for, and its pick planned meanwhile.
+    fn begin_object(&mut self, fx: &mut impl Effects, now: u64) {
+        self.decision_failed = None;
+        self.decide_since = now;
+        self.ask_decision(fx, now);
+        self.phase = Phase::Starting;
+        self.request_motion(fx, Motion::Pick);
+    }
+
+    /// Asks the decision worker where the current object goes (again on a later tick if its
+    /// ring is full).
+    fn ask_decision(&mut self, fx: &mut impl Effects, now: u64) {
+        let req = DecisionRequest {
+            job_id: self.job_id,
+            index: self.index as u32,
+            order: self.order,
+            count: self.count as u32,
+            after_stamp_ns: self.release_stamp,
+        };
+        match fx.decide(req) {
+            Ok(()) => {
+                self.deciding = Some((self.index, now));
+                self.decide_due = false;
+            }
+            Err(_) => self.decide_due = true,
+        }
+    }
+
+    /// The picked object is held at the lift pose: its place is planned if its placement is
+    /// decided; else the arm holds it there until the decision comes (the wait is counted),
+    /// and a failed decision ends the job.
+    fn await_decision(&mut self, fx: &mut impl Effects, now: u64) {
+        if let Some(f) = self.decision_failed {
+            self.fault = f;
+            self.finish(fx, StatusEvent::JobFailed);
+        } else if self.decided_pose().is_some() {
+            self.request_place(fx, now);
+        } else {
+            if self.deciding.is_none() && !self.decide_due {
+                self.decide_since = now;
+                self.decide_due = true;
+            }
+            self.phase = Phase::AwaitDecision { since: now };
+        }
+    }
+
+    /// Asks for the held object's place at its decided placement.
+    fn request_place(&mut self, fx: &mut impl Effects, now: u64) {
+        self.phase = Phase::AwaitDecision { since: now };
+        self.request_motion(fx, Motion::Place { flip: self.flip });
+    }
+
+    /// Asks the planner for the current object's `motion` (a place or a pick and place at its
+    /// decided placement) when a trajectory buffer is home; the phase becomes `Planning`, or
+    /// stays as it is (`Starting`, `AwaitDecision`) to ask again on a later tick.
+    fn request_motion(&mut self, fx: &mut impl Effects, motion: Motion) {
+        let pose = match motion {
+            Motion::Pick => [0.0; 4],
+            Motion::Place { .. } | Motion::PickAndPlace => match self.decided_pose() {
+                Some(p) => p,
+                None => return,
+            },
+        };
         let Some(buf) = self.spare.take() else {
             return;
-        };
-        // Only a place-only plan reuses the placement (a run log's replay from a snapshot
-        // does not know the last job's).
-        let pose = match (self.placement, place_only) {
-            (Some(p), true) => p.pose,
-            _ => [0.0; 4],
         };
         let req = Request::Plan {
             index: self.index as u32,
             object: self.order[self.index],
-            after_stamp_ns: self.release_stamp,
             from: self.out.cmd.position,
-            place_only,
-            repick: false,
+            motion,
             pose,
             buf,
         };
         match fx.plan(req) {
-            Ok(()) => self.phase = Phase::Planning { since },
+            Ok(()) => self.phase = Phase::Planning,
             Err(Request::Plan { buf, .. }) => self.spare = Some(buf),
             Err(_) => {}
         }
     }
 
     fn step(&mut self, now: u64, fx: &mut impl Effects) {
+        // The decision runs beside the motion: asked again when due, and given up when it does
+        // not come in time (a hung worker never holds the arm).
+        let live = self.job_id != 0
+            && !self.stopping
+            && !self.cancelling
+            && matches!(
+                self.phase,
+                Phase::Starting
+                    | Phase::Planning
+                    | Phase::Streaming { .. }
+                    | Phase::Gripper { .. }
+                    | Phase::Regrasp { .. }
+                    | Phase::AwaitDecision { .. }
+            );
+        if live && self.decision_failed.is_none() && self.decided_pose().is_none() {
+            if self.decide_due && self.deciding.is_none() {
+                self.ask_decision(fx, now);
+            }
+            if let Some((_, at)) = self.deciding
+                && now.saturating_sub(at) > self.p.decision_timeout_ns
+            {
+                self.deciding = None;
+                self.decision_failed = Some(Fault::Decision);
+            }
+        }
         match self.phase {
-            Phase::Idle | Phase::Ordering | Phase::Planning { .. } => {}
-            Phase::WaitHeightmap { since } => {
+            Phase::Idle | Phase::Ordering | Phase::Planning => {}
+            Phase::Starting => {
+                if !self.stopping {
+                    self.request_motion(fx, Motion::Pick);
+                }
+            }
+            Phase::AwaitDecision { since } => {
                 if self.stopping {
                     return;
                 }
-                if now.saturating_sub(since) > self.p.timeouts.fresh_heightmap_ns {
-                    self.raise(fx, Fault::HeightmapTimeout);
-                } else if self.inputs.hm_stamp > self.release_stamp {
-                    self.request_plan(fx, false, since);
+                if let Some(f) = self.decision_failed {
+                    self.wait_ns += now.saturating_sub(since);
+                    self.fault = f;
+                    self.finish(fx, StatusEvent::JobFailed);
+                } else if self.decided_pose().is_some() {
+                    self.request_motion(fx, Motion::Place { flip: self.flip });
+                    if self.phase == Phase::Planning {
+                        self.wait_ns += now.saturating_sub(since);
+                    }
                 }
             }
             Phase::Streaming { seg, cursor } => self.stream(fx, now, seg, cursor),
@@ -1168,17 +1365,20 @@ impl Job {
                 GripperAction::Open => {
                     self.holding = false;
                     self.release_stamp = g.header.stamp_ns;
-                    let (ty, pose, dns) = self
+                    let dns = self.decision_ns;
+                    let (ty, pose) = self
                         .active
                         .as_ref()
-                        .map(|p| (p.object as u32, p.pose, p.decision_ns))
-                        .unwrap_or((NO_OBJECT, [0.0; 4], 0));
+                        .map(|p| (p.object as u32, p.pose))
+                        .unwrap_or((NO_OBJECT, [0.0; 4]));
                     self.done += 1;
                     self.emit(fx, StatusEvent::Placed, ty, pose, dns);
                     self.index += 1;
                     self.announced = false;
                     self.missed = 0;
                     self.placement = None;
+                    self.decision_ns = 0;
+                    self.forget_decision();
                 }
             }
             self.next_segment(fx, now, seg + 1);
@@ -1220,8 +1420,16 @@ impl Job {
             self.retreat(fx);
             return;
         }
-        if self.missed <= self.p.grasp_retries && self.placement.is_some() {
-            self.request_repick(fx, now);
+        if let Some(f) = self.decision_failed {
+            // Its decision failed meanwhile: the job ends here, the gripper open.
+            self.fault = f;
+            self.finish(fx, StatusEvent::JobFailed);
+            return;
+        }
+        if self.missed <= self.p.grasp_retries {
+            // The same object picked again; its decision (made or still coming) stands.
+            self.phase = Phase::Starting;
+            self.request_motion(fx, Motion::Pick);
             return;
         }
         // Given up: skipped with its reason, the job goes on.
@@ -1230,32 +1438,11 @@ impl Job {
         self.announced = false;
         self.missed = 0;
         self.placement = None;
+        self.forget_decision();
         if self.index >= self.count {
             self.finish(fx, StatusEvent::JobDone);
         } else {
-            self.phase = Phase::WaitHeightmap { since: now };
-        }
-    }
-
-    /// Asks for the current object's pick and place again, at its decided placement.
-    fn request_repick(&mut self, fx: &mut impl Effects, now: u64) {
-        let (Some(p), Some(buf)) = (self.placement, self.spare.take()) else {
-            return;
-        };
-        let req = Request::Plan {
-            index: self.index as u32,
-            object: self.order[self.index],
-            after_stamp_ns: self.release_stamp,
-            from: self.out.cmd.position,
-            place_only: false,
-            repick: true,
-            pose: p.pose,
-            buf,
-        };
-        match fx.plan(req) {
-            Ok(()) => self.phase = Phase::Planning { since: now },
-            Err(Request::Plan { buf, .. }) => self.spare = Some(buf),
-            Err(_) => {}
+            self.begin_object(fx, now);
         }
     }
 
@@ -1340,7 +1527,7 @@ impl Job {
             self.holding = false;
         }
         // The current object's decided placement, if any: a resume does not decide again.
-        let decided = self.placement.filter(|p| p.index as usize == self.index);
+        let decided = self.decided_pose();
         if held && !self.holding && decided.is_some() {
             // The grasp closed while the job was halted: the current object is in the gripper.
             self.holding = true;
@@ -1355,17 +1542,32 @@ impl Job {
         } else {
             NO_OBJECT
         };
-        if self.holding {
-            self.request_plan(fx, true, now);
+        if self.decision_failed.is_some() {
+            // Its decision failed while the job was halted: nothing more to do.
+            self.await_decision(fx, now);
+        } else if self.holding {
+            // Placed where it was decided; or, not decided yet, held until it is.
+            self.await_decision(fx, now);
         } else if decided.is_some() {
             // Halted before the grasp, or the object was lost from the gripper: pick it (again)
             // and place it where it was decided (nothing was released since); one decision,
             // announced once.
-            self.request_repick(fx, now);
+            self.phase = Phase::Starting;
+            self.request_motion(fx, Motion::PickAndPlace);
+            if self.phase == Phase::Starting {
+                // No buffer home yet: the pick alone, the place once it is held.
+                self.request_motion(fx, Motion::Pick);
+            }
         } else {
-            // Not decided yet: decide on a heightmap taken after the resume.
+            // Not decided yet: decided on a heightmap taken after the resume (a decision
+            // still out is answered first, on an older one: its answer is kept).
             self.release_stamp = self.release_stamp.max(now);
-            self.phase = Phase::WaitHeightmap { since: now };
+            if self.deciding.is_none() {
+                self.begin_object(fx, now);
+            } else {
+                self.phase = Phase::Starting;
+                self.request_motion(fx, Motion::Pick);
+            }
         }
     }
 
@@ -1375,10 +1577,12 @@ impl Job {
         let placement = self.placement.filter(|p| p.index as usize == self.index);
         let at_release = |p: &Placement| {
             self.inputs.js.is_some_and(|j| {
-                j.position
-                    .iter()
-                    .zip(&p.release_q)
-                    .all(|(q, r)| (q - r).abs() <= RELEASE_Q_TOL_RAD)
+                p.release_q.is_some_and(|release| {
+                    j.position
+                        .iter()
+                        .zip(&release)
+                        .all(|(q, r)| (q - r).abs() <= RELEASE_Q_TOL_RAD)
+                })
             })
         };
         match placement {
@@ -1392,15 +1596,10 @@ impl Job {
                 self.announced = false;
                 self.placement = None;
             }
-            // In the gripper (perhaps closed just before the crash): placed where decided.
-            Some(_) if held => self.holding = true,
-            // In the gripper with no placement decided: nothing safe to do with it.
-            None if held => {
-                self.fault = Fault::Restarted;
-                self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
-                self.finish(fx, StatusEvent::JobFailed);
-                return false;
-            }
+            // In the gripper (perhaps closed just before the crash): placed where decided, or,
+            // picked before its decision came, held until it is decided (on a heightmap taken
+            // after the resume) and placed as the journal says it was taken.
+            _ if held => self.holding = true,
             // Not in the gripper: picked (again, as ObjectLost says, if the journal had it held).
             _ => {}
         }
@@ -1417,10 +1616,13 @@ impl Job {
             self.phase = Phase::Streaming { seg, cursor: start };
         } else if self.cancelling {
             self.finish(fx, StatusEvent::JobCancelled);
+        } else if self.holding {
+            // Picked: the place once its placement is decided.
+            self.await_decision(fx, now);
         } else if self.index >= self.count {
             self.finish(fx, StatusEvent::JobDone);
         } else {
-            self.phase = Phase::WaitHeightmap { since: now };
+            self.begin_object(fx, now);
         }
     }
 
@@ -1443,6 +1645,14 @@ impl Job {
         // At the segment's end, at rest.
         self.out.cmd.velocity = [0.0; DOF];
         self.out.cmd.acceleration = [0.0; DOF];
+        if let Some(f) = self.decision_failed
+            && !self.holding
+        {
+            // The decision failed and nothing is held: the job ends at this standstill.
+            self.fault = f;
+            self.finish(fx, StatusEvent::JobFailed);
+            return;
+        }
         match sg.then {
             Some(action) => {
                 self.out.grip_cmd = action;
@@ -1510,7 +1720,7 @@ impl Job {
             objects_done: self.done.min(self.count) as u32,
             object_index: self.index as u32,
             object_type,
-            reserved: 0,
+            decision_wait_ms: (self.wait_ns / 1_000_000).min(u32::MAX as u64) as u32,
             pose,
             decision_ns: dns,
             cycles: 0,

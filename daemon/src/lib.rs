@@ -7,6 +7,7 @@
 pub mod cellcal;
 pub mod config;
 pub mod controller;
+pub mod decision;
 pub mod digest;
 pub mod job;
 pub mod journal;

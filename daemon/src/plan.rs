@@ -1,6 +1,8 @@
-//! What the control loop and the planner thread exchange: trajectory buffers ([`MotionPlan`])
-//! that move between them, [`Request`]s and [`Response`]s. Plain data (no I/O), shared by the
-//! planner ([`crate::planner`]), the job state machine ([`crate::job`]) and its tests.
+//! What the control loop exchanges with the planner thread (trajectory buffers, [`MotionPlan`],
+//! that move between them, [`Request`]s and [`Response`]s) and with the decision worker
+//! ([`DecisionRequest`], [`DecisionResponse`]). Plain data (no I/O), shared by the planner
+//! ([`crate::planner`]), the decision worker ([`crate::decision`]), the job state machine
+//! ([`crate::job`]) and its tests.
 
 use crate::digest::Fnv;
 use herb_ipc::{Fault, GripperAction, MAX_JOB_OBJECTS};
@@ -32,15 +34,13 @@ pub struct MotionPlan {
     pub index: u32,
     /// Its catalog type.
     pub object: u16,
-    /// Placement in B: x, y, z (m), yaw (rad).
+    /// Placement in B: x, y, z (m), yaw (rad); zeros for a pick.
     pub pose: [f32; 4],
-    /// Whether the placement was decided for this plan (false for a replan of a held
-    /// object's placement after a resume).
-    pub decided: bool,
-    /// Decision latency (one `herb_decide::Decider::decide` call), ns; 0 when not decided.
-    pub decision_ns: u64,
-    /// Digest of everything above but the latency ([`MotionPlan::content_digest`]), set by
-    /// the planner when it fills the plan (the loop records it without hashing samples).
+    /// The gripper holds (or will hold) the object turned by a half turn
+    /// ([`herb_robot::cell::pick_waypoints`]).
+    pub flip: bool,
+    /// Digest of everything above ([`MotionPlan::content_digest`]), set by the planner when it
+    /// fills the plan (the loop records it without hashing samples).
     pub digest: u64,
 }
 
@@ -54,8 +54,7 @@ impl MotionPlan {
             index: 0,
             object: 0,
             pose: [0.0; 4],
-            decided: false,
-            decision_ns: 0,
+            flip: false,
             digest: 0,
         }
     }
@@ -64,13 +63,13 @@ impl MotionPlan {
     pub fn reset(&mut self) {
         self.setpoints.clear();
         self.n_segments = 0;
-        self.decided = false;
-        self.decision_ns = 0;
+        self.pose = [0.0; 4];
+        self.flip = false;
         self.digest = 0;
     }
 
     /// The digest of the plan's content: samples (bit for bit), segments, index, object, pose
-    /// and whether it was decided; not the measured latency.
+    /// and grasp flip.
     pub fn content_digest(&self) -> u64 {
         let mut h = Fnv::new();
         for s in self.setpoints.as_slice() {
@@ -86,7 +85,7 @@ impl MotionPlan {
         for v in self.pose {
             h.u64(v.to_bits() as u64);
         }
-        h.u64(self.decided as u64).finish()
+        h.u64(self.flip as u64).finish()
     }
 
     /// Ends a segment at the last sample, with `then` to do there.
@@ -121,24 +120,17 @@ pub enum Request {
         /// The objects are already in packing order: no search.
         ordered: bool,
     },
-    /// Decide and plan object `index` from rest at `from`, on a heightmap stamped after
-    /// `after_stamp_ns`. With `place_only`, the object is already held: reuse `pose` and plan
-    /// only the placing moves. With `repick`, a grasp missed: reuse `pose` (decided already)
-    /// and plan the pick and the placing moves again.
+    /// Plan `motion` for object `index` from rest at `from`.
     Plan {
         /// Index in the order.
         index: u32,
         /// Its type.
         object: u16,
-        /// Oldest acceptable heightmap stamp (exclusive).
-        after_stamp_ns: u64,
         /// Current configuration (at rest).
         from: [f64; DOF],
-        /// Held already: place at `pose`.
-        place_only: bool,
-        /// The grasp missed: pick again and place at `pose`, no new decision.
-        repick: bool,
-        /// The placement to reuse with `place_only` or `repick`.
+        /// Which moves.
+        motion: Motion,
+        /// The placement (decided already) of a [`Motion::Place`] or [`Motion::PickAndPlace`].
         pose: [f32; 4],
         /// Buffer to fill.
         buf: Box<MotionPlan>,
@@ -161,6 +153,94 @@ pub enum Request {
         /// Buffer to fill.
         buf: Box<MotionPlan>,
     },
+}
+
+/// The moves of an object's plan. The pick does not wait for the placement: the decision is
+/// made meanwhile ([`DecisionRequest`]), and the place is planned when it arrives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Motion {
+    /// Up to the transit height, above the pick station, the grasp (close), and back up: the
+    /// object is held at the lift pose. The plan says which way it is held ([`MotionPlan::flip`]).
+    Pick,
+    /// The held object (taken as `flip` says) carried to its placement, released (open), and
+    /// the gripper back up.
+    Place {
+        /// The object is held turned by a half turn.
+        flip: bool,
+    },
+    /// The pick and the place of an object whose placement was decided before (a grasp that
+    /// missed, a resume before the grasp): the grasp and release turns chosen together.
+    PickAndPlace,
+}
+
+/// What the loop asks the decision worker: where object `index` of the job's order goes, on a
+/// heightmap stamped after `after_stamp_ns` (the last release).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DecisionRequest {
+    /// Job id.
+    pub job_id: u64,
+    /// Index in the order.
+    pub index: u32,
+    /// The job's packing order (the objects after `index` are what a search rolls out).
+    pub order: [u16; MAX_JOB_OBJECTS],
+    /// Used.
+    pub count: u32,
+    /// Oldest acceptable heightmap stamp (exclusive).
+    pub after_stamp_ns: u64,
+}
+
+impl DecisionRequest {
+    /// The object to place and those after it, in order.
+    pub fn remaining(&self) -> &[u16] {
+        let n = (self.count as usize).min(MAX_JOB_OBJECTS);
+        self.order[..n].get(self.index as usize..).unwrap_or(&[])
+    }
+}
+
+/// `allowed` of a decision that is not a search.
+pub const NOT_A_SEARCH: u32 = u32::MAX;
+
+/// What the decision worker answers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DecisionResponse {
+    /// Job id of the request.
+    pub job_id: u64,
+    /// Index of the request.
+    pub index: u32,
+    /// The object's type.
+    pub object: u16,
+    /// The placement in B (x, y, z in m, yaw in rad), or why there is none:
+    /// `HeightmapTimeout` (no valid frame newer than the release came in time; ask again),
+    /// `NoFeasiblePlacement`, or `Decision` (the method failed).
+    pub outcome: Result<[f32; 4], Fault>,
+    /// What the budget allowed: the rollouts a search finished, which a replay runs as a count
+    /// ([`NOT_A_SEARCH`] for a policy).
+    pub allowed: u32,
+    /// The decision's latency, ns (not reproducible: a replay injects the recorded one).
+    pub decision_ns: u64,
+}
+
+impl DecisionResponse {
+    /// The digest of everything but the latency: what a replay compares.
+    pub fn digest(&self) -> u64 {
+        let mut h = Fnv::new();
+        h.u64(6)
+            .u64(self.job_id)
+            .u64(self.index as u64)
+            .u64(self.object as u64);
+        match self.outcome {
+            Ok(p) => {
+                h.u64(0);
+                for v in p {
+                    h.u64(v.to_bits() as u64);
+                }
+            }
+            Err(f) => {
+                h.u64(1).u64(f as u64);
+            }
+        }
+        h.u64(self.allowed as u64).finish()
+    }
 }
 
 /// What the planner answers.

@@ -1,17 +1,21 @@
 //! Re-running a run log offline ([`crate::record`]): the job state machine is fed the
 //! recorded inputs in their recorded order, the planner's requests are served by the same
-//! [`PlannerCore`] herbd runs, on the heightmaps recorded for them, and every cycle's outputs
-//! and every planner response are compared with the recorded digests. On an unmodified build
+//! [`PlannerCore`] herbd runs, the decisions by the same [`DecisionCore`] on the heightmaps
+//! recorded for them (a search runs the count of rollouts its recorded budget allowed), and
+//! every cycle's outputs, planner response and decision are compared with the recorded
+//! digests. On an unmodified build
 //! on the same kind of CPU a run is reproduced bit for bit; otherwise the first divergence is
 //! reported. `herbctl replay` and `herbctl explain` are thin front ends.
 
 use crate::config::{Config, ConfigFile};
+use crate::decision::DecisionCore;
 use crate::job::{Effects, Job, JobParams};
-use crate::plan::{MotionPlan, Request, Response};
+use crate::plan::{DecisionRequest, DecisionResponse, MotionPlan, NOT_A_SEARCH, Request, Response};
 use crate::planner::PlannerCore;
 use crate::record::{Entry, Log, OutDigest, catalog_digest};
 use herb_ipc::{GripperAction, HeightmapFrame, Payload, RejectReason, Status, StatusEvent};
 use herb_robot::motion::Setpoint;
+use herb_sim::search::SearchReport;
 use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -30,14 +34,18 @@ pub struct ReplayOptions {
 /// The decision made for the explained object, re-made on its recorded heightmap.
 #[derive(Debug)]
 pub struct Explained {
-    /// Planner request number.
+    /// Decision request number.
     pub request: u64,
     /// Catalog type.
     pub object: u16,
     /// The heightmap it was decided on.
     pub frame: Box<HeightmapFrame>,
-    /// The policy's decision (action, release position with z, yaw), or why there was none.
-    pub decision: Result<herb_decide::Decision, herb_decide::DecideError>,
+    /// The method (`search`, or the policy's name).
+    pub method: String,
+    /// The decision as re-made (placement or why there was none, what the budget allowed).
+    pub response: DecisionResponse,
+    /// A search's candidates: the rollouts it finished, their returns, the one chosen.
+    pub search: Option<SearchReport>,
 }
 
 /// What a replay reproduced.
@@ -47,7 +55,7 @@ pub struct Replayed {
     pub cycles: u64,
     /// Joint commands reproduced.
     pub joint_commands: u64,
-    /// Planner responses reproduced.
+    /// Planner responses and decisions reproduced.
     pub responses: u64,
     /// Placements decided (`Decided` statuses).
     pub decisions: u64,
@@ -103,6 +111,7 @@ pub enum ReplayError {
 struct ReplayFx {
     digest: OutDigest,
     requests: VecDeque<Request>,
+    decisions: VecDeque<DecisionRequest>,
     /// This cycle's outputs, described (for a divergence report).
     said: Vec<String>,
     statuses: Vec<Status>,
@@ -150,19 +159,27 @@ impl Effects for ReplayFx {
                 ordered,
                 ..
             } => format!("order job {job_id} ({count}, already ordered: {ordered})"),
-            Request::Plan {
-                index, place_only, ..
-            } => format!("plan object {index} (place only: {place_only})"),
+            Request::Plan { index, motion, .. } => format!("plan object {index} ({motion:?})"),
             Request::Brake { .. } => "brake".into(),
             Request::Retreat { .. } => "retreat".into(),
         });
         self.requests.push_back(r);
         Ok(())
     }
+    fn decide(&mut self, r: DecisionRequest) -> Result<(), DecisionRequest> {
+        self.digest.decision_request(&r);
+        self.said.push(format!("decide object {}", r.index));
+        self.decisions.push_back(r);
+        Ok(())
+    }
 }
 
-/// The configuration, catalog and planner of a recorded run, checked against its digests.
-fn rebuild(log: &Log, opts: &ReplayOptions) -> Result<(Config, PlannerCore), ReplayError> {
+/// The configuration, catalog, planner and decision method of a recorded run, checked against
+/// its digests.
+fn rebuild(
+    log: &Log,
+    opts: &ReplayOptions,
+) -> Result<(Config, PlannerCore, DecisionCore), ReplayError> {
     let h = &log.header;
     let mut cfg: Config = toml::from_str(&h.config_toml).map_err(ReplayError::Config)?;
     if let Some(b) = &opts.boxed {
@@ -193,13 +210,15 @@ fn rebuild(log: &Log, opts: &ReplayOptions) -> Result<(Config, PlannerCore), Rep
     if !differ.is_empty() && !opts.force {
         return Err(ReplayError::Differs(differ));
     }
-    let core = PlannerCore::new(&cfg, Arc::new(catalog))?;
-    Ok((cfg, core))
+    let catalog = Arc::new(catalog);
+    let core = PlannerCore::new(&cfg, catalog.clone())?;
+    let decider = DecisionCore::new(&cfg, catalog)?;
+    Ok((cfg, core, decider))
 }
 
 /// Replays one segment; `Err` when it cannot start (configuration, catalog, models).
 pub fn replay(log: &Log, opts: &ReplayOptions) -> Result<(Outcome, Replayed), ReplayError> {
-    let (cfg, mut core) = rebuild(log, opts)?;
+    let (cfg, mut core, mut decider) = rebuild(log, opts)?;
     let samples = cfg.trajectory_samples();
     let buffer = || Box::new(MotionPlan::with_capacity(samples));
     let mut job = Job::new(
@@ -207,10 +226,10 @@ pub fn replay(log: &Log, opts: &ReplayOptions) -> Result<(Outcome, Replayed), Re
         buffer(),
         buffer(),
     );
-    let mut k = 0u64;
+    let (mut k, mut kd) = (0u64, 0u64);
     if let Some((before, s)) = &log.snapshot {
         job.restore(s);
-        k = *before;
+        (k, kd) = (before.requests, before.decisions);
     }
     let mut fx = ReplayFx::default();
     let mut out = Replayed::default();
@@ -249,45 +268,7 @@ pub fn replay(log: &Log, opts: &ReplayOptions) -> Result<(Outcome, Replayed), Re
                     );
                     return Ok((diverged(&out, now, t0, what), out));
                 };
-                let used = match log.plan_frames.get(&k) {
-                    Some(Some(d)) => match log.frames.get(d) {
-                        Some(f) => Some(f.as_ref()),
-                        None => {
-                            return Ok((
-                                Outcome::Incomplete(format!("the frame of request {k} is missing")),
-                                out,
-                            ));
-                        }
-                    },
-                    Some(None) => None,
-                    None if PlannerCore::frame_needed(&req).is_some() => {
-                        return Ok((
-                            Outcome::Incomplete(format!("no frame recorded for request {k}")),
-                            out,
-                        ));
-                    }
-                    None => None,
-                };
-                if let (Request::Plan { index, object, .. }, Some(f)) = (&req, used) {
-                    out.decision_frames.push((*index, Box::new(*f)));
-                    if opts.explain == Some(*index) {
-                        let (d, _) = core.decision(f, *object, *index);
-                        out.explained = Some(Explained {
-                            request: k,
-                            object: *object,
-                            frame: Box::new(*f),
-                            decision: d,
-                        });
-                    }
-                }
-                let mut resp = core.handle(req, used);
-                if let Response::Planned(b)
-                | Response::Braked(b)
-                | Response::Failed { buf: b, .. } = &mut resp
-                {
-                    // Time is not reproducible: the measured latency is the recorded one.
-                    b.decision_ns = rec.decision_ns;
-                }
+                let resp = core.handle(req);
                 if resp.digest() != rec.digest {
                     let what = format!(
                         "planner response {k} differs: recorded digest {:016x}, replayed {:016x} ({})",
@@ -300,6 +281,67 @@ pub fn replay(log: &Log, opts: &ReplayOptions) -> Result<(Outcome, Replayed), Re
                 out.responses += 1;
                 k += 1;
                 job.planner_response(resp, now, &mut fx);
+            }
+            Entry::Decision(rec) => {
+                let Some(req) = fx.decisions.pop_front() else {
+                    let what =
+                        format!("the run received decision {kd}, which the replay never asked for");
+                    return Ok((diverged(&out, now, t0, what), out));
+                };
+                let used = match log.decision_frames.get(&kd) {
+                    Some(Some(d)) => match log.frames.get(d) {
+                        Some(f) => Some(f.as_ref()),
+                        None => {
+                            return Ok((
+                                Outcome::Incomplete(format!(
+                                    "the frame of decision {kd} is missing"
+                                )),
+                                out,
+                            ));
+                        }
+                    },
+                    Some(None) => None,
+                    None => {
+                        return Ok((
+                            Outcome::Incomplete(format!("no frame recorded for decision {kd}")),
+                            out,
+                        ));
+                    }
+                };
+                let allowed = (rec.allowed != NOT_A_SEARCH).then_some(rec.allowed);
+                let mut d = match used {
+                    Some(f) => {
+                        out.decision_frames.push((req.index, Box::new(*f)));
+                        decider.decide(&req, f, allowed)
+                    }
+                    None => crate::decision::no_fresh_frame(&req),
+                };
+                // Time is not reproducible: the measured latency is the recorded one.
+                d.decision_ns = rec.decision_ns;
+                if let (Some(f), true) = (used, opts.explain == Some(req.index)) {
+                    out.explained = Some(Explained {
+                        request: kd,
+                        object: d.object,
+                        frame: Box::new(*f),
+                        method: decider.name().to_owned(),
+                        response: d,
+                        search: decider.search_report().cloned(),
+                    });
+                }
+                if d.digest() != rec.digest {
+                    let what = format!(
+                        "decision {kd} differs: recorded digest {:016x}, replayed {:016x} (object {}: {:?}, allowed {})",
+                        rec.digest,
+                        d.digest(),
+                        d.index,
+                        d.outcome,
+                        d.allowed
+                    );
+                    return Ok((diverged(&out, now, t0, what), out));
+                }
+                out.responses += 1;
+                kd += 1;
+                job.decision_response(d, now, &mut fx);
             }
             Entry::Job(r) => job.job_request(&r, now, &mut fx),
             Entry::Cancel(r) => job.cancel_request(&r, &mut fx),

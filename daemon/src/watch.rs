@@ -279,7 +279,7 @@ mod tests {
             objects_done: 1,
             object_index: 1,
             object_type: 3,
-            reserved: 0,
+            decision_wait_ms: 0,
             pose: [0.01, -0.02, 0.05, 1.5],
             decision_ns: 412_000,
             cycles,

@@ -79,12 +79,9 @@ const RULES: &[(&str, &[&str])] = &[
             "herb-daemon",
         ],
     ),
-    // herbd: no pictures (herbctl, its own crate, draws them), and no physics engine: it
-    // decides through the decision core, and the evaluation's registry is not its business.
-    (
-        "herb-daemon",
-        &["plotters", "rapier3d", "herb-sim", "herb-methods"],
-    ),
+    // herbd: no pictures (herbctl, its own crate, draws them), and not the evaluation's
+    // registry; the physics engine only through the search (see ONLY_THROUGH).
+    ("herb-daemon", &["plotters", "herb-methods", "herb-picture"]),
     // The Rust client library: the wire and iceoryx2 only; no physics engine, policies'
     // runtime or pictures, and none of the crates that bring them.
     (
@@ -159,6 +156,14 @@ const RULES: &[(&str, &[&str])] = &[
     ),
 ];
 
+/// (package, crate, the one crate through which the package may reach it): with that crate
+/// taken out of the graph, the package reaches the crate no more.
+const ONLY_THROUGH: &[(&str, &str, &str)] = &[
+    // herbd decides through the decision core (policies, no physics); the decision worker's
+    // search (`herb_sim::search`, its twin) is its one way to the physics engine.
+    ("herb-daemon", "rapier3d", "herb-sim"),
+];
+
 /// What the simulation-side crates (decision core, CLI, bindings) never reach.
 const SIM_SIDE_NEVER: &[&str] = &[
     "iceoryx2",
@@ -221,16 +226,42 @@ fn resolved_graph() -> BTreeMap<String, BTreeSet<String>> {
 
 /// Every crate `from` reaches through normal and build dependencies.
 fn reach(graph: &BTreeMap<String, BTreeSet<String>>, from: &str) -> BTreeSet<String> {
+    reach_avoiding(graph, from, None)
+}
+
+/// Every crate `from` reaches without passing through `avoid`.
+fn reach_avoiding(
+    graph: &BTreeMap<String, BTreeSet<String>>,
+    from: &str,
+    avoid: Option<&str>,
+) -> BTreeSet<String> {
     let mut seen = BTreeSet::new();
     let mut stack = vec![from.to_owned()];
     while let Some(p) = stack.pop() {
         for d in graph.get(&p).into_iter().flatten() {
-            if seen.insert(d.clone()) {
+            if Some(d.as_str()) != avoid && seen.insert(d.clone()) {
                 stack.push(d.clone());
             }
         }
     }
     seen
+}
+
+#[test]
+fn some_crates_are_reached_through_one_crate_only() {
+    let graph = resolved_graph();
+    for (package, target, via) in ONLY_THROUGH {
+        let direct = reach(&graph, package);
+        assert!(
+            direct.contains(*via),
+            "{package} no longer reaches {via}: update the rule"
+        );
+        let around = reach_avoiding(&graph, package, Some(via));
+        assert!(
+            !around.contains(*target),
+            "{package} reaches {target} other than through {via}"
+        );
+    }
 }
 
 #[test]

@@ -1,10 +1,10 @@
-//! The planner driven by arbitrary policy outputs (proptest): a policy that returns any three
-//! numbers (NaN, infinities, out of range, or plausible), decided on an empty box and planned
-//! as herbd plans it (`PlannerCore`: decision, IK, Ruckig). Whatever the output, either the
-//! plan is refused with a fault or every setpoint it holds is inside the configured joint
-//! limits with finite speeds and accelerations; an action outside `[-1, 1]^3` or not finite is
-//! always refused as a decision fault, never placed. The same for a held object's placement
-//! replanned from any pose (`place_only`).
+//! The decision worker and the planner driven by arbitrary policy outputs (proptest): a policy
+//! that returns any three numbers (NaN, infinities, out of range, or plausible), decided on an
+//! empty box (`DecisionCore`, as herbd's worker decides) and planned as herbd plans it
+//! (`PlannerCore`: IK, Ruckig). Whatever the output, either it is refused with a fault or every
+//! setpoint of its plan is inside the configured joint limits with finite speeds and
+//! accelerations; an action outside `[-1, 1]^3` or not finite is always refused as a decision
+//! fault, never placed. The same for a held object's place planned from any pose.
 //!
 //! Budget: `PROPTEST_CASES` cases (a quarter of proptest's default 256 in CI, each case plans
 //! a whole pick and place); `scripts/fuzz.sh` runs more.
@@ -13,7 +13,8 @@ use herb_core::observation::ObsLayout;
 use herb_core::paths::MeshSource;
 use herb_core::{Catalog, GridSpec, TypeIdx};
 use herb_daemon::config::Config;
-use herb_daemon::plan::{MotionPlan, Request, Response};
+use herb_daemon::decision::DecisionCore;
+use herb_daemon::plan::{DecisionRequest, Motion, MotionPlan, Request, Response};
 use herb_daemon::planner::PlannerCore;
 use herb_decide::{DecisionInput, Order, Policy, SequenceModel};
 use herb_ipc::{Fault, HeightmapFrame, MAX_JOB_OBJECTS};
@@ -76,27 +77,25 @@ fn any_f32() -> impl Strategy<Value = f32> {
     ]
 }
 
-/// Plans object `object` with `core` and checks the outcome (module docs): `None` when planned
-/// (every setpoint checked), the fault when refused.
+/// Plans `motion` of object `object` to `pose` with `core` and checks the outcome (module
+/// docs): `None` when planned (every setpoint checked), the fault when refused.
 fn check_plan(
     core: &mut PlannerCore,
     cfg: &Config,
     object: u16,
-    place_only: Option<[f32; 4]>,
-    frame: &HeightmapFrame,
+    motion: Motion,
+    pose: [f32; 4],
 ) -> Result<Option<Fault>, TestCaseError> {
     let buf = Box::new(MotionPlan::with_capacity(cfg.trajectory_samples()));
     let r = Request::Plan {
         index: 0,
         object,
-        after_stamp_ns: 0,
         from: LEFT_TOP_DOWN_NOMINAL,
-        place_only: place_only.is_some(),
-        repick: false,
-        pose: place_only.unwrap_or_default(),
+        motion,
+        pose,
         buf,
     };
-    match core.handle(r, Some(frame)) {
+    match core.handle(r) {
         Response::Planned(plan) => {
             let (lo, hi) = (cfg.limits.lower, cfg.limits.upper);
             for i in 0..plan.setpoints.len() {
@@ -120,18 +119,31 @@ fn check_plan(
     }
 }
 
-fn order(core: &mut PlannerCore, object: u16) {
-    let mut objects = [0u16; MAX_JOB_OBJECTS];
-    objects[0] = object;
-    core.handle(
-        Request::Order {
-            job_id: 1,
-            objects,
-            count: 1,
-            ordered: false,
-        },
-        None,
-    );
+/// Decides object `object` (a one-object job) with a policy answering `action`, then plans its
+/// pick and place there: the decision's fault, or the plan's outcome.
+fn decide_and_plan(
+    cfg: &Config,
+    object: u16,
+    action: [f32; 3],
+) -> Result<Option<Fault>, TestCaseError> {
+    let mut decider = DecisionCore::with_policy(cfg, catalog(), Box::new(Scripted(action)));
+    let mut order = [0u16; MAX_JOB_OBJECTS];
+    order[0] = object;
+    let req = DecisionRequest {
+        job_id: 1,
+        index: 0,
+        order,
+        count: 1,
+        after_stamp_ns: 0,
+    };
+    let d = decider.decide(&req, &empty_frame(), None);
+    match d.outcome {
+        Err(f) => Ok(Some(f)),
+        Ok(pose) => {
+            let mut core = PlannerCore::new(cfg, catalog()).unwrap();
+            check_plan(&mut core, cfg, object, Motion::PickAndPlace, pose)
+        }
+    }
 }
 
 proptest! {
@@ -145,11 +157,8 @@ proptest! {
         object in 0u16..24,
     ) {
         let cfg = config();
-        let catalog = catalog();
-        let mut core = PlannerCore::with_policy(&cfg, catalog, Box::new(Scripted(action))).unwrap();
-        order(&mut core, object);
         let valid = action.iter().all(|a| a.is_finite() && (-1.0..=1.0).contains(a));
-        let outcome = check_plan(&mut core, &cfg, object, None, &empty_frame())?;
+        let outcome = decide_and_plan(&cfg, object, action)?;
         if !valid {
             prop_assert_eq!(outcome, Some(Fault::Decision), "action {:?}", action);
         }
@@ -161,10 +170,10 @@ proptest! {
         object in 0u16..24,
     ) {
         let cfg = config();
-        let catalog = catalog();
-        let mut core = PlannerCore::with_policy(&cfg, catalog, Box::new(Scripted([0.0; 3]))).unwrap();
-        order(&mut core, object);
-        check_plan(&mut core, &cfg, object, Some(pose), &empty_frame())?;
+        let mut core = PlannerCore::new(&cfg, catalog()).unwrap();
+        for flip in [false, true] {
+            check_plan(&mut core, &cfg, object, Motion::Place { flip }, pose)?;
+        }
     }
 }
 
@@ -173,14 +182,9 @@ proptest! {
 #[test]
 fn a_plausible_action_is_planned_and_checked() {
     let cfg = config();
-    let catalog = catalog();
     for object in [0u16, 1, 11] {
-        let mut core =
-            PlannerCore::with_policy(&cfg, catalog.clone(), Box::new(Scripted([0.2, -0.3, 0.5])))
-                .unwrap();
-        order(&mut core, object);
-        let outcome = check_plan(&mut core, &cfg, object, None, &empty_frame())
-            .unwrap_or_else(|e| panic!("{e}"));
+        let outcome =
+            decide_and_plan(&cfg, object, [0.2, -0.3, 0.5]).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(
             outcome, None,
             "object {object}: a plausible action was refused"
@@ -195,8 +199,7 @@ fn jobs_are_ordered_with_herbs_beam3_and_recovered_ones_kept_as_given() {
     let cfg = config();
     let catalog = catalog();
     let model = SequenceModel::load(&cfg.models.sequence, &catalog).unwrap();
-    let mut core =
-        PlannerCore::with_policy(&cfg, catalog.clone(), Box::new(Scripted([0.0; 3]))).unwrap();
+    let mut core = PlannerCore::new(&cfg, catalog.clone()).unwrap();
     let job: Vec<u16> = vec![20, 3, 3, 11, 7, 0, 15, 22, 9, 1, 18];
     let types: Vec<TypeIdx> = job.iter().map(|&t| TypeIdx(t)).collect();
     let ids = |v: Vec<TypeIdx>| v.iter().map(|t| t.0).collect::<Vec<u16>>();
@@ -211,15 +214,12 @@ fn jobs_are_ordered_with_herbs_beam3_and_recovered_ones_kept_as_given() {
     for (ordered, want) in [(false, herb), (true, job.clone())] {
         let mut objects = [0u16; MAX_JOB_OBJECTS];
         objects[..job.len()].copy_from_slice(&job);
-        let r = core.handle(
-            Request::Order {
-                job_id: 7,
-                objects,
-                count: job.len(),
-                ordered,
-            },
-            None,
-        );
+        let r = core.handle(Request::Order {
+            job_id: 7,
+            objects,
+            count: job.len(),
+            ordered,
+        });
         match r {
             Response::Ordered {
                 job_id,

@@ -3,7 +3,7 @@
 //! the middle of a job, with the arm moving; one of them is then handed a payload built from
 //! arbitrary bytes (a joint state, gripper state, heightmap, pack-job or cancel request) that
 //! fails validation. Over the next cycles both publish exactly the same joint commands, gripper
-//! commands, planner requests and statuses, except that the rejection is counted
+//! commands, planner and decision requests and statuses, except that the rejection is counted
 //! (`rejected_inputs`) and a rejected request gets its reply, with a reason.
 //!
 //! Budget: `PROPTEST_CASES` cases per property (256 by default, what CI runs);
@@ -11,7 +11,9 @@
 
 use herb_daemon::config::Config;
 use herb_daemon::job::{Effects, Job, JobParams};
-use herb_daemon::plan::{MotionPlan, Request, Response};
+use herb_daemon::plan::{
+    DecisionRequest, DecisionResponse, Motion, MotionPlan, NOT_A_SEARCH, Request, Response,
+};
 use herb_ipc::{
     CancelJobRequest, GripperAction, GripperState, Header, HeightmapFrame, JointState, NO_OBJECT,
     PackJobRequest, Payload, RejectReason, Status,
@@ -33,12 +35,14 @@ enum Out {
     Joint(Setpoint),
     Gripper(u64, GripperAction, u32),
     Plan(&'static str),
+    Decide(u32),
 }
 
 #[derive(Default)]
 struct Fx {
     out: Vec<Out>,
     pending: Vec<Request>,
+    decisions: Vec<DecisionRequest>,
 }
 
 impl Effects for Fx {
@@ -69,10 +73,27 @@ impl Effects for Fx {
         self.pending.push(r);
         Ok(())
     }
+    fn decide(&mut self, r: DecisionRequest) -> Result<(), DecisionRequest> {
+        self.out.push(Out::Decide(r.index));
+        self.decisions.push(r);
+        Ok(())
+    }
 }
 
-/// A scripted planner (fixture): orders as given; plans pick and place as five segments of
-/// 300 samples moving joint 0 by 0.1 mrad each.
+/// A scripted decision worker (fixture): every object in the box's middle.
+fn decided(r: DecisionRequest) -> DecisionResponse {
+    DecisionResponse {
+        job_id: r.job_id,
+        index: r.index,
+        object: r.remaining().first().copied().unwrap_or(0),
+        outcome: Ok([0.0, 0.0, 0.05, 0.0]),
+        allowed: NOT_A_SEARCH,
+        decision_ns: 1000,
+    }
+}
+
+/// A scripted planner (fixture): orders as given; plans a pick, or a place, as three segments
+/// of 300 samples moving joint 0 by 0.1 mrad each (a pick and place as five).
 fn answer(r: Request) -> Response {
     match r {
         Request::Order {
@@ -89,18 +110,24 @@ fn answer(r: Request) -> Response {
             index,
             object,
             from,
+            motion,
+            pose,
             mut buf,
-            ..
         } => {
             buf.reset();
             let mut q = from;
-            for then in [
-                None,
-                Some(GripperAction::Close),
-                None,
-                Some(GripperAction::Open),
-                None,
-            ] {
+            let segments: &[Option<GripperAction>] = match motion {
+                Motion::Pick => &[None, Some(GripperAction::Close), None],
+                Motion::Place { .. } => &[None, Some(GripperAction::Open), None],
+                Motion::PickAndPlace => &[
+                    None,
+                    Some(GripperAction::Close),
+                    None,
+                    Some(GripperAction::Open),
+                    None,
+                ],
+            };
+            for &then in segments {
                 for _ in 0..300 {
                     q[0] += 1e-4;
                     let mut s = Setpoint::at_rest(q);
@@ -111,8 +138,7 @@ fn answer(r: Request) -> Response {
             }
             buf.index = index;
             buf.object = object;
-            buf.pose = [0.0, 0.0, 0.05, 0.0];
-            buf.decided = true;
+            buf.pose = pose;
             Response::Planned(buf)
         }
         Request::Retreat { mut buf, .. } => {
@@ -208,6 +234,10 @@ impl Cell {
         self.feed();
         for r in std::mem::take(&mut self.fx.pending) {
             self.job.planner_response(answer(r), self.now, &mut self.fx);
+        }
+        for r in std::mem::take(&mut self.fx.decisions) {
+            self.job
+                .decision_response(decided(r), self.now, &mut self.fx);
         }
         let mark = self.fx.out.len();
         self.job.tick(self.now, false, &mut self.fx);

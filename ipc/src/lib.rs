@@ -677,8 +677,10 @@ pub struct Status {
     pub object_index: u32,
     /// Its catalog type index, or [`NO_OBJECT`].
     pub object_type: u32,
-    /// Reserved, zero.
-    pub reserved: u32,
+    /// Time this job has held objects at the lift pose waiting for their placements'
+    /// decisions so far, ms (the pick starts before the decision; 0 when every decision came
+    /// before its grasp was done).
+    pub decision_wait_ms: u32,
     /// Placement in the box frame: x, y, z (m) of the object's canonical origin, yaw (rad).
     pub pose: [f32; 4],
     /// Decision latency of this object, ns: herbd's one decision call (check and copy the

@@ -144,7 +144,7 @@ fn layouts() -> String {
         objects_done: "objects released",
         object_index: "index in the packing order of the object this event is about",
         object_type: "its catalog type index, or `NO_OBJECT`",
-        reserved: "zero",
+        decision_wait_ms: "ms this job has held objects at the lift pose waiting for their decisions, so far",
         pose: "m, m, m, rad: x, y, z of the canonical origin in the box frame, yaw",
         decision_ns: "ns, the decision's latency (Decided)",
         cycles: "loop cycles run",

@@ -112,6 +112,12 @@ impl Search {
         &self.settings
     }
 
+    /// Sets the budget of the next decisions (a replay runs a recorded count of rollouts
+    /// where a deadline stopped the run).
+    pub fn set_budget(&mut self, budget: Budget) {
+        self.settings.budget = budget;
+    }
+
     /// What the last decision did.
     pub fn report(&self) -> &SearchReport {
         &self.report

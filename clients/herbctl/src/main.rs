@@ -253,6 +253,7 @@ fn pack(
         Err(e) => return Err(e.to_string()),
     };
 
+    let job_t0 = std::time::Instant::now();
     let mut decision_ms = Vec::new();
     let mut faults = Vec::new();
     let mut last: Option<Status> = None;
@@ -467,6 +468,8 @@ fn pack(
         }
     }
     let mut d = decision_ms.clone();
+    let job_s = job_t0.elapsed().as_secs_f64();
+    let wait_s = s.decision_wait_ms as f64 / 1e3;
     let summary = serde_json::json!({
         "job_id": job_id,
         "ok": ok == Some(true),
@@ -477,6 +480,9 @@ fn pack(
         "decisions": decision_ms.len(),
         "decision_ms_p50": pct(&mut d, 0.5),
         "decision_ms_max": pct(&mut d, 1.0),
+        "job_s": job_s,
+        "decision_wait_s": wait_s,
+        "decision_wait_pct": 100.0 * wait_s / job_s.max(1e-9),
         "faults": faults,
         "verdict": verdict,
         "loop_cycles": s.cycles,
@@ -503,9 +509,12 @@ fn pack(
         println!("{summary}");
     } else {
         println!(
-            "statistics: decision p50 {:.3} ms (max {:.3}), loop {} cycles, {} deadline misses, worst cycle {:.1} us, faults {:?}",
+            "statistics: decision p50 {:.3} ms (max {:.3}), held waiting for decisions {:.2} s of {:.1} s ({:.1} %), loop {} cycles, {} deadline misses, worst cycle {:.1} us, faults {:?}",
             pct(&mut d, 0.5),
             pct(&mut d, 1.0),
+            wait_s,
+            job_s,
+            100.0 * wait_s / job_s.max(1e-9),
             s.cycles,
             s.deadline_misses,
             s.max_cycle_ns as f64 / 1000.0,
@@ -828,7 +837,7 @@ fn explain(
     })?;
     let f = &e.frame;
     println!(
-        "object {object}: {} (planner request {})",
+        "object {object}: {} (decision request {})",
         name(catalog, e.object as u32),
         e.request
     );
@@ -841,19 +850,48 @@ fn explain(
         f.objects,
         if f.objects == 0 { " (or unknown)" } else { "" }
     );
-    println!("policy: {}", cfg.models.policy);
-    match &e.decision {
-        Ok(d) => {
+    println!("method: {}", e.method);
+    if let Some(rep) = &e.search {
+        let allowed = e.response.allowed;
+        println!(
+            "search: {} feasible candidates on the lattice; the budget allowed {allowed} rollout{} (replayed as that count){}",
+            rep.candidates,
+            if allowed == 1 { "" } else { "s" },
+            if allowed == 0 {
+                ": none finished, so the prior's first (lattice BLBF's) was taken"
+            } else {
+                ""
+            }
+        );
+        for (c, o) in &rep.finished {
+            let p = &o.placement;
             println!(
-                "action (normalised x, y, theta): [{:+.4}, {:+.4}, {:+.4}]",
-                d.action[0], d.action[1], d.action[2]
-            );
-            println!(
-                "placement: x {:+.4} m, y {:+.4} m, yaw {:+.3} rad; z {:.4} m (resting height from the heightmap + {:.3} m clearance)",
-                d.position[0], d.position[1], d.theta, d.position[2], cfg.models.clearance_m
+                "  candidate {:>2} (x {:+.3} y {:+.3} yaw {:+.2}): return {:+.4}, {} objects placed inside{}{}",
+                c + 1,
+                p.x,
+                p.y,
+                p.theta(),
+                o.ret,
+                o.packed,
+                if o.success {
+                    ", all"
+                } else {
+                    ", then a failure"
+                },
+                if Some(*c) == rep.chosen {
+                    "  <- chosen"
+                } else {
+                    ""
+                }
             );
         }
-        Err(why) => println!("no placement: {why}"),
+    }
+    match e.response.outcome {
+        Ok(p) => println!(
+            "placement: x {:+.4} m, y {:+.4} m, yaw {:+.3} rad; z {:.4} m (resting height from the heightmap + {:.3} m clearance)",
+            p[0], p[1], p[3], p[2], cfg.models.clearance_m
+        ),
+        Err(why) => println!("no placement: {why:?}"),
     }
     let mine: Vec<&Status> = r
         .statuses

@@ -107,7 +107,7 @@ class Status(_Payload):
         ("objects_done", _u32),
         ("object_index", _u32),
         ("object_type", _u32),
-        ("reserved", _u32),
+        ("decision_wait_ms", _u32),
         ("pose", _f32 * 4),
         ("decision_ns", _u64),
         ("cycles", _u64),

@@ -130,6 +130,8 @@ pub struct Waypoints {
     pub grasp_yaw: f64,
     /// Gripper yaw at the release.
     pub place_yaw: f64,
+    /// The object is held turned by a half turn ([`pick_waypoints`]).
+    pub flip: bool,
 }
 
 /// Why the waypoints of a placement could not be found.
@@ -142,10 +144,70 @@ pub struct Unreachable {
     pub error: IkError,
 }
 
+/// The joint targets of a pick of an object of height `h`: above the pick station at transit
+/// height (for `clear_top`), and the closing position, seeded from `seed`. With `flip` the
+/// parallel gripper takes the object turned by a half turn; the release then turns it back
+/// ([`place_waypoints`] with the same `flip`).
+pub fn pick_waypoints(
+    cell: &CellConfig,
+    arm: &Arm,
+    opts: &IkOptions,
+    h: f64,
+    seed: &[f64; DOF],
+    clear_top: f64,
+    flip: bool,
+) -> Result<([f64; DOF], [f64; DOF]), Unreachable> {
+    let transit = cell.transit_z(h, clear_top);
+    let g = cell.grasp_point(h);
+    let yaw = cell.pick_yaw + if flip { std::f64::consts::PI } else { 0.0 };
+    let pre_grasp = ik_top_down(arm, opts, "pre-grasp", [g.x, g.y, transit, yaw], seed)?;
+    let grasp = ik_top_down(arm, opts, "grasp", [g.x, g.y, g.z, yaw], &pre_grasp)?;
+    Ok((pre_grasp, grasp))
+}
+
+/// The joint targets of releasing an object of height `h`, held as [`pick_waypoints`] with
+/// `flip` took it, with its canonical origin at `place` (B frame: x, y, z in m, yaw in rad):
+/// above the placement at transit height, and the release position, seeded from `seed`.
+#[allow(clippy::too_many_arguments)]
+pub fn place_waypoints(
+    cell: &CellConfig,
+    arm: &Arm,
+    opts: &IkOptions,
+    h: f64,
+    place: [f64; 4],
+    seed: &[f64; DOF],
+    clear_top: f64,
+    flip: bool,
+) -> Result<([f64; DOF], [f64; DOF]), Unreachable> {
+    let transit = cell.transit_z(h, clear_top);
+    let c = cell.box_pose() * Point3::new(place[0], place[1], place[2] + 0.5 * h - cell.depth(h));
+    let yaw = cell.box_yaw + place[3] + if flip { std::f64::consts::PI } else { 0.0 };
+    let pre_place = ik_top_down(arm, opts, "pre-place", [c.x, c.y, transit, yaw], seed)?;
+    let place_q = ik_top_down(arm, opts, "place", [c.x, c.y, c.z, yaw], &pre_place)?;
+    Ok((pre_place, place_q))
+}
+
+/// The configuration with the gripper pointing down at `xyz_yaw` (in `base`), from `seed` or,
+/// failing that, from the nominal top-down configuration; `which` names the waypoint.
+fn ik_top_down(
+    arm: &Arm,
+    opts: &IkOptions,
+    which: &'static str,
+    [x, y, z, yaw]: [f64; 4],
+    seed: &[f64; DOF],
+) -> Result<[f64; DOF], Unreachable> {
+    let target = top_down(x, y, z, yaw);
+    arm.ik(&target, seed, opts)
+        .or_else(|_| arm.ik(&target, &LEFT_TOP_DOWN_NOMINAL, opts))
+        .map_err(|error| Unreachable { which, error })
+}
+
 /// Plans the joint targets for taking an object of height `h` from the pick station and
 /// releasing it with its canonical origin at `place` (B frame: x, y, z in m, yaw in rad),
-/// seeded from `seed`, moving sideways at [`CellConfig::transit_z`] for `clear_top`. A parallel gripper may take the object turned by a half turn; the
-/// grasp and release yaws are chosen together so that the object ends at the decided yaw.
+/// seeded from `seed`, moving sideways at [`CellConfig::transit_z`] for `clear_top`. A
+/// parallel gripper may take the object turned by a half turn; the grasp and release yaws are
+/// chosen together (the first `flip` that reaches all four) so that the object ends at the
+/// decided yaw.
 pub fn plan_waypoints(
     cell: &CellConfig,
     arm: &Arm,
@@ -155,43 +217,24 @@ pub fn plan_waypoints(
     seed: &[f64; DOF],
     clear_top: f64,
 ) -> Result<Waypoints, Unreachable> {
-    let depth = cell.depth(h);
-    let transit = cell.transit_z(h, clear_top);
-    let grasp_xyz = cell.grasp_point(h);
-    let b = cell.box_pose();
-    let c = b * Point3::new(place[0], place[1], place[2] + 0.5 * h - depth);
-    let object_yaw = cell.box_yaw + place[3];
     let mut last = None;
-    for flip in [0.0, std::f64::consts::PI] {
-        let gy = cell.pick_yaw + flip;
-        let py = object_yaw + flip;
-        let r = (|| -> Result<Waypoints, Unreachable> {
-            let ik = |which, x: f64, y: f64, z: f64, yaw: f64, s: &[f64; DOF]| {
-                let target = top_down(x, y, z, yaw);
-                arm.ik(&target, s, opts)
-                    .or_else(|_| arm.ik(&target, &LEFT_TOP_DOWN_NOMINAL, opts))
-                    .map_err(|error| Unreachable { which, error })
-            };
-            let pre_grasp = ik("pre-grasp", grasp_xyz.x, grasp_xyz.y, transit, gy, seed)?;
-            let grasp = ik(
-                "grasp",
-                grasp_xyz.x,
-                grasp_xyz.y,
-                grasp_xyz.z,
-                gy,
-                &pre_grasp,
-            )?;
-            let pre_place = ik("pre-place", c.x, c.y, transit, py, &pre_grasp)?;
-            let place_q = ik("place", c.x, c.y, c.z, py, &pre_place)?;
-            Ok(Waypoints {
-                pre_grasp,
-                grasp,
-                pre_place,
-                place: place_q,
-                grasp_yaw: gy,
-                place_yaw: py,
-            })
-        })();
+    for flip in [false, true] {
+        let r = pick_waypoints(cell, arm, opts, h, seed, clear_top, flip).and_then(
+            |(pre_grasp, grasp)| {
+                let (pre_place, place_q) =
+                    place_waypoints(cell, arm, opts, h, place, &pre_grasp, clear_top, flip)?;
+                let turn = if flip { std::f64::consts::PI } else { 0.0 };
+                Ok(Waypoints {
+                    pre_grasp,
+                    grasp,
+                    pre_place,
+                    place: place_q,
+                    grasp_yaw: cell.pick_yaw + turn,
+                    place_yaw: cell.box_yaw + place[3] + turn,
+                    flip,
+                })
+            },
+        );
         match r {
             Ok(w) => return Ok(w),
             Err(e) => last = Some(e),

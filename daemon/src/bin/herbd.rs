@@ -6,7 +6,7 @@ use herb_core::{Catalog, paths};
 use herb_daemon::config::{Config, ConfigFile, OnRestart};
 use herb_daemon::controller::{Controller, LoopStats, Ports, Shared};
 use herb_daemon::notify::{Notice, Notifier};
-use herb_daemon::{journal, logfmt, planner, record};
+use herb_daemon::{decision, journal, logfmt, planner, record};
 use herb_ipc::bus::{Bus, daemon_node_name, live_nodes_named};
 use herb_ipc::{Fault, JobState, Services, Status, StatusEvent};
 use std::path::PathBuf;
@@ -121,6 +121,8 @@ fn summary(s: &LoopStats) -> serde_json::Value {
         "cycle_us": h(&s.cycle_ns),
         "jitter_us": h(&s.jitter_ns),
         "decision_us": h(&s.decision_ns),
+        "jobs": s.jobs,
+        "decision_wait_ms": s.decision_wait_ms,
     })
 }
 
@@ -175,14 +177,31 @@ fn describe(s: &Status) -> Option<String> {
         ),
         StatusEvent::Braked => logfmt::line("braked", &[("job", job), ("fault", &fault)]),
         StatusEvent::Resumed => logfmt::line("resumed", &[("job", job), ("object", &object)]),
-        StatusEvent::JobDone => logfmt::line("job_done", &[("job", job), ("placed", &placed)]),
+        StatusEvent::JobDone => logfmt::line(
+            "job_done",
+            &[
+                ("job", job),
+                ("placed", &placed),
+                ("decision_wait_ms", &s.decision_wait_ms),
+            ],
+        ),
         StatusEvent::JobFailed => logfmt::line(
             "job_failed",
-            &[("job", job), ("fault", &fault), ("placed", &placed)],
+            &[
+                ("job", job),
+                ("fault", &fault),
+                ("placed", &placed),
+                ("decision_wait_ms", &s.decision_wait_ms),
+            ],
         ),
-        StatusEvent::JobCancelled => {
-            logfmt::line("job_cancelled", &[("job", job), ("placed", &placed)])
-        }
+        StatusEvent::JobCancelled => logfmt::line(
+            "job_cancelled",
+            &[
+                ("job", job),
+                ("placed", &placed),
+                ("decision_wait_ms", &s.decision_wait_ms),
+            ],
+        ),
         StatusEvent::Shutdown => logfmt::line("shutdown", &[("state", &state)]),
         StatusEvent::Skipped => logfmt::line(
             "skipped",
@@ -271,12 +290,16 @@ fn run(cli: Cli) -> Result<(), String> {
         None => (None, None, None),
     };
     let (link, planner_thread) =
-        planner::spawn(&cfg, catalog.clone(), planner_stop.clone(), frame_log)
+        planner::spawn(&cfg, catalog.clone(), planner_stop.clone()).map_err(|e| e.to_string())?;
+    // The decision worker is not joined at exit: a search in progress is dropped with the
+    // process (nothing it holds outlives it).
+    let (decider, _decision_thread) =
+        decision::spawn(&cfg, catalog.clone(), planner_stop.clone(), frame_log)
             .map_err(|e| e.to_string())?;
     let bus = Bus::open(&node_name, &services).map_err(|e| e.to_string())?;
     let ports = Ports::open(bus).map_err(|e| e.to_string())?;
     let (controller, mut stats_link) =
-        Controller::new(&cfg, ports, link, shared.clone(), catalog.len());
+        Controller::new(&cfg, ports, link, decider, shared.clone(), catalog.len());
     let mut controller = match recorder {
         Some(r) => controller.with_recorder(r),
         None => controller,

@@ -30,18 +30,20 @@ pub enum ObjectPhase {
     Idle,
     /// The job's objects are being ordered (Beam-3).
     Ordering,
-    /// Waiting for a heightmap, or deciding and planning the placement.
+    /// The current object's pick is being planned or its placement decided, nothing held.
     Deciding,
     /// The arm moves or grasps without an object in the gripper (to pick the current object,
     /// or away from the last placement).
     Moving,
-    /// The current object is in the gripper (carried to its placement, or being released).
+    /// The current object is in the gripper (lifted, held at the lift pose until its placement
+    /// is decided, carried to it, or being released).
     Carrying,
     /// Braking or holding after a fault, a stop or a restart.
     Halted,
 }
 
-/// The current object's decided placement and the arm configuration that releases it there.
+/// The current object's decided placement and, once its place is planned, the arm
+/// configuration that releases it there.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Placement {
@@ -49,8 +51,8 @@ pub struct Placement {
     pub index: u16,
     /// Placement in B: x, y, z (m), yaw (rad).
     pub pose: [f32; 4],
-    /// Joint configuration at which the gripper opens (rad).
-    pub release_q: [f64; DOF],
+    /// Joint configuration at which the gripper opens (rad), once the place is planned.
+    pub release_q: Option<[f64; DOF]>,
 }
 
 /// A job as it is kept outside the machine. Fixed size, `Copy`: the loop builds one each cycle
@@ -76,6 +78,9 @@ pub struct JobRecord {
     pub done: u16,
     /// The current object is believed to be in the gripper.
     pub holding: bool,
+    /// The object in the gripper is held turned by a half turn (how its pick took it; its
+    /// place turns it back).
+    pub flip: bool,
     /// Where the current object stands.
     pub phase: ObjectPhase,
     /// The current object's placement, once decided.
@@ -157,6 +162,9 @@ struct Encoded {
     index: u16,
     done: u16,
     holding: bool,
+    /// Absent in records written before picks started ahead of their decisions: false.
+    #[serde(default)]
+    flip: bool,
     phase: ObjectPhase,
     placement: Option<Placement>,
 }
@@ -179,6 +187,7 @@ impl JobRecord {
         index: 0,
         done: 0,
         holding: false,
+        flip: false,
         phase: ObjectPhase::Idle,
         placement: None,
     };
@@ -228,6 +237,7 @@ impl JobRecord {
             index: self.index,
             done: self.done,
             holding: self.holding,
+            flip: self.flip,
             phase: self.phase,
             placement: self.placement,
         };
@@ -277,8 +287,8 @@ impl JobRecord {
             });
         }
         if let Some(p) = &e.placement {
-            let finite =
-                p.pose.iter().all(|v| v.is_finite()) && p.release_q.iter().all(|v| v.is_finite());
+            let finite = p.pose.iter().all(|v| v.is_finite())
+                && p.release_q.iter().flatten().all(|v| v.is_finite());
             if !finite || p.index != e.index {
                 return Err(JobRecordError::Placement);
             }
@@ -292,6 +302,7 @@ impl JobRecord {
         r.index = e.index;
         r.done = e.done;
         r.holding = e.holding;
+        r.flip = e.flip;
         r.phase = e.phase;
         r.placement = e.placement;
         Ok(r)
@@ -331,11 +342,12 @@ impl JobRecord {
         r.index = 1;
         r.done = 1;
         r.holding = true;
+        r.flip = true;
         r.phase = ObjectPhase::Carrying;
         r.placement = Some(Placement {
             index: 1,
             pose: [0.01, -0.02, 0.05, 1.5],
-            release_q: [0.1, -0.2, 0.3, 0.4, 0.5, 0.6, 0.1 + 0.2],
+            release_q: Some([0.1, -0.2, 0.3, 0.4, 0.5, 0.6, 0.1 + 0.2]),
         });
         r
     }

@@ -40,6 +40,8 @@ enum Out {
     },
     /// A planner request was handed over (its kind).
     Plan(&'static str),
+    /// A decision request was handed over (the object's index).
+    Decide(u32),
 }
 
 fn kind(r: &Request) -> &'static str {
@@ -51,12 +53,16 @@ fn kind(r: &Request) -> &'static str {
     }
 }
 
-/// Records the outputs; the planner's ring refuses requests while `refuse` is set.
+/// Records the outputs; the planner's ring refuses requests while `refuse` is set, the
+/// decision worker's while `refuse_decisions` is.
 #[derive(Default)]
 struct Fx {
     out: Vec<Out>,
     sent: VecDeque<Request>,
     refuse: bool,
+    /// Decision requests handed over, with the time they were sent (set by the rig).
+    decisions: VecDeque<DecisionRequest>,
+    refuse_decisions: bool,
 }
 
 impl Effects for Fx {
@@ -91,6 +97,39 @@ impl Effects for Fx {
         self.sent.push_back(request);
         Ok(())
     }
+    fn decide(&mut self, request: DecisionRequest) -> Result<(), DecisionRequest> {
+        if self.refuse_decisions {
+            return Err(request);
+        }
+        self.out.push(Out::Decide(request.index));
+        self.decisions.push_back(request);
+        Ok(())
+    }
+}
+
+/// The scripted decision of object `index`.
+fn pose_of(index: u32) -> [f32; 4] {
+    [0.1 * (index + 1) as f32, 0.2, 0.05, 0.3]
+}
+
+/// The scripted decision worker's answer to `r`.
+fn decided(r: &DecisionRequest) -> DecisionResponse {
+    DecisionResponse {
+        job_id: r.job_id,
+        index: r.index,
+        object: r.remaining().first().copied().unwrap_or(0),
+        outcome: Ok(pose_of(r.index)),
+        allowed: crate::plan::NOT_A_SEARCH,
+        decision_ns: DECISION_NS,
+    }
+}
+
+/// The decision worker's answer to `r` when it fails with `fault`.
+fn failed_decision(r: &DecisionRequest, fault: Fault) -> DecisionResponse {
+    DecisionResponse {
+        outcome: Err(fault),
+        ..decided(r)
+    }
 }
 
 fn event(s: &Status) -> StatusEvent {
@@ -105,6 +144,7 @@ fn params() -> JobParams {
         upper: cfg.limits.upper,
         catalog_len: CATALOG,
         grasp_retries: cfg.recovery.grasp_retries,
+        decision_timeout_ns: secs_to_ns(cfg.decision.timeout_s),
     }
 }
 
@@ -113,20 +153,20 @@ fn buffer() -> Box<MotionPlan> {
 }
 
 /// A scripted plan from `from`: per segment, `SEG` samples moving joint 0 by 1 mrad each at
-/// 1 rad/s (forth, back, forth...), then the segment's action. Pick and place: lift, grasp (close), carry, place
-/// (open), retreat; place only: carry, place (open), retreat.
-fn fill(buf: &mut MotionPlan, from: [f64; DOF], place_only: bool) {
+/// 1 rad/s (forth, back, forth...), then the segment's action. Pick: to the station, grasp
+/// (close), lift; place: carry, place (open), retreat; pick and place: both.
+fn fill(buf: &mut MotionPlan, from: [f64; DOF], motion: Motion) {
     buf.reset();
-    let segs: &[Option<GripperAction>] = if place_only {
-        &[None, Some(GripperAction::Open), None]
-    } else {
-        &[
+    let segs: &[Option<GripperAction>] = match motion {
+        Motion::Pick => &[None, Some(GripperAction::Close), None],
+        Motion::Place { .. } => &[None, Some(GripperAction::Open), None],
+        Motion::PickAndPlace => &[
             None,
             Some(GripperAction::Close),
             None,
             Some(GripperAction::Open),
             None,
-        ]
+        ],
     };
     let mut q = from;
     for (k, then) in segs.iter().enumerate() {
@@ -167,21 +207,18 @@ fn answer(r: Request) -> Response {
             index,
             object,
             from,
-            place_only,
-            repick,
+            motion,
             pose,
             mut buf,
-            ..
         } => {
-            fill(&mut buf, from, place_only);
+            fill(&mut buf, from, motion);
             buf.index = index;
             buf.object = object;
-            if place_only || repick {
+            if motion != Motion::Pick {
                 buf.pose = pose;
-            } else {
-                buf.pose = [0.1 * (index + 1) as f32, 0.2, 0.05, 0.3];
-                buf.decided = true;
-                buf.decision_ns = DECISION_NS;
+            }
+            if let Motion::Place { flip } = motion {
+                buf.flip = flip;
             }
             Response::Planned(buf)
         }
@@ -238,6 +275,10 @@ struct Rig {
     stop: bool,
     /// Answer planner requests at the start of the next tick.
     auto: bool,
+    /// Answer decision requests this many ticks after they were sent (`None`: by hand).
+    decide_after: Option<u64>,
+    /// When each pending decision request was sent (parallel to `fx.decisions`).
+    decision_sent: VecDeque<u64>,
     finished: bool,
     /// What the arm adapter says each tick (`None`: it says nothing).
     arm: Option<ArmBlocker>,
@@ -278,6 +319,8 @@ impl Rig {
             frame,
             stop: false,
             auto: true,
+            decide_after: Some(1),
+            decision_sent: VecDeque::new(),
             finished: false,
             arm: None,
             arm_seq: 0,
@@ -346,6 +389,7 @@ impl Rig {
         if self.auto {
             self.respond();
         }
+        self.answer_decisions();
         let mark = self.fx.out.len();
         self.finished = self.job.tick(self.now, self.stop, &mut self.fx);
         for o in &self.fx.out[mark..] {
@@ -386,12 +430,61 @@ impl Rig {
         );
     }
 
-    /// Answers every pending planner request (the scripted planner).
+    /// Answers every planner request pending now (the scripted planner; a request made while
+    /// answering, as the pick's after its order, waits for the next call).
     fn respond(&mut self) {
-        while let Some(r) = self.fx.sent.pop_front() {
+        for _ in 0..self.fx.sent.len() {
+            let Some(r) = self.fx.sent.pop_front() else {
+                break;
+            };
             let resp = answer(r);
             self.job.planner_response(resp, self.now, &mut self.fx);
         }
+    }
+
+    /// Ticks until a plan request is pending (at once if one is), at most `max` ticks.
+    fn until_plan(&mut self, max: usize) {
+        if !self
+            .fx
+            .sent
+            .iter()
+            .any(|r| matches!(r, Request::Plan { .. }))
+        {
+            self.until(max, "plan", is_plan);
+        }
+    }
+
+    /// Notes when new decision requests were sent, and answers those due (`decide_after`).
+    fn answer_decisions(&mut self) {
+        while self.decision_sent.len() < self.fx.decisions.len() {
+            self.decision_sent.push_back(self.now);
+        }
+        let Some(after) = self.decide_after else {
+            return;
+        };
+        while let Some(&at) = self.decision_sent.front() {
+            if self.now < at + after * PERIOD {
+                break;
+            }
+            self.decision_sent.pop_front();
+            let r = self.fx.decisions.pop_front().expect("parallel queues");
+            let d = decided(&r);
+            self.job.decision_response(d, self.now, &mut self.fx);
+        }
+    }
+
+    /// The oldest pending decision request (manual decisions).
+    fn take_decision(&mut self) -> DecisionRequest {
+        self.decision_sent.pop_front();
+        self.fx
+            .decisions
+            .pop_front()
+            .expect("a pending decision request")
+    }
+
+    /// Hands the decision `d` to the machine now.
+    fn deliver_decision(&mut self, d: DecisionResponse) {
+        self.job.decision_response(d, self.now, &mut self.fx);
     }
 
     /// Hands `resp` to the machine now.
@@ -601,7 +694,7 @@ fn a_job_while_braking_or_faulted_is_busy() {
     r.auto = false;
     r.tick();
     r.respond();
-    r.until(200, "plan", is_plan);
+    r.until_plan(200);
     r.respond();
     r.ticks(2); // streaming
     r.job.p.timeouts.gripper_state_ns = 20 * MS; // soon stale: the arm is seen, it brakes
@@ -676,31 +769,33 @@ fn an_accepted_job_replies_orders_reports_and_holds_the_measured_position() {
 // ---------------------------------------------------------------------------------------
 
 #[test]
-fn ordered_waits_for_a_heightmap_then_plans_the_first_object_of_the_order() {
+fn ordered_starts_the_pick_and_asks_for_the_decision_at_once() {
     let mut r = Rig::new();
     r.auto = false;
+    r.decide_after = None;
     r.submit(7, &[4, 5, 6]);
     r.ticks(5);
     assert_eq!(r.phase(), Phase::Ordering);
     let resp = answer(r.take());
     r.deliver(resp);
-    assert_eq!(r.phase(), Phase::WaitHeightmap { since: r.now });
-    r.tick();
+    // The decision is asked for on the job's order (reversed by the script), on a heightmap
+    // newer than the last release (none yet)...
+    let d = r.take_decision();
+    assert_eq!((d.job_id, d.index, d.after_stamp_ns), (7, 0, 0));
+    assert_eq!(d.remaining(), &[6, 5, 4]);
+    // ...and the pick is planned meanwhile, from rest where the arm stands.
     let Request::Plan {
         index,
         object,
-        after_stamp_ns,
         from,
-        place_only,
+        motion,
         ..
     } = r.take()
     else {
         panic!("a plan")
     };
-    // The planner's order (reversed by the script), from rest where the arm stands.
-    assert_eq!((index, object, after_stamp_ns), (0, 6, 0));
-    assert_eq!((from, place_only), (r.q, false));
-    assert!(matches!(r.phase(), Phase::Planning { .. }));
+    assert_eq!((index, object, from, motion), (0, 6, r.q, Motion::Pick));
+    assert_eq!(r.phase(), Phase::Planning);
 }
 
 #[test]
@@ -749,87 +844,105 @@ fn order_failed_for_another_job_or_after_ordering_is_ignored() {
     let resp = answer(r.take());
     r.deliver(resp);
     r.deliver(Response::OrderFailed { job_id: 7 });
-    assert!(matches!(r.phase(), Phase::WaitHeightmap { .. }));
+    assert_eq!(r.phase(), Phase::Planning);
     assert!(!r.events().contains(&StatusEvent::JobFailed));
 }
 
 // ---------------------------------------------------------------------------------------
-// Waiting for a heightmap, planning
+// Deciding while the arm picks
 // ---------------------------------------------------------------------------------------
 
 #[test]
-fn the_next_object_is_planned_only_on_a_frame_newer_than_the_release() {
+fn the_next_decision_is_asked_for_on_a_frame_newer_than_the_release() {
     let mut r = Rig::started(&[1, 2]);
+    r.decide_after = None;
+    // The first object's decision, by hand.
+    r.until(50, "decision request", |o| matches!(o, Out::Decide(0)));
+    let d = r.take_decision();
+    r.deliver_decision(decided(&d));
     r.until_event(5000, StatusEvent::Placed);
-    // Released; the camera stalls.
-    r.camera_up = false;
-    let plans = r.count(is_plan);
-    r.ticks(300);
-    assert_eq!(
-        r.count(is_plan),
-        plans,
-        "no plan on the frame from before the release"
-    );
-    assert!(matches!(r.phase(), Phase::WaitHeightmap { .. }));
-    r.camera_up = true;
-    r.auto = false;
-    r.until(200, "plan", is_plan);
-    let Request::Plan {
-        index,
-        after_stamp_ns,
-        ..
-    } = r.take()
-    else {
-        panic!()
-    };
-    assert_eq!(index, 1);
-    assert_eq!(after_stamp_ns, r.job.release_stamp);
-    assert!(r.job.inputs.hm_stamp > after_stamp_ns);
+    r.until(1000, "decision request", |o| matches!(o, Out::Decide(1)));
+    let d = r.take_decision();
+    assert_eq!(d.index, 1);
+    assert!(r.job.release_stamp > 0);
+    assert_eq!(d.after_stamp_ns, r.job.release_stamp);
 }
 
 #[test]
-fn no_newer_frame_within_fresh_heightmap_timeout_faults() {
+fn no_fresh_heightmap_within_fresh_heightmap_timeout_faults() {
     let mut r = Rig::started(&[1, 2]);
-    r.until_event(5000, StatusEvent::Placed);
-    // Frames keep coming, but none is newer than the release.
-    r.frame_stamp = Some(r.job.release_stamp);
-    while !matches!(r.phase(), Phase::WaitHeightmap { .. }) {
-        r.tick();
-    }
-    let Phase::WaitHeightmap { since } = r.phase() else {
-        unreachable!()
-    };
+    r.decide_after = None;
+    let since = r.now;
     let t = params().timeouts.fresh_heightmap_ns;
-    while r.now < since + t {
+    // The worker answers every request: no frame newer than the release came in time.
+    let mut asked = 0;
+    while r.now <= since + t + 2 * PERIOD && !r.events().contains(&StatusEvent::Fault) {
         r.tick();
+        while !r.fx.decisions.is_empty() {
+            let d = r.take_decision();
+            asked += 1;
+            r.deliver_decision(failed_decision(&d, Fault::HeightmapTimeout));
+        }
     }
-    assert!(
-        matches!(r.phase(), Phase::WaitHeightmap { .. }),
-        "not at the timeout"
-    );
-    r.tick();
+    assert!(asked > 1, "asked again after each timeout ({asked})");
     let s = r.last(StatusEvent::Fault);
     assert_eq!(s.fault, Fault::HeightmapTimeout as u32);
-    // At rest: faulted at once, no brake.
+    assert!(r.now > since + t, "not before the timeout");
+    // Held at the lift pose, at rest: faulted at once, no brake.
     assert_eq!(r.events().last(), Some(&StatusEvent::Braked));
     assert_eq!(r.count(is_brake), 0);
 }
 
 #[test]
-fn a_full_planner_ring_keeps_waiting_and_retries() {
+fn the_workers_heightmap_timeout_asks_again_silently() {
     let mut r = Rig::started(&[1]);
-    r.fx.refuse = true;
-    r.ticks(20);
-    assert!(matches!(r.phase(), Phase::WaitHeightmap { .. }));
-    assert!(r.job.spare.is_some(), "the buffer stays home");
-    r.fx.refuse = false;
-    r.auto = false;
+    r.decide_after = None;
+    r.until(50, "decision request", |o| matches!(o, Out::Decide(0)));
+    let d = r.take_decision();
+    r.deliver_decision(failed_decision(&d, Fault::HeightmapTimeout));
+    assert!(!r.events().contains(&StatusEvent::Fault), "no fault event");
+    assert_eq!(
+        r.job.status(StatusEvent::Heartbeat).fault,
+        Fault::None as u32,
+        "nor fault"
+    );
+    // and asks again
     r.tick();
-    assert!(matches!(r.phase(), Phase::Planning { .. }));
+    assert_eq!(r.fx.decisions.len(), 1);
+    assert_eq!(r.fx.decisions[0].index, 0);
 }
 
 #[test]
-fn planned_streams_and_reports_decided_with_pose_and_latency() {
+fn a_full_planner_ring_keeps_waiting_and_retries() {
+    let mut r = Rig::started(&[1]);
+    r.auto = false;
+    r.tick();
+    let resp = answer(r.take());
+    r.fx.refuse = true;
+    r.deliver(resp);
+    r.ticks(20);
+    assert_eq!(r.phase(), Phase::Starting);
+    assert!(r.job.spare.is_some(), "the buffer stays home");
+    r.fx.refuse = false;
+    r.tick();
+    assert_eq!(r.phase(), Phase::Planning);
+}
+
+#[test]
+fn a_full_decision_ring_asks_again_on_a_later_tick() {
+    let mut r = Rig::new();
+    r.fx.refuse_decisions = true;
+    r.decide_after = None;
+    r.submit(7, &[1]);
+    r.ticks(20);
+    assert!(r.fx.decisions.is_empty());
+    r.fx.refuse_decisions = false;
+    r.tick();
+    assert_eq!(r.fx.decisions.len(), 1, "asked once the ring has room");
+}
+
+#[test]
+fn decided_is_reported_with_pose_and_latency_while_the_pick_streams() {
     let mut r = Rig::started(&[4, 5]);
     r.until_event(5000, StatusEvent::Decided);
     let s = r.last(StatusEvent::Decided);
@@ -837,44 +950,176 @@ fn planned_streams_and_reports_decided_with_pose_and_latency() {
         (s.job_id, s.object_type, s.object_index, s.decision_ns),
         (7, 5, 0, DECISION_NS)
     );
-    assert_eq!(s.pose, [0.1, 0.2, 0.05, 0.3]);
-    assert_eq!(r.phase(), Phase::Streaming { seg: 0, cursor: 1 });
+    assert_eq!(s.pose, pose_of(0));
+    assert!(matches!(r.phase(), Phase::Streaming { seg: 0, .. }));
+}
+
+/// Runs the rig to the end of the job; the time it held an object waiting, from the final
+/// status.
+fn run_to_done(r: &mut Rig) -> Status {
+    r.until_event(40_000, StatusEvent::JobDone);
+    r.last(StatusEvent::JobDone)
 }
 
 #[test]
-fn the_planners_heightmap_timeout_returns_to_waiting_silently() {
-    let mut r = Rig::started(&[1]);
-    r.auto = false;
-    r.tick();
-    r.respond(); // ordered
-    r.until(50, "plan", is_plan);
-    let Request::Plan { buf, .. } = r.take() else {
-        panic!()
+fn a_decision_before_the_lift_costs_no_wait() {
+    let mut r = Rig::started(&[1, 2, 3]);
+    let mut waited = false;
+    while !r.events().contains(&StatusEvent::JobDone) {
+        r.tick();
+        waited |= matches!(r.phase(), Phase::AwaitDecision { .. });
+        assert!(r.now < 10_000 * MS + 60_000 * MS, "the job ends");
+    }
+    let done = r.last(StatusEvent::JobDone);
+    assert_eq!((done.objects_done, done.decision_wait_ms), (3, 0));
+    // The place is asked for at the lift, with the decision already in: one planning round
+    // trip, not a wait.
+    assert!(!waited || r.job.wait_ns < 5 * PERIOD);
+    // Every object: decided once, picked, then placed where decided.
+    let placed: Vec<_> = r
+        .statuses()
+        .into_iter()
+        .filter(|s| event(s) == StatusEvent::Placed)
+        .map(|s| s.pose)
+        .collect();
+    assert_eq!(placed, vec![pose_of(0), pose_of(1), pose_of(2)]);
+}
+
+#[test]
+fn a_decision_after_the_lift_holds_the_object_there_and_counts_the_wait() {
+    let mut r = Rig::started(&[1, 2]);
+    // The pick (three scripted segments and a grasp) takes well under 2 s; the decision 2 s.
+    r.decide_after = Some(2000);
+    while !matches!(r.phase(), Phase::AwaitDecision { .. }) {
+        r.tick();
+        assert!(r.now < 20_000 * MS, "never held waiting");
+    }
+    let Phase::AwaitDecision { since } = r.phase() else {
+        unreachable!()
     };
-    r.deliver(Response::Failed {
-        fault: Fault::HeightmapTimeout,
-        buf,
-    });
-    assert!(matches!(r.phase(), Phase::WaitHeightmap { .. }));
-    assert!(!r.events().contains(&StatusEvent::Fault), "no fault event");
-    assert_eq!(
-        r.job.status(StatusEvent::Heartbeat).fault,
-        Fault::None as u32,
-        "nor fault"
+    assert!(r.job.holding, "held at the lift pose");
+    assert!(!r.events().contains(&StatusEvent::Decided));
+    // Held still: commands at rest where the lift ended, and nothing planned meanwhile.
+    let (mark, q, plans) = (r.fx.out.len(), r.q, r.count(is_plan));
+    r.ticks(100);
+    let held = r.joints_since(mark);
+    assert!(!held.is_empty());
+    assert!(
+        held.iter()
+            .all(|c| c.position == q && c.velocity == [0.0; DOF])
     );
-    // and plans again
-    r.tick();
-    assert!(matches!(r.phase(), Phase::Planning { .. }));
+    assert_eq!(r.count(is_plan), plans);
+    r.until_event(3000, StatusEvent::Decided);
+    let first_wait_ms = (r.now - since) / MS;
+    let done = run_to_done(&mut r);
+    assert_eq!(done.objects_done, 2);
+    assert!(
+        done.decision_wait_ms as u64 >= first_wait_ms && first_wait_ms > 0,
+        "the wait is counted: {} ms reported, {first_wait_ms} ms for the first object",
+        done.decision_wait_ms
+    );
 }
 
 #[test]
-fn a_planner_that_never_finds_a_frame_faults_at_the_fresh_heightmap_timeout() {
-    // The loop sees frames (their headers are fine) but the planner rejects every one (a bad
-    // cell): its 500 ms waits must not restart the loop's fresh-heightmap clock.
+fn new_heightmaps_during_a_decision_ask_for_nothing_more() {
     let mut r = Rig::started(&[1]);
-    r.auto = false;
+    r.decide_after = Some(1500);
+    r.until_event(5000, StatusEvent::Decided);
+    // About 15 frames came in meanwhile: one request, decided on the frame the worker took.
+    assert_eq!(r.count(|o| matches!(o, Out::Decide(_))), 1);
+    assert_eq!(run_to_done(&mut r).objects_done, 1);
+}
+
+#[test]
+fn a_failed_decision_before_the_grasp_ends_the_job_at_the_next_standstill_gripper_open() {
+    let mut r = Rig::started(&[1, 2]);
+    r.decide_after = None;
+    r.until(50, "decision request", |o| matches!(o, Out::Decide(0)));
+    let d = r.take_decision();
+    r.deliver_decision(failed_decision(&d, Fault::NoFeasiblePlacement));
+    r.until_event(2000, StatusEvent::JobFailed);
+    let s = r.last(StatusEvent::JobFailed);
+    assert_eq!(s.fault, Fault::NoFeasiblePlacement as u32);
+    assert_eq!(r.count(is_close), 0, "never grasped");
+    assert!(!r.holding);
+    assert_eq!(r.job.out.cmd.velocity, [0.0; DOF], "at rest");
+    assert_eq!(r.phase(), Phase::Idle);
+}
+
+#[test]
+fn a_failed_decision_after_the_grasp_ends_the_job_at_the_lift_pose_holding_the_object() {
+    let mut r = Rig::started(&[1, 2]);
+    r.decide_after = None;
+    r.until(2000, "close", is_close);
+    let d = r.take_decision();
+    r.deliver_decision(failed_decision(&d, Fault::Decision));
+    r.until_event(2000, StatusEvent::JobFailed);
+    assert_eq!(r.last(StatusEvent::JobFailed).fault, Fault::Decision as u32);
+    assert!(r.holding, "held, not dropped");
+    assert_eq!(r.job.out.cmd.velocity, [0.0; DOF], "at rest after the lift");
+    assert!(!r.events().contains(&StatusEvent::Placed));
+}
+
+#[test]
+fn a_hung_decision_fails_the_job_after_the_decision_timeout() {
+    let mut r = Rig::started(&[1]);
+    r.decide_after = None;
+    r.until(50, "decision request", |o| matches!(o, Out::Decide(0)));
+    let asked = r.now;
+    r.until_event(30_000, StatusEvent::JobFailed);
+    assert_eq!(r.last(StatusEvent::JobFailed).fault, Fault::Decision as u32);
+    assert!(r.now >= asked + params().decision_timeout_ns);
+    assert!(r.holding, "held at the lift pose");
+    // The late answer changes nothing.
+    let d = r.take_decision();
+    let n = r.statuses().len();
+    r.deliver_decision(decided(&d));
+    r.ticks(5);
+    assert!(
+        !r.statuses()[n..]
+            .iter()
+            .any(|s| event(s) == StatusEvent::Decided)
+    );
+}
+
+#[test]
+fn a_cancel_while_waiting_for_a_decision_retreats_and_ignores_the_late_decision() {
+    let mut r = Rig::started(&[1, 2]);
+    r.decide_after = None;
+    while !matches!(r.phase(), Phase::AwaitDecision { .. }) {
+        r.tick();
+        assert!(r.now < 20_000 * MS);
+    }
+    assert_eq!(r.cancel(7), RejectReason::None);
+    r.until_event(2000, StatusEvent::JobCancelled);
+    let d = r.take_decision();
+    r.deliver_decision(decided(&d));
+    r.ticks(5);
+    assert!(!r.events().contains(&StatusEvent::Decided));
+    assert_eq!(r.phase(), Phase::Idle);
+}
+
+#[test]
+fn a_stop_while_waiting_for_a_decision_lets_herbd_exit_at_once() {
+    let mut r = Rig::started(&[1]);
+    r.decide_after = None;
+    while !matches!(r.phase(), Phase::AwaitDecision { .. }) {
+        r.tick();
+        assert!(r.now < 20_000 * MS);
+    }
+    r.stop = true;
     r.tick();
-    r.respond(); // ordered
+    assert!(r.finished, "at rest: nothing to brake");
+    assert_eq!(r.count(is_brake), 0);
+}
+
+#[test]
+fn a_worker_that_never_finds_a_frame_faults_at_the_fresh_heightmap_timeout() {
+    // The loop sees frames (their headers are fine) but the decision worker rejects every one
+    // (a bad cell): its 500 ms waits must not restart the loop's fresh-heightmap clock.
+    let mut r = Rig::started(&[1]);
+    r.decide_after = None;
+    r.tick(); // ordered: the pick starts, the decision is asked for
     let start = r.now;
     let t = params().timeouts.fresh_heightmap_ns;
     while !r.events().contains(&StatusEvent::Fault) {
@@ -883,12 +1128,10 @@ fn a_planner_that_never_finds_a_frame_faults_at_the_fresh_heightmap_timeout() {
             "no fault after {} ms",
             (r.now - start) / MS
         );
-        if let Some(Request::Plan { buf, .. }) = r.fx.sent.pop_front() {
-            r.ticks(500); // the planner's wait
-            r.deliver(Response::Failed {
-                fault: Fault::HeightmapTimeout,
-                buf,
-            });
+        if !r.fx.decisions.is_empty() {
+            let d = r.take_decision();
+            r.ticks(500); // the worker's wait
+            r.deliver_decision(failed_decision(&d, Fault::HeightmapTimeout));
         }
         r.tick();
     }
@@ -911,7 +1154,7 @@ fn planner_failures_fail_the_job_with_their_fault() {
         r.auto = false;
         r.tick();
         r.respond();
-        r.until(50, "plan", is_plan);
+        r.until_plan(50);
         let Request::Plan { buf, .. } = r.take() else {
             panic!()
         };
@@ -936,11 +1179,12 @@ fn planner_failures_fail_the_job_with_their_fault() {
 #[test]
 fn a_plan_arriving_after_a_fault_is_recycled_and_the_resume_waits_for_it() {
     let mut r = Rig::started(&[1]);
+    r.decide_after = None;
     r.auto = false;
     r.tick();
     r.respond();
-    r.until(50, "plan", is_plan);
-    assert!(matches!(r.phase(), Phase::Planning { .. }));
+    r.until_plan(50);
+    assert!(matches!(r.phase(), Phase::Planning));
     // The adapter goes away while the planner works.
     r.js_up = false;
     r.until_event(200, StatusEvent::Braked);
@@ -955,13 +1199,14 @@ fn a_plan_arriving_after_a_fault_is_recycled_and_the_resume_waits_for_it() {
     let resp = answer(late);
     r.deliver(resp);
     assert!(
-        !r.events().contains(&StatusEvent::Decided),
+        matches!(r.phase(), Phase::Faulted { .. }),
         "a late plan is not used"
     );
     r.tick();
     assert_eq!(r.events().last(), Some(&StatusEvent::Resumed));
-    // Starts the object over on a new frame, with a new decision.
+    // Starts the pick over; the decision asked for before the fault comes now.
     r.auto = true;
+    r.decide_after = Some(1);
     r.until_event(5000, StatusEvent::JobDone);
     assert_eq!(
         r.events(),
@@ -987,7 +1232,7 @@ fn streaming() -> (Rig, Vec<Setpoint>) {
     r.auto = false;
     r.tick();
     r.respond();
-    r.until(50, "plan", is_plan);
+    r.until_plan(50);
     let resp = answer(r.take());
     let Response::Planned(p) = &resp else {
         panic!()
@@ -1511,23 +1756,18 @@ fn a_resume_while_holding_replans_only_the_placement_at_the_same_pose() {
     r.respond(); // the brake
     r.until_event(50, StatusEvent::Braked);
     r.gs_up = true;
-    r.until(1000, "plan", is_plan);
+    r.until_plan(1000);
     assert_eq!(r.events().last(), Some(&StatusEvent::Resumed));
-    let Request::Plan {
-        place_only, pose, ..
-    } = r.take()
-    else {
+    let Request::Plan { motion, pose, .. } = r.take() else {
         panic!()
     };
-    assert!(place_only);
+    assert_eq!(motion, Motion::Place { flip: false });
     assert_eq!(pose, [0.1, 0.2, 0.05, 0.3]);
     let resp = answer(Request::Plan {
         index: 0,
         object: 1,
-        after_stamp_ns: 0,
         from: r.q,
-        place_only,
-        repick: false,
+        motion,
         pose,
         buf: buffer(),
     });
@@ -1638,7 +1878,7 @@ fn a_stop_while_planning_drops_the_late_plan_and_blocks_resume() {
     r.auto = false;
     r.tick();
     r.respond();
-    r.until(50, "plan", is_plan);
+    r.until_plan(50);
     r.stop = true;
     r.tick();
     assert!(r.finished);
@@ -1759,12 +1999,13 @@ fn a_cancel_while_moving_brakes_retreats_and_reports_cancelled() {
 
 #[test]
 fn a_cancel_at_rest_retreats_without_a_brake() {
-    // Waiting for a heightmap.
+    // Holding the next object at the lift pose, waiting for its decision.
     let mut r = Rig::started(&[1, 2]);
     r.until_event(5000, StatusEvent::Placed);
-    r.frame_stamp = Some(0); // no newer frame: the job waits
-    while !matches!(r.phase(), Phase::WaitHeightmap { .. }) {
+    r.decide_after = None;
+    while !matches!(r.phase(), Phase::AwaitDecision { .. }) {
         r.tick();
+        assert!(r.now < 20_000 * MS);
     }
     r.cancel(7);
     assert_eq!(r.count(is_retreat), 1);
@@ -1795,10 +2036,11 @@ fn a_cancel_at_rest_retreats_without_a_brake() {
 #[test]
 fn a_cancel_while_planning_waits_for_the_plan_then_retreats() {
     let mut r = Rig::started(&[1]);
+    r.decide_after = None;
     r.auto = false;
     r.tick();
     r.respond(); // ordered
-    r.until(50, "plan", is_plan);
+    r.until_plan(50);
     r.cancel(7);
     r.ticks(5);
     assert_eq!(
@@ -1873,7 +2115,7 @@ fn a_command_outside_the_limits_is_held_and_counted() {
     r.auto = false;
     r.tick();
     r.respond();
-    r.until(50, "plan", is_plan);
+    r.until_plan(50);
     let Response::Planned(mut p) = answer(r.take()) else {
         panic!()
     };
@@ -2044,6 +2286,8 @@ fn a_whole_job_with_a_fault_and_a_resume_allocates_nothing() {
     // The rig's own records are preallocated, so that every allocation counted is the job's.
     r.fx.out.reserve(100_000);
     r.fx.sent.reserve(16);
+    r.fx.decisions.reserve(16);
+    r.decision_sent.reserve(16);
     let n = counting::allocations(|| {
         // Into the second object's carry, then the adapter goes away and comes back.
         let mut placed = 0;
@@ -2142,7 +2386,16 @@ fn the_journal_record_follows_the_job_and_ends_with_it() {
 fn a_recovered_job_holding_its_object_places_it_where_it_was_decided() {
     let mut a = Rig::started(&[1, 2]);
     a.until(3000, "close", is_close);
-    a.ticks(50); // carrying
+    // Carrying it to its placement (the place planned).
+    while a
+        .job
+        .journal()
+        .placement
+        .is_none_or(|p| p.release_q.is_none())
+    {
+        a.tick();
+    }
+    a.ticks(50);
     let rec = a.job.journal();
     assert!(rec.holding && rec.phase == ObjectPhase::Carrying, "{rec:?}");
     let decided = rec.placement.unwrap().pose;
@@ -2216,6 +2469,53 @@ fn a_recovered_job_holding_its_object_places_it_where_it_was_decided() {
 }
 
 #[test]
+fn a_restart_while_waiting_for_a_decision_decides_again_and_places_it_as_it_is_held() {
+    let mut a = Rig::started(&[1, 2]);
+    a.decide_after = None;
+    while !matches!(a.phase(), Phase::AwaitDecision { .. }) {
+        a.tick();
+        assert!(a.now < 20_000 * MS);
+    }
+    let mut rec = a.job.journal();
+    assert!(rec.holding && rec.placement.is_none(), "{rec:?}");
+    assert_eq!(rec.phase, ObjectPhase::Carrying);
+    // Say its pick took it turned by a half turn: the place must turn it back.
+    rec.flip = true;
+    let mut b = restarted(&a, &rec, true);
+    b.until_event(2000, StatusEvent::Resumed);
+    b.auto = false;
+    b.until_plan(200);
+    let Request::Plan {
+        index,
+        motion,
+        pose,
+        ..
+    } = b.take()
+    else {
+        panic!("a plan")
+    };
+    assert_eq!(
+        (index, motion, pose),
+        (0, Motion::Place { flip: true }, pose_of(0))
+    );
+    b.auto = true;
+    b.deliver(answer(Request::Plan {
+        index,
+        object: 2,
+        from: b.q,
+        motion,
+        pose,
+        buf: buffer(),
+    }));
+    b.until_event(8000, StatusEvent::JobDone);
+    use StatusEvent::*;
+    assert_eq!(
+        b.events(),
+        vec![Fault, Resumed, Decided, Placed, Decided, Placed, JobDone]
+    );
+}
+
+#[test]
 fn a_release_the_journal_missed_counts_the_object_placed_once() {
     let mut a = Rig::started(&[1, 2]);
     a.until(3000, "close", is_close);
@@ -2244,9 +2544,14 @@ fn a_release_the_journal_missed_counts_the_object_placed_once() {
             .iter()
             .any(|s| s.fault == herb_ipc::Fault::ObjectLost as u32)
     );
-    // Both objects decided and picked (the first again: a new decision, announced before the
-    // crash, so only the second's Decided is sent now).
-    assert_eq!(c.count(is_plan), 2, "both objects decided and picked");
+    // Both objects picked: the first again, picked and placed in one plan where it was decided
+    // before the crash (announced then, so only the second's Decided is sent now); the second
+    // picked, then placed once decided.
+    assert_eq!(
+        c.count(is_plan),
+        3,
+        "the first's pick and place, the second's pick, its place"
+    );
     assert_eq!(
         c.events()
             .iter()

@@ -10,7 +10,7 @@
 use super::error::SnapshotError;
 use crate::digest::Fnv;
 use crate::job::{Commands, Inputs, JobRecord, JobSnapshot};
-use crate::plan::Request;
+use crate::plan::{DecisionRequest, Motion, Request};
 use herb_ipc::{
     ArmBlocker, ArmStatus, CancelJobRequest, Fault, GripperAction, GripperState, HeightmapFrame,
     InOrder, JointState, PackJobRequest, Payload, RejectReason, Status,
@@ -21,18 +21,39 @@ use std::io::Write;
 /// The first bytes of a segment file.
 pub const MAGIC: &[u8; 8] = b"HERBRUN\0";
 /// The format version after [`MAGIC`] (2: a snapshot holds the job's record in the job
-/// journal's encoding).
-pub const FORMAT: u32 = 2;
+/// journal's encoding; 3: decisions come from their own worker, recorded apart from the
+/// planner's responses, and the frames are the decisions').
+pub const FORMAT: u32 = 3;
 /// A frame's header and grid: the bytes of a [`HeightmapFrame`] before its cells.
 pub const FRAME_META: usize = std::mem::offset_of!(HeightmapFrame, data);
 
-/// A planner response as recorded: its digest ([`crate::plan::Response::digest`]) and the
-/// decision latency measured with it (a replay injects it: time is not reproducible).
+/// The requests handed over before a snapshot, in the planner's and the decision worker's
+/// numbering (a later segment's replay numbers on from them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Sent {
+    /// Planner requests.
+    pub requests: u64,
+    /// Decision requests.
+    pub decisions: u64,
+}
+
+/// A planner response as recorded: its digest ([`crate::plan::Response::digest`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct RespRec {
     /// Digest of the response.
     pub digest: u64,
-    /// Measured decision latency (ns; 0 when none).
+}
+
+/// A decision as recorded: its digest ([`crate::plan::DecisionResponse::digest`]), what its
+/// budget allowed (a replay runs that count of rollouts) and its measured latency (a replay
+/// injects it: time is not reproducible).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DecisionRec {
+    /// Digest of the response.
+    pub digest: u64,
+    /// Rollouts the search finished ([`crate::plan::NOT_A_SEARCH`] for a policy).
+    pub allowed: u32,
+    /// Measured decision latency (ns).
     pub decision_ns: u64,
 }
 
@@ -76,6 +97,8 @@ pub enum LoopRec {
     Frame([u8; FRAME_META]),
     /// A planner response.
     Resp(RespRec),
+    /// A decision worker's response.
+    Decision(DecisionRec),
     /// A pack-job request.
     Job(PackJobRequest),
     /// A cancel request.
@@ -159,22 +182,17 @@ impl OutDigest {
             Request::Plan {
                 index,
                 object,
-                after_stamp_ns,
                 from,
-                place_only,
-                repick,
+                motion,
                 pose,
                 ..
             } => {
-                h.u64(7)
-                    .u64(*index as u64)
-                    .u64(*object as u64)
-                    .u64(*after_stamp_ns)
-                    .u64(*place_only as u64);
-                // Logs written before re-picks existed hash the same.
-                if *repick {
-                    h.u64(1);
-                }
+                h.u64(7).u64(*index as u64).u64(*object as u64);
+                match motion {
+                    Motion::Pick => h.u64(0),
+                    Motion::Place { flip } => h.u64(1).u64(*flip as u64),
+                    Motion::PickAndPlace => h.u64(2),
+                };
                 for v in from {
                     h.f64(*v);
                 }
@@ -201,6 +219,17 @@ impl OutDigest {
             }
         }
     }
+    /// A decision request handed over.
+    pub fn decision_request(&mut self, r: &DecisionRequest) {
+        self.0
+            .u64(10)
+            .u64(r.job_id)
+            .u64(r.index as u64)
+            .u64(r.after_stamp_ns);
+        for o in r.remaining() {
+            self.0.u64(*o as u64);
+        }
+    }
     /// The digest.
     pub fn finish(&self) -> u64 {
         self.0.finish()
@@ -223,6 +252,7 @@ pub(super) mod kind {
     pub const PLAN_FRAME: u8 = 12;
     pub const FRAME_CELLS: u8 = 13;
     pub const ARM: u8 = 14;
+    pub const DECISION: u8 = 15;
 }
 
 /// Little-endian encoding of record payloads.
@@ -353,9 +383,11 @@ impl RunHeader {
 /// A snapshot record: the planner requests sent before it, then the machine's state: the last
 /// job's record in its own encoding ([`JobRecord::encode`], shared with the job journal), the
 /// latched inputs, the last fault and release, the commands, and the stop flag.
-pub(super) fn encode_snapshot(requests_before: u64, s: &JobSnapshot) -> Vec<u8> {
+pub(super) fn encode_snapshot(before: Sent, s: &JobSnapshot) -> Vec<u8> {
     let mut e = Enc::default();
-    e.u64(requests_before).bytes(&s.job.encode());
+    e.u64(before.requests)
+        .u64(before.decisions)
+        .bytes(&s.job.encode());
     let opt_order = |e: &mut Enc, o: InOrder| match o.last() {
         Some((p, q, t)) => {
             e.u8(1).u128(p).u64(q).u64(t);
@@ -398,9 +430,15 @@ pub(super) fn encode_snapshot(requests_before: u64, s: &JobSnapshot) -> Vec<u8> 
 }
 
 /// A snapshot record read back ([`encode_snapshot`]).
-pub(super) fn decode_snapshot(b: &[u8]) -> Result<(u64, JobSnapshot), SnapshotError> {
+pub(super) fn decode_snapshot(b: &[u8]) -> Result<(Sent, JobSnapshot), SnapshotError> {
     let mut d = Dec(b);
-    let before = d.u64().ok_or(SnapshotError::Malformed)?;
+    let before = (|| {
+        Some(Sent {
+            requests: d.u64()?,
+            decisions: d.u64()?,
+        })
+    })()
+    .ok_or(SnapshotError::Malformed)?;
     let job = JobRecord::decode(d.bytes().ok_or(SnapshotError::Malformed)?)?;
     decode_machine(&mut d, job)
         .filter(|_| d.0.is_empty())
@@ -505,8 +543,12 @@ pub(super) fn encode_loop(r: &LoopRec) -> (u8, Vec<u8>) {
             kind::FRAME
         }
         LoopRec::Resp(r) => {
-            e.u64(r.digest).u64(r.decision_ns);
+            e.u64(r.digest);
             kind::RESP
+        }
+        LoopRec::Decision(r) => {
+            e.u64(r.digest).u32(r.allowed).u64(r.decision_ns);
+            kind::DECISION
         }
         LoopRec::Job(r) => {
             e.bytes(r.as_bytes());
@@ -539,8 +581,10 @@ pub(super) fn decode_loop(k: u8, payload: &[u8]) -> Option<Entry> {
         kind::GS => Some(Entry::Gs(d.u128()?, d.u64()?, d.payload()?)),
         kind::ARM => Some(Entry::Arm(d.u128()?, d.u64()?, d.payload()?)),
         kind::FRAME => d.bytes().and_then(|b| b.try_into().ok()).map(Entry::Frame),
-        kind::RESP => Some(Entry::Resp(RespRec {
+        kind::RESP => Some(Entry::Resp(RespRec { digest: d.u64()? })),
+        kind::DECISION => Some(Entry::Decision(DecisionRec {
             digest: d.u64()?,
+            allowed: d.u32()?,
             decision_ns: d.u64()?,
         })),
         kind::JOB => d.payload().map(Entry::Job),
@@ -639,6 +683,8 @@ pub enum Entry {
     Frame([u8; FRAME_META]),
     /// See [`LoopRec`].
     Resp(RespRec),
+    /// See [`LoopRec`].
+    Decision(DecisionRec),
     /// See [`LoopRec`].
     Job(PackJobRequest),
     /// See [`LoopRec`].

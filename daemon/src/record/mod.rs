@@ -43,7 +43,9 @@ mod reader;
 mod writer;
 
 pub use error::{LogError, LogProblem, RecordError, SnapshotError};
-pub use format::{Entry, FORMAT, FRAME_META, LoopRec, MAGIC, OutDigest, RespRec, RunHeader};
+pub use format::{
+    DecisionRec, Entry, FORMAT, FRAME_META, LoopRec, MAGIC, OutDigest, RespRec, RunHeader, Sent,
+};
 pub use identity::{catalog_digest, cpu_identity, header_for};
 pub use reader::Log;
 pub use writer::{RecordOptions, Recorder, Recording, start};

@@ -1,9 +1,9 @@
 //! Reading a segment file back into a [`Log`]: the header, the snapshot it starts from, the
-//! loop's records in order, and the frames the planner was served with.
+//! loop's records in order, and the frames the decisions were made on.
 
 use super::error::{LogError, LogProblem};
 use super::format::{
-    Dec, Entry, FORMAT, FRAMING, Framed, MAGIC, RunHeader, decode_loop, decode_snapshot,
+    Dec, Entry, FORMAT, FRAMING, Framed, MAGIC, RunHeader, Sent, decode_loop, decode_snapshot,
     frame_from, kind, read_record,
 };
 use crate::job::JobSnapshot;
@@ -16,13 +16,14 @@ use std::path::Path;
 pub struct Log {
     /// The header.
     pub header: RunHeader,
-    /// The machine's state at the start, and the planner requests sent before it (a later
-    /// segment); `None` for a run's first segment.
-    pub snapshot: Option<(u64, JobSnapshot)>,
+    /// The machine's state at the start, and the requests sent before it (a later segment);
+    /// `None` for a run's first segment.
+    pub snapshot: Option<(Sent, JobSnapshot)>,
     /// The loop's records.
     pub entries: Vec<Entry>,
-    /// Per planner request number: the digest of the frame it was served with (`None`: none).
-    pub plan_frames: BTreeMap<u64, Option<u64>>,
+    /// Per decision request number: the digest of the frame it was decided on (`None`: none
+    /// came in time).
+    pub decision_frames: BTreeMap<u64, Option<u64>>,
     /// Frames by digest: header, grid and used cells.
     pub frames: HashMap<u64, Box<HeightmapFrame>>,
     /// Why the log ends early, if it does (a torn or corrupt record, dropped records).
@@ -60,7 +61,7 @@ impl Log {
             },
             snapshot: None,
             entries: Vec::new(),
-            plan_frames: BTreeMap::new(),
+            decision_frames: BTreeMap::new(),
             frames: HashMap::new(),
             incomplete: None,
         };
@@ -97,14 +98,14 @@ impl Log {
                 kind::PLAN_FRAME => {
                     let (n, has, digest) = (|| Some((d.u64()?, d.bool()?, d.u64()?)))()
                         .ok_or_else(|| bad(LogProblem::PlanFrame))?;
-                    log.plan_frames.insert(n, has.then_some(digest));
+                    log.decision_frames.insert(n, has.then_some(digest));
                 }
                 kind::FRAME_CELLS => {
                     let (digest, f) = (|| Some((d.u64()?, frame_from(d.bytes()?)?)))()
                         .ok_or_else(|| bad(LogProblem::Frame))?;
                     log.frames.insert(digest, f);
                 }
-                kind::CYCLE..=kind::TICK | kind::ARM => {
+                kind::CYCLE..=kind::TICK | kind::ARM | kind::DECISION => {
                     let e = decode_loop(k, payload).ok_or_else(|| bad(LogProblem::Malformed(k)))?;
                     if let Entry::Cycle(_) = e {
                         cycles += 1;

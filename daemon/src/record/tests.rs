@@ -71,8 +71,10 @@ fn a_recording_reads_back_record_for_record_and_bit_for_bit() {
             digest: i * 3,
         });
     }
-    recorder.push(LoopRec::Resp(RespRec {
-        digest: 9,
+    recorder.push(LoopRec::Resp(RespRec { digest: 9 }));
+    recorder.push(LoopRec::Decision(DecisionRec {
+        digest: 11,
+        allowed: 6,
         decision_ns: 400_000,
     }));
     frames(0, Some(&frame));
@@ -85,7 +87,7 @@ fn a_recording_reads_back_record_for_record_and_bit_for_bit() {
     let log = Log::read(&files[0]).unwrap();
     assert_eq!(log.header, header());
     assert!(log.incomplete.is_none());
-    assert_eq!(log.entries.len(), 151);
+    assert_eq!(log.entries.len(), 152);
     let Entry::Js(p, r, m) = log.entries[1] else {
         panic!("{:?}", log.entries[1])
     };
@@ -94,16 +96,21 @@ fn a_recording_reads_back_record_for_record_and_bit_for_bit() {
     assert!(matches!(log.entries[149], Entry::Tick(true, 150)));
     assert!(matches!(
         log.entries[150],
-        Entry::Resp(RespRec {
-            digest: 9,
+        Entry::Resp(RespRec { digest: 9 })
+    ));
+    assert!(matches!(
+        log.entries[151],
+        Entry::Decision(DecisionRec {
+            digest: 11,
+            allowed: 6,
             decision_ns: 400_000
         })
     ));
-    // Frames: two requests served with the same frame, stored once.
+    // Frames: two decisions made on the same frame, stored once.
     assert_eq!(log.frames.len(), 1);
-    assert_eq!(log.plan_frames.get(&1), Some(&None));
-    let f0 = log.plan_frames[&0].unwrap();
-    assert_eq!(log.plan_frames[&2], Some(f0));
+    assert_eq!(log.decision_frames.get(&1), Some(&None));
+    let f0 = log.decision_frames[&0].unwrap();
+    assert_eq!(log.decision_frames[&2], Some(f0));
     assert_eq!(log.frames[&f0].cells(), frame.cells());
 
     // A torn tail: what comes before it is read, and the log says where it ends.
@@ -169,6 +176,7 @@ fn segments_rotate_between_jobs_and_the_oldest_are_deleted() {
         upper: cfg.limits.upper,
         catalog_len: 24,
         grasp_retries: 1,
+        decision_timeout_ns: 10_000_000_000,
     };
     let snap = crate::job::Job::new(params, buf(), buf())
         .snapshot()
@@ -182,7 +190,13 @@ fn segments_rotate_between_jobs_and_the_oldest_are_deleted() {
             m: js(i),
         });
         if recorder.wants_snapshot() {
-            recorder.snapshot(i, snap);
+            recorder.snapshot(
+                Sent {
+                    requests: i,
+                    decisions: i / 2,
+                },
+                snap,
+            );
             rotations += 1;
         }
         if i % 100 == 0 {
@@ -207,7 +221,7 @@ fn segments_rotate_between_jobs_and_the_oldest_are_deleted() {
     // A later segment starts from its snapshot.
     let last = Log::read(files.last().unwrap()).unwrap();
     let (before, s) = last.snapshot.expect("a snapshot");
-    assert!(before > 0);
+    assert!(before.requests > 0 && before.decisions > 0);
     assert_eq!(s, snap);
     assert!(last.header.segment >= 3);
     let _ = std::fs::remove_dir_all(&d);
@@ -229,7 +243,7 @@ fn a_snapshot_reads_back_bit_for_bit() {
     job.placement = Some(Placement {
         index: 1,
         pose: [0.1, -0.2, 0.05, std::f32::consts::PI],
-        release_q: [0.1 + 0.2, -1.0 / 3.0, 0.3, 0.4, 0.5, 0.6, 1e-300],
+        release_q: Some([0.1 + 0.2, -1.0 / 3.0, 0.3, 0.4, 0.5, 0.6, 1e-300]),
     });
     let gs = GripperState::from_bytes(&[0u8; std::mem::size_of::<GripperState>()]).unwrap();
     let s = JobSnapshot {
@@ -264,9 +278,13 @@ fn a_snapshot_reads_back_bit_for_bit() {
         fault: Fault::MissedGrasp,
         stopping: true,
     };
-    let b = super::format::encode_snapshot(42, &s);
+    let sent = Sent {
+        requests: 42,
+        decisions: 17,
+    };
+    let b = super::format::encode_snapshot(sent, &s);
     let (before, back) = super::format::decode_snapshot(&b).unwrap();
-    assert_eq!((before, back), (42, s));
+    assert_eq!((before, back), (sent, s));
     // Cut short or with a byte too many: an error, never a different state.
     assert!(super::format::decode_snapshot(&b[..b.len() - 1]).is_err());
     let mut long = b.clone();

@@ -4,7 +4,7 @@
 
 use super::RecordError;
 use super::format::{
-    Enc, FORMAT, LoopRec, MAGIC, RunHeader, encode_loop, encode_snapshot, frame_bytes, kind,
+    Enc, FORMAT, LoopRec, MAGIC, RunHeader, Sent, encode_loop, encode_snapshot, frame_bytes, kind,
     write_record,
 };
 use crate::job::JobSnapshot;
@@ -24,7 +24,7 @@ const WRITER_PERIOD: Duration = Duration::from_millis(100);
 /// The loop's end of the recorder: pushes never block or allocate.
 pub struct Recorder {
     tx: rtrb::Producer<LoopRec>,
-    snaps: rtrb::Producer<(u64, JobSnapshot)>,
+    snaps: rtrb::Producer<(Sent, JobSnapshot)>,
     want_snapshot: Arc<AtomicBool>,
     dropped: u64,
 }
@@ -53,10 +53,10 @@ impl Recorder {
         self.want_snapshot.load(Ordering::Relaxed)
     }
 
-    /// Records the machine's snapshot, taken with `requests_before` planner requests sent so
-    /// far: the writer starts a new segment with it.
-    pub fn snapshot(&mut self, requests_before: u64, s: JobSnapshot) {
-        if self.snaps.push((requests_before, s)).is_ok() {
+    /// Records the machine's snapshot, taken with `before` requests sent so far: the writer
+    /// starts a new segment with it.
+    pub fn snapshot(&mut self, before: Sent, s: JobSnapshot) {
+        if self.snaps.push((before, s)).is_ok() {
             self.want_snapshot.store(false, Ordering::Relaxed);
             self.push(LoopRec::Snapshot);
         }
@@ -74,15 +74,15 @@ pub struct RecordOptions {
     pub keep_bytes: u64,
 }
 
-/// A frame the planner was served with, on its way to the writer.
+/// A frame a decision was made on, on its way to the writer.
 type PlanFrame = (u64, Option<Box<[u8]>>);
 
-/// A running recorder: the loop's end, the planner's frame log, and the writer thread.
+/// A running recorder: the loop's end, the decision worker's frame log, and the writer thread.
 pub struct Recording {
     /// For the loop.
     pub recorder: Recorder,
-    /// For the planner thread ([`crate::planner::spawn`]).
-    pub frames: crate::planner::FrameLog,
+    /// For the decision worker ([`crate::decision::spawn`]).
+    pub frames: crate::decision::FrameLog,
     /// The writer; set `stop` and join it after the loop ended. Returns the segment files.
     pub writer: std::thread::JoinHandle<Result<Vec<PathBuf>, RecordError>>,
     /// Tells the writer to drain, flush, sync and end.
@@ -97,7 +97,7 @@ pub fn start(opts: RecordOptions, header: RunHeader) -> Result<Recording, Record
         source,
     })?;
     let (tx, mut rx) = rtrb::RingBuffer::<LoopRec>::new(LOOP_RING);
-    let (snaps, mut snaps_rx) = rtrb::RingBuffer::<(u64, JobSnapshot)>::new(2);
+    let (snaps, mut snaps_rx) = rtrb::RingBuffer::<(Sent, JobSnapshot)>::new(2);
     let (ftx, frx) = mpsc::channel::<PlanFrame>();
     let want = Arc::new(AtomicBool::new(false));
     let stop = Arc::new(AtomicBool::new(false));
@@ -145,7 +145,7 @@ pub fn start(opts: RecordOptions, header: RunHeader) -> Result<Recording, Record
             }
         })
         .map_err(RecordError::Thread)?;
-    let frames: crate::planner::FrameLog = Box::new(move |n, f| {
+    let frames: crate::decision::FrameLog = Box::new(move |n, f| {
         let _ = ftx.send((n, f.map(frame_bytes)));
     });
     Ok(Recording {

@@ -343,7 +343,7 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
     );
     assert!(st.success(), "{out}");
     for want in [
-        "action",
+        "method: blbf",
         "placement",
         "z ",
         "outcome: released",

@@ -173,7 +173,7 @@ pub fn status(job_id: u64, event: StatusEvent) -> Status {
         objects_done: 0,
         object_index: 0,
         object_type: NO_OBJECT,
-        reserved: 0,
+        decision_wait_ms: 0,
         pose: [0.0; 4],
         decision_ns: 0,
         cycles: 0,

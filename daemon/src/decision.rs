@@ -1,0 +1,395 @@
+//! The decision worker: where each object goes, decided on its own thread while the arm picks
+//! the object, so that neither the loop nor the planner (brakes, the next motion) waits for it.
+//!
+//! The loop sends a [`DecisionRequest`] when an object's pick starts and gets a
+//! [`DecisionResponse`] back over two wait-free rings. The worker keeps the newest valid
+//! heightmap (every cell checked on receipt; a bad frame is dropped and counted), waits for
+//! one newer than the last release, and decides with the configured method
+//! (`[decision] method`): the placement policy of `[models] policy` through the
+//! [`herb_decide::Decider`], or the search ([`herb_sim::search`]) through the same `Decider`
+//! (the same heightmap checks and the same z estimate), the search's twin built from that
+//! heightmap alone. A search's time budget is not reproducible, so a response says what it
+//! allowed (`allowed`: rollouts finished), and a replay runs exactly that count.
+//!
+//! A method that panics answers `Decision` (the job faults with that reason; the worker goes
+//! on); one that hangs is caught by the job machine's `decision.timeout_s`.
+
+use crate::config::{Config, DecisionMethod};
+use crate::plan::{DecisionRequest, DecisionResponse, NOT_A_SEARCH};
+use crate::planner::PlannerError;
+use herb_core::observation::placement_to_action;
+use herb_core::{SharedCatalog, TypeIdx};
+use herb_decide::policy::{DecisionInput, Policy};
+use herb_decide::{DecideError, Decider, HeightmapView};
+use herb_ipc::bus::{Bus, Sub};
+use herb_ipc::{Fault, HeightmapFrame, Services};
+use herb_sim::WorldConfig;
+use herb_sim::search::{Budget, Search, SearchReport, SearchSettings};
+use iceoryx2::prelude::ipc;
+use iceoryx2::sample::Sample;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// Receives, for decision request `n` (from 0, in the order the loop sent them), the frame it
+/// was decided on: `None` when none newer than the release came within the wait. Called on the
+/// worker's thread (it may allocate).
+pub type FrameLog = Box<dyn Fn(u64, Option<&HeightmapFrame>) + Send>;
+
+/// Requests (and responses) the rings hold; the loop has at most one decision out.
+const RING: usize = 4;
+/// Longest wait for a heightmap stamped after the last release before a decision answers
+/// `HeightmapTimeout` (the loop then asks again, within its own fresh-heightmap timeout).
+const FRAME_WAIT: Duration = Duration::from_millis(500);
+/// How often a waiting decision looks for a new frame.
+const FRAME_POLL: Duration = Duration::from_millis(1);
+/// Longest sleep with no request (the loop wakes the thread when it sends one).
+const IDLE_PARK: Duration = Duration::from_millis(20);
+
+/// The search as a placement policy of the [`Decider`]: the candidate it chooses becomes the
+/// action, and the `Decider` checks it and estimates its z as for any policy.
+pub struct SearchPolicy {
+    search: Search,
+}
+
+impl SearchPolicy {
+    /// A search over `catalog` with `settings`, its twins built with the world's defaults.
+    pub fn new(catalog: SharedCatalog, settings: SearchSettings) -> Self {
+        Self {
+            search: Search::new(catalog, WorldConfig::default(), settings),
+        }
+    }
+
+    /// What the last decision did: candidates, finished rollouts and their returns, the one
+    /// chosen.
+    pub fn report(&self) -> &SearchReport {
+        self.search.report()
+    }
+}
+
+impl Policy for SearchPolicy {
+    fn name(&self) -> &str {
+        "search"
+    }
+
+    fn begin_episode(&mut self, _seed: u64) {}
+
+    fn decide(&mut self, input: &DecisionInput) -> herb_decide::Result<[f32; 3]> {
+        let mut remaining = Vec::with_capacity(1 + input.after.len());
+        remaining.push(input.object);
+        remaining.extend_from_slice(input.after);
+        let p = self
+            .search
+            .decide(input.heightmap, &remaining, None)
+            .map_err(|e| DecideError::Rejected {
+                policy: "search".into(),
+                reason: e.to_string(),
+            })?
+            .ok_or(DecideError::NoFeasiblePlacement)?;
+        Ok(placement_to_action(p.x, p.y, p.theta()))
+    }
+
+    fn needs_observation(&self) -> bool {
+        false
+    }
+}
+
+/// How the worker decides.
+enum Method {
+    Policy(Decider),
+    Search(Decider<SearchPolicy>),
+}
+
+/// The worker's decisions without its thread and ports: herbd's worker and `herbctl replay`
+/// run this same code.
+pub struct DecisionCore {
+    method: Method,
+    budget: Budget,
+}
+
+impl DecisionCore {
+    /// The method `cfg` configures, for `catalog` (the policy file is loaded here: a bad one
+    /// is an error at start).
+    pub fn new(cfg: &Config, catalog: SharedCatalog) -> Result<Self, PlannerError> {
+        let clearance = cfg.models.clearance_m as f32;
+        let d = &cfg.decision;
+        let budget = Budget::Time(Duration::from_secs_f64(d.budget_s));
+        let method = match d.method {
+            DecisionMethod::Policy => Method::Policy(Decider::load(
+                &cfg.models.resolved_policy(),
+                catalog,
+                clearance,
+            )?),
+            DecisionMethod::Search => {
+                let settings = SearchSettings {
+                    k: d.k,
+                    budget,
+                    horizon: (d.horizon > 0).then_some(d.horizon),
+                    ..SearchSettings::default()
+                };
+                let policy = Box::new(SearchPolicy::new(catalog.clone(), settings));
+                Method::Search(Decider::new(policy, catalog, clearance))
+            }
+        };
+        Ok(Self { method, budget })
+    }
+
+    /// As [`DecisionCore::new`] with `policy` instead of the configured method (the planner's
+    /// property tests drive it with arbitrary policy outputs).
+    pub fn with_policy(cfg: &Config, catalog: SharedCatalog, policy: Box<dyn Policy>) -> Self {
+        Self {
+            method: Method::Policy(Decider::new(policy, catalog, cfg.models.clearance_m as f32)),
+            budget: Budget::Rollouts(0),
+        }
+    }
+
+    /// Decides `req` on `frame`. `allowed`: run that many rollouts instead of the time budget
+    /// (a replay of what a recorded decision's budget allowed); ignored by a policy.
+    pub fn decide(
+        &mut self,
+        req: &DecisionRequest,
+        frame: &HeightmapFrame,
+        allowed: Option<u32>,
+    ) -> DecisionResponse {
+        let view = HeightmapView {
+            nx: frame.nx as usize,
+            ny: frame.ny as usize,
+            cell_m: frame.cell_m,
+            cells: frame.cells(),
+        };
+        let remaining: Vec<TypeIdx> = req.remaining().iter().map(|&o| TypeIdx(o)).collect();
+        let object = req.remaining().first().copied().unwrap_or(0);
+        let t0 = Instant::now();
+        let (d, allowed) = match (&mut self.method, remaining.split_first()) {
+            (_, None) => (Err(DecideError::NoFeasiblePlacement), NOT_A_SEARCH),
+            (Method::Policy(p), Some((&o, after))) => {
+                (p.decide(view, o, req.index as usize, after), NOT_A_SEARCH)
+            }
+            (Method::Search(s), Some((&o, after))) => {
+                let budget = allowed.map_or(self.budget, |n| Budget::Rollouts(n as usize));
+                s.policy_mut().search.set_budget(budget);
+                let d = s.decide(view, o, req.index as usize, after);
+                let finished = s.policy().report().finished.len() as u32;
+                (d, finished)
+            }
+        };
+        let decision_ns = t0.elapsed().as_nanos() as u64;
+        DecisionResponse {
+            job_id: req.job_id,
+            index: req.index,
+            object,
+            outcome: d.map(|d| d.xyz_theta()).map_err(|e| match e {
+                DecideError::NoFeasiblePlacement => Fault::NoFeasiblePlacement,
+                _ => Fault::Decision,
+            }),
+            allowed,
+            decision_ns,
+        }
+    }
+
+    /// The last search's report (`None` for a policy).
+    pub fn search_report(&self) -> Option<&SearchReport> {
+        match &self.method {
+            Method::Search(s) => Some(s.policy().report()),
+            Method::Policy(_) => None,
+        }
+    }
+
+    /// The method's name (`search`, or the policy's).
+    pub fn name(&self) -> &str {
+        match &self.method {
+            Method::Policy(p) => p.policy_name(),
+            Method::Search(_) => "search",
+        }
+    }
+}
+
+/// The answer to `req` when no heightmap newer than its release came within the worker's wait
+/// (`HeightmapTimeout`: the loop asks again).
+pub fn no_fresh_frame(req: &DecisionRequest) -> DecisionResponse {
+    DecisionResponse {
+        job_id: req.job_id,
+        index: req.index,
+        object: req.remaining().first().copied().unwrap_or(0),
+        outcome: Err(Fault::HeightmapTimeout),
+        allowed: NOT_A_SEARCH,
+        decision_ns: 0,
+    }
+}
+
+/// The loop's ends of the decision rings.
+pub struct DecisionLink {
+    /// Requests to the worker.
+    pub tx: rtrb::Producer<DecisionRequest>,
+    /// Its responses.
+    pub rx: rtrb::Consumer<DecisionResponse>,
+    thread: std::thread::Thread,
+    rejected_frames: Arc<AtomicU64>,
+}
+
+impl DecisionLink {
+    /// Sends a request and wakes the worker; gives the request back if the ring is full.
+    #[allow(clippy::result_large_err)] // moved, not copied around: the loop takes it back
+    pub fn send(&mut self, r: DecisionRequest) -> Result<(), DecisionRequest> {
+        match self.tx.push(r) {
+            Ok(()) => {
+                self.thread.unpark();
+                Ok(())
+            }
+            Err(rtrb::PushError::Full(r)) => Err(r),
+        }
+    }
+
+    /// Heightmap frames the worker dropped as invalid (a cell not finite or out of range, or a
+    /// bad header or grid): never decided on, counted with the loop's rejected inputs.
+    pub fn rejected_frames(&self) -> u64 {
+        self.rejected_frames.load(Ordering::Relaxed)
+    }
+}
+
+/// The worker thread: the core, and the heightmaps it decides on.
+struct Worker {
+    core: DecisionCore,
+    hm_sub: Sub<HeightmapFrame>,
+    latest: Option<Sample<ipc::Service, HeightmapFrame, ()>>,
+    rejected_frames: Arc<AtomicU64>,
+    record: Option<FrameLog>,
+    handled: u64,
+    _bus: Bus,
+}
+
+impl Worker {
+    /// Keeps the newest valid frame, waiting up to `wait` for one stamped after `after`; true
+    /// when it has one.
+    fn refresh_frame(&mut self, after: u64, wait: Duration) -> bool {
+        let t0 = Instant::now();
+        loop {
+            self.drain_frames();
+            let fresh = self
+                .latest
+                .as_ref()
+                .is_some_and(|s| s.payload().header.stamp_ns > after);
+            if fresh || t0.elapsed() > wait {
+                return fresh;
+            }
+            std::thread::sleep(FRAME_POLL);
+        }
+    }
+
+    /// Receives every frame that arrived, checking every cell of each: a bad frame is dropped
+    /// and counted, the newest good one kept.
+    fn drain_frames(&mut self) {
+        while let Ok(Some(s)) = self.hm_sub.receive() {
+            if s.payload().validate().is_ok() {
+                self.latest = Some(s);
+            } else {
+                self.rejected_frames.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+
+    /// Serves one request: a frame newer than the release (recorded when a run log is
+    /// written), then the core; a panic of the method answers `Decision`.
+    fn handle(&mut self, r: DecisionRequest) -> DecisionResponse {
+        let fresh = self.refresh_frame(r.after_stamp_ns, FRAME_WAIT);
+        let frame = self.latest.as_ref().filter(|_| fresh).map(|s| s.payload());
+        if let Some(log) = &self.record {
+            log(self.handled, frame);
+        }
+        self.handled += 1;
+        let Some(frame) = frame else {
+            return no_fresh_frame(&r);
+        };
+        let core = &mut self.core;
+        match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            core.decide(&r, frame, None)
+        })) {
+            Ok(resp) => resp,
+            Err(_) => {
+                crate::logfmt::log(
+                    "error",
+                    &[
+                        ("what", &"the decision method panicked"),
+                        ("index", &r.index),
+                    ],
+                );
+                DecisionResponse {
+                    outcome: Err(Fault::Decision),
+                    ..no_fresh_frame(&r)
+                }
+            }
+        }
+    }
+}
+
+/// Starts the decision worker: loads the method (errors come back here, before the daemon
+/// reports ready) and opens its own heightmap subscriber.
+pub fn spawn(
+    cfg: &Config,
+    catalog: SharedCatalog,
+    stop: Arc<AtomicBool>,
+    record: Option<FrameLog>,
+) -> Result<(DecisionLink, JoinHandle<()>), PlannerError> {
+    let (tx, req_rx) = rtrb::RingBuffer::<DecisionRequest>::new(RING);
+    let (resp_tx, rx) = rtrb::RingBuffer::<DecisionResponse>::new(RING);
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), PlannerError>>();
+    let cfg = cfg.clone();
+    let shared_rejects = Arc::new(AtomicU64::new(0));
+    let rejected_frames = shared_rejects.clone();
+    let handle = std::thread::Builder::new()
+        .name("herbd-decide".into())
+        .spawn(move || {
+            let setup = (|| -> Result<Worker, PlannerError> {
+                let services = Services::new(&cfg.ipc_prefix)?;
+                let bus = Bus::open("herbd-decide", &services)?;
+                let hm_sub = bus.subscriber::<HeightmapFrame>(&services.heightmap())?;
+                Ok(Worker {
+                    core: DecisionCore::new(&cfg, catalog)?,
+                    hm_sub,
+                    latest: None,
+                    rejected_frames,
+                    record,
+                    handled: 0,
+                    _bus: bus,
+                })
+            })();
+            let (mut w, mut req_rx, mut resp_tx) = match setup {
+                Ok(w) => {
+                    let _ = ready_tx.send(Ok(()));
+                    (w, req_rx, resp_tx)
+                }
+                Err(e) => {
+                    let _ = ready_tx.send(Err(e));
+                    return;
+                }
+            };
+            while !stop.load(Ordering::Relaxed) {
+                while let Ok(r) = req_rx.pop() {
+                    let resp = w.handle(r);
+                    if resp_tx.push(resp).is_err() {
+                        // The loop reads every cycle and has at most one decision out.
+                        crate::logfmt::log("bug", &[("what", &"decision response ring full")]);
+                    }
+                }
+                // Frames are checked as they come, not only when one is decided on.
+                w.drain_frames();
+                std::thread::park_timeout(IDLE_PARK);
+            }
+        })
+        .map_err(PlannerError::Thread)?;
+    let thread = handle.thread().clone();
+    match ready_rx.recv() {
+        Ok(Ok(())) => Ok((
+            DecisionLink {
+                tx,
+                rx,
+                thread,
+                rejected_frames: shared_rejects,
+            },
+            handle,
+        )),
+        Ok(Err(e)) => Err(e),
+        Err(_) => Err(PlannerError::Died),
+    }
+}
