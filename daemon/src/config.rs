@@ -457,6 +457,25 @@ mod tests {
         c = Config::default();
         c.ipc_prefix = "/x".into();
         assert!(c.validate().is_err());
+        // The decision: a method by name, and each bad number named.
+        let c =
+            Config::from_toml("[decision]\nmethod = \"search\"\nbudget_s = 0.0\n", "x").unwrap();
+        assert_eq!(c.decision.method, DecisionMethod::Search);
+        for (toml, name) in [
+            ("[decision]\nmethod = \"rollout\"\n", "method"),
+            ("[decision]\nbudget_s = -1.0\n", "decision.budget_s"),
+            ("[decision]\nbudget_s = nan\n", "decision.budget_s"),
+            ("[decision]\nk = 0\n", "decision.k"),
+            ("[decision]\nk = 65\n", "decision.k"),
+            ("[decision]\nhorizon = 65\n", "decision.horizon"),
+            (
+                "[decision]\nbudget_s = 5.0\ntimeout_s = 2.0\n",
+                "decision.timeout_s",
+            ),
+        ] {
+            let e = Config::from_toml(toml, "x").unwrap_err().to_string();
+            assert!(e.contains(name), "{toml}: {e}");
+        }
         let c = Config::from_toml("[journal]\non_restart = \"abandon\"\n", "x").unwrap();
         assert_eq!(c.journal.on_restart, OnRestart::Abandon);
         assert_eq!(
