@@ -245,6 +245,102 @@ fn pack_shortest_episode_with(tag: &str, policy: &Path) {
     claims.check();
 }
 
+/// With the search deciding (`[decision] method = "search"`, a short budget): the episode is
+/// packed with every decision made while the arm picks, the run log replays bit for bit (each
+/// search re-run with the rollouts its budget allowed), and `herbctl explain` lists the
+/// candidates the search tried.
+#[test]
+fn packs_an_episode_with_the_search_and_replays_it_bit_for_bit() {
+    let Some(root) = herb_sim::paths::boxed_root_for_tests() else {
+        return;
+    };
+    let (session, n) = shortest_session(&root);
+    let (dir, prefix, cfg) = setup("search");
+    let mut text = std::fs::read_to_string(&cfg).unwrap();
+    text.push_str("\n[decision]\nmethod = \"search\"\nbudget_s = 0.3\nk = 4\n");
+    std::fs::write(&cfg, text).unwrap();
+    let (cfg_s, boxed) = (cfg.to_str().unwrap(), root.to_str().unwrap());
+    let runs = dir.join("runs");
+    let _lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s, "--boxed", boxed],
+        &dir.join("loopback.log"),
+    );
+    let mut hd = spawn(
+        &exe("herbd"),
+        &[
+            "--config",
+            cfg_s,
+            "--boxed",
+            boxed,
+            "--record",
+            runs.to_str().unwrap(),
+        ],
+        &dir.join("herbd.log"),
+    );
+    let (st, out) = herbctl_output(
+        &prefix,
+        &[
+            "--boxed",
+            boxed,
+            "pack",
+            "--session",
+            &session,
+            "--json",
+            "--timeout",
+            "600",
+        ],
+    );
+    let summary: serde_json::Value = out
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .last()
+        .unwrap_or_else(|| panic!("a JSON summary: {out}"));
+    assert!(st.success(), "{summary}");
+    assert_eq!(summary["ok"], true, "{summary}");
+    assert_eq!(summary["placed"], n as u64, "{summary}");
+    assert_eq!(summary["decisions"], n as u64, "{summary}");
+    assert!(
+        summary["decision_wait_s"].as_f64().unwrap() >= 0.0,
+        "{summary}"
+    );
+    hd.signal(libc::SIGTERM);
+    assert!(hd.wait_for(Duration::from_secs(10)).success());
+    let mut logs: Vec<PathBuf> = std::fs::read_dir(&runs)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    logs.sort();
+    let log = logs[0].to_str().unwrap();
+    let (st, out) = herbctl_output(&prefix, &["--boxed", boxed, "replay", log]);
+    assert!(st.success(), "{out}");
+    assert!(out.contains("reproduced bit for bit"), "{out}");
+    assert!(out.contains(&format!("{n} decisions")), "{out}");
+    let pictures = dir.join("explain");
+    let (st, out) = herbctl_output(
+        &prefix,
+        &[
+            "--boxed",
+            boxed,
+            "explain",
+            log,
+            "--object",
+            "1",
+            "--out",
+            pictures.to_str().unwrap(),
+        ],
+    );
+    assert!(st.success(), "{out}");
+    for want in [
+        "method: search",
+        "feasible candidates",
+        "rollout",
+        "placement",
+    ] {
+        assert!(out.contains(want), "{want}: {out}");
+    }
+}
+
 #[test]
 fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
     let (dir, prefix, cfg) = setup("kill");
