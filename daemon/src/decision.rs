@@ -188,6 +188,34 @@ impl DecisionCore {
         }
     }
 
+    /// [`DecisionCore::decide`], with a panic of the method answered `Decision` (logged): the
+    /// worker goes on with the next request.
+    pub fn decide_guarded(
+        &mut self,
+        req: &DecisionRequest,
+        frame: &HeightmapFrame,
+        allowed: Option<u32>,
+    ) -> DecisionResponse {
+        match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            self.decide(req, frame, allowed)
+        })) {
+            Ok(resp) => resp,
+            Err(_) => {
+                crate::logfmt::log(
+                    "error",
+                    &[
+                        ("what", &"the decision method panicked"),
+                        ("index", &req.index),
+                    ],
+                );
+                DecisionResponse {
+                    outcome: Err(Fault::Decision),
+                    ..no_fresh_frame(req)
+                }
+            }
+        }
+    }
+
     /// The last search's report (`None` for a policy).
     pub fn search_report(&self) -> Option<&SearchReport> {
         match &self.method {
@@ -290,7 +318,7 @@ impl Worker {
     }
 
     /// Serves one request: a frame newer than the release (recorded when a run log is
-    /// written), then the core; a panic of the method answers `Decision`.
+    /// written), then the core ([`DecisionCore::decide_guarded`]).
     fn handle(&mut self, r: DecisionRequest) -> DecisionResponse {
         let fresh = self.refresh_frame(r.after_stamp_ns, FRAME_WAIT);
         let frame = self.latest.as_ref().filter(|_| fresh).map(|s| s.payload());
@@ -301,25 +329,7 @@ impl Worker {
         let Some(frame) = frame else {
             return no_fresh_frame(&r);
         };
-        let core = &mut self.core;
-        match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            core.decide(&r, frame, None)
-        })) {
-            Ok(resp) => resp,
-            Err(_) => {
-                crate::logfmt::log(
-                    "error",
-                    &[
-                        ("what", &"the decision method panicked"),
-                        ("index", &r.index),
-                    ],
-                );
-                DecisionResponse {
-                    outcome: Err(Fault::Decision),
-                    ..no_fresh_frame(&r)
-                }
-            }
-        }
+        self.core.decide_guarded(&r, frame, None)
     }
 }
 

@@ -1,0 +1,151 @@
+//! The decision worker's core (`DecisionCore`, what herbd's decision thread and the replay run)
+//! on bad and edge inputs: a budget of zero, a method that panics, heightmaps that are not the
+//! box's or not finite, and a search replayed from the count of rollouts its budget allowed.
+
+use herb_core::lattice::Lattice;
+use herb_core::observation::ObsLayout;
+use herb_core::paths::MeshSource;
+use herb_core::{Catalog, GridSpec, Heightmap, TypeIdx};
+use herb_daemon::config::{Config, DecisionMethod};
+use herb_daemon::decision::DecisionCore;
+use herb_daemon::plan::{DecisionRequest, NOT_A_SEARCH};
+use herb_decide::{DecisionInput, Policy};
+use herb_ipc::{Fault, HeightmapFrame, MAX_JOB_OBJECTS};
+use std::path::Path;
+use std::sync::Arc;
+
+fn catalog() -> Arc<Catalog> {
+    Arc::new(Catalog::builtin(&MeshSource::None("fixture".into())).unwrap())
+}
+
+fn config(method: DecisionMethod, budget_s: f64) -> Config {
+    let mut cfg = Config::default();
+    cfg.models.sequence = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/sequence.json");
+    cfg.decision.method = method;
+    cfg.decision.budget_s = budget_s;
+    cfg.decision.k = 3;
+    cfg
+}
+
+/// The box's heightmap with a block of `h` m in one corner, as the camera publishes it.
+fn frame(h: f32) -> Box<HeightmapFrame> {
+    let spec = GridSpec::for_box(ObsLayout::CELL_M).unwrap();
+    let mut f = Box::new(HeightmapFrame {
+        header: herb_ipc::Header::at(1, 2),
+        nx: spec.nx as u32,
+        ny: spec.ny as u32,
+        cell_m: ObsLayout::CELL_M,
+        objects: 0,
+        data: [0.0; herb_ipc::HEIGHTMAP_MAX_CELLS],
+    });
+    for row in 0..spec.ny / 2 {
+        for col in 0..spec.nx / 3 {
+            f.data[row * spec.nx + col] = h;
+        }
+    }
+    f
+}
+
+/// Object `objects[0]` of a job of `objects`.
+fn request(objects: &[u16]) -> DecisionRequest {
+    let mut order = [0u16; MAX_JOB_OBJECTS];
+    order[..objects.len()].copy_from_slice(objects);
+    DecisionRequest {
+        job_id: 3,
+        index: 0,
+        order,
+        count: objects.len() as u32,
+        after_stamp_ns: 0,
+    }
+}
+
+#[test]
+fn a_search_with_no_budget_takes_the_priors_first_and_says_so() {
+    let c = catalog();
+    let mut core = DecisionCore::new(&config(DecisionMethod::Search, 0.0), c.clone()).unwrap();
+    let f = frame(0.04);
+    let d = core.decide(&request(&[5, 9, 11]), &f, None);
+    assert_eq!(d.allowed, 0, "no rollout finished");
+    let pose = d.outcome.expect("a placement");
+    // The prior: lattice BLBF's first candidate on this heightmap.
+    let spec = GridSpec::for_box(ObsLayout::CELL_M).unwrap();
+    let hm = Heightmap::from_data(spec, f.cells().to_vec()).unwrap();
+    let mut lattice = Lattice::new(&c);
+    lattice.compute(&hm, &c, TypeIdx(5));
+    let first = lattice.candidates()[0];
+    assert!((pose[0] - first.x).abs() < 1e-5 && (pose[1] - first.y).abs() < 1e-5);
+    let report = core.search_report().unwrap();
+    assert!(report.finished.is_empty() && report.chosen == Some(0));
+}
+
+#[test]
+fn a_search_replays_from_the_count_its_budget_allowed() {
+    let c = catalog();
+    let mut live = DecisionCore::new(&config(DecisionMethod::Search, 0.5), c.clone()).unwrap();
+    let f = frame(0.04);
+    let req = request(&[5, 9, 11, 2]);
+    let d = live.decide(&req, &f, None);
+    assert!(d.allowed != NOT_A_SEARCH && d.allowed > 0, "{d:?}");
+    // Another core (a replay) given what the budget allowed makes the same decision.
+    let mut replay = DecisionCore::new(&config(DecisionMethod::Search, 0.5), c).unwrap();
+    let again = replay.decide(&req, &f, Some(d.allowed));
+    assert_eq!(again.digest(), d.digest(), "{d:?} vs {again:?}");
+}
+
+/// A policy that panics (a fixture standing for a broken method).
+struct Panics;
+
+impl Policy for Panics {
+    fn name(&self) -> &str {
+        "panics (fixture)"
+    }
+    fn begin_episode(&mut self, _seed: u64) {}
+    fn decide(&mut self, _input: &DecisionInput) -> herb_decide::Result<[f32; 3]> {
+        panic!("a broken decision method")
+    }
+    fn needs_observation(&self) -> bool {
+        false
+    }
+}
+
+#[test]
+fn a_method_that_panics_answers_a_decision_fault_and_the_worker_goes_on() {
+    let cfg = config(DecisionMethod::Policy, 1.0);
+    let mut core = DecisionCore::with_policy(&cfg, catalog(), Box::new(Panics));
+    let req = request(&[5]);
+    for _ in 0..2 {
+        let d = core.decide_guarded(&req, &frame(0.0), None);
+        assert_eq!(d.outcome, Err(Fault::Decision));
+        assert_eq!((d.job_id, d.index), (3, 0));
+    }
+}
+
+#[test]
+fn heightmaps_not_of_the_box_or_not_finite_are_refused_by_both_methods() {
+    let c = catalog();
+    for method in [DecisionMethod::Policy, DecisionMethod::Search] {
+        let mut core = DecisionCore::new(&config(method, 0.1), c.clone()).unwrap();
+        let mut nan = frame(0.02);
+        nan.data[7] = f32::NAN;
+        let mut high = frame(0.02);
+        high.data[9] = 5.0;
+        let mut grid = frame(0.02);
+        grid.nx = 100;
+        for (what, f) in [("NaN", nan), ("out of range", high), ("another grid", grid)] {
+            let d = core.decide_guarded(&request(&[5, 6]), &f, None);
+            assert_eq!(d.outcome, Err(Fault::Decision), "{method:?}, {what}");
+        }
+        // A good frame afterwards is decided as usual.
+        let d = core.decide_guarded(&request(&[5, 6]), &frame(0.02), None);
+        assert!(d.outcome.is_ok(), "{method:?}: {d:?}");
+    }
+}
+
+#[test]
+fn a_job_with_no_object_left_has_no_placement() {
+    let mut core = DecisionCore::new(&config(DecisionMethod::Search, 0.1), catalog()).unwrap();
+    let mut req = request(&[5]);
+    req.index = 1;
+    let d = core.decide(&req, &frame(0.0), None);
+    assert_eq!(d.outcome, Err(Fault::NoFeasiblePlacement));
+}
