@@ -293,8 +293,8 @@ fn packs_an_episode_with_the_search_and_replays_it_bit_for_bit() {
     );
     let summary: serde_json::Value = out
         .lines()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .last()
+        .rev()
+        .find_map(|l| serde_json::from_str(l).ok())
         .unwrap_or_else(|| panic!("a JSON summary: {out}"));
     assert!(st.success(), "{summary}");
     assert_eq!(summary["ok"], true, "{summary}");
