@@ -1,0 +1,112 @@
+//! herbd's decision with the search, timed as herbd times it (one `DecisionCore::decide` call:
+//! the heightmap checked and copied, the twin built from it, the rollouts, the z estimate), on
+//! one thread, for a count of rollouts (what tables use) and for herbd's time budget.
+//!
+//! `cargo bench -p herb-daemon --bench search` (BoxED needed: mid-pack heightmaps of the first
+//! sessions, their humans' placements after a quarter, half and three quarters of the episode,
+//! the object after decided with the rest of the episode to come). Prints p50, p95, p99 and
+//! the maximum per budget. A bench binary rather than criterion: a decision takes up to a
+//! second, and what matters is the tail over many states, not a mean over repeats of one.
+
+use hdrhistogram::Histogram;
+use herb_daemon::config::{Config, DecisionMethod};
+use herb_daemon::decision::DecisionCore;
+use herb_daemon::plan::DecisionRequest;
+use herb_ipc::{HeightmapFrame, MAX_JOB_OBJECTS};
+use herb_sim::boxed::{list_sessions, load_session};
+use herb_sim::paths::{self, MeshSource};
+use herb_sim::{Catalog, PackingWorld, SharedCatalog, WorldConfig};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Sessions whose states are timed.
+const SESSIONS: usize = 12;
+
+fn main() {
+    let Some(root) = paths::boxed_root(None).filter(|r| r.join("sessions").is_dir()) else {
+        eprintln!("no BoxED data: nothing to time (set HERB_BOXED)");
+        return;
+    };
+    let catalog: SharedCatalog =
+        Arc::new(Catalog::builtin(&MeshSource::Folder(root.join("meshes"))).expect("catalog"));
+    // The states: (heightmap frame, the rest of the episode from the object to place).
+    let mut states = Vec::new();
+    for name in list_sessions(&root)
+        .expect("sessions")
+        .iter()
+        .take(SESSIONS)
+    {
+        let ep = load_session(&root, name, &catalog)
+            .expect("session")
+            .episode(&catalog);
+        let n = ep.objects.len();
+        for cut in [n / 4, n / 2, 3 * n / 4] {
+            let mut w = PackingWorld::new(catalog.clone(), WorldConfig::default()).expect("world");
+            let mut inside = true;
+            for (t, h) in ep.objects[..cut].iter().zip(&ep.human) {
+                inside &= w.place(*t, h.x, h.y, h.theta).expect("place").inside;
+            }
+            if !inside || cut + 1 >= n {
+                continue;
+            }
+            let spec = *w.heightmap().spec();
+            let mut f: Box<HeightmapFrame> = Box::new(HeightmapFrame {
+                header: herb_ipc::Header::at(1, 1),
+                nx: spec.nx as u32,
+                ny: spec.ny as u32,
+                cell_m: spec.cell,
+                objects: cut as u32,
+                data: [0.0; herb_ipc::HEIGHTMAP_MAX_CELLS],
+            });
+            f.data[..spec.len()].copy_from_slice(w.heightmap().data());
+            let rest: Vec<u16> = ep.objects[cut..].iter().map(|t| t.0).collect();
+            states.push((f, rest));
+        }
+    }
+    let mut cfg = Config::default();
+    cfg.models.sequence =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/sequence.json");
+    cfg.decision.method = DecisionMethod::Search;
+    eprintln!(
+        "{} states from {SESSIONS} sessions (objects still to place: {}..{})",
+        states.len(),
+        states.iter().map(|s| s.1.len()).min().unwrap_or(0),
+        states.iter().map(|s| s.1.len()).max().unwrap_or(0)
+    );
+    for (label, budget_s, allowed) in [
+        ("8 rollouts of 8 candidates", 30.0, Some(8)),
+        ("herbd's default budget, 1.0 s", 1.0, None),
+    ] {
+        cfg.decision.budget_s = budget_s;
+        cfg.decision.timeout_s = budget_s + 10.0;
+        let mut core = DecisionCore::new(&cfg, catalog.clone()).expect("decision core");
+        let mut h = Histogram::<u64>::new_with_bounds(1, 60_000_000_000, 3).expect("histogram");
+        let mut rollouts = 0u64;
+        for (f, rest) in &states {
+            let mut order = [0u16; MAX_JOB_OBJECTS];
+            order[..rest.len()].copy_from_slice(rest);
+            let req = DecisionRequest {
+                job_id: 1,
+                index: 0,
+                order,
+                count: rest.len() as u32,
+                after_stamp_ns: 0,
+            };
+            let t0 = Instant::now();
+            let d = core.decide(&req, f, allowed);
+            h.record(t0.elapsed().as_nanos() as u64).ok();
+            assert!(d.outcome.is_ok(), "{d:?}");
+            rollouts += d.allowed as u64;
+        }
+        let ms = |q: f64| h.value_at_quantile(q) as f64 / 1e6;
+        println!(
+            "search, {label}, one thread: n {} p50 {:.0} ms p95 {:.0} ms p99 {:.0} ms max {:.0} ms; {:.1} rollouts finished per decision",
+            h.len(),
+            ms(0.5),
+            ms(0.95),
+            ms(0.99),
+            h.max() as f64 / 1e6,
+            rollouts as f64 / h.len().max(1) as f64
+        );
+    }
+}
