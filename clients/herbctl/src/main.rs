@@ -123,6 +123,11 @@ enum Cmd {
         #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
         tip_offset: f64,
     },
+    /// Print the object catalog as JSON for viewers (`python -m herb_client.view`): the box
+    /// (half lengths, height, wall thickness; m) and each object type's id, name and convex
+    /// hull (vertices in its canonical frame, m, and outward triangles), from the BoxED meshes
+    /// (`--boxed`) when present, else the primitives.
+    Catalog,
     /// Print the daemon's next heartbeat.
     Status {
         /// Give up after this many seconds.
@@ -807,6 +812,40 @@ fn write_png(f: &HeightmapFrame, path: &std::path::Path) -> Result<(), String> {
     herb_sim::image::write_heightmap_png(path, &hm, 0.3, 4).map_err(|e| e.to_string())
 }
 
+/// `herbctl catalog`: the catalog (meshes from BoxED when present) as one JSON document.
+fn catalog_json(cli: &Cli) -> Result<bool, String> {
+    use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, BOX_WALL_THICKNESS};
+    let root = paths::boxed_root(cli.boxed.as_deref());
+    let meshes = paths::mesh_source(None, root.as_deref());
+    let catalog = Catalog::builtin(&meshes).map_err(|e| format!("catalog: {e}"))?;
+    let objects: Vec<serde_json::Value> = catalog
+        .types()
+        .map(|t| {
+            let (spec, shape) = (catalog.spec(t), catalog.shape(t));
+            serde_json::json!({
+                "index": t.0,
+                "id": spec.id,
+                "name": spec.name,
+                "vertices": shape.vertices.iter().map(|v| [v.x, v.y, v.z]).collect::<Vec<_>>(),
+                "triangles": shape.triangles,
+            })
+        })
+        .collect();
+    let doc = serde_json::json!({
+        "format": 1,
+        "box": {
+            "half_x": BOX_HALF_X,
+            "half_y": BOX_HALF_Y,
+            "height": BOX_HEIGHT,
+            "wall": BOX_WALL_THICKNESS,
+        },
+        "objects": objects,
+    });
+    use std::io::Write;
+    writeln!(std::io::stdout(), "{doc}").map_err(|e| format!("stdout: {e}"))?;
+    Ok(true)
+}
+
 /// `herbctl explain`.
 fn explain(
     cli: &Cli,
@@ -972,6 +1011,7 @@ fn main() -> ExitCode {
             (*json, *operator, *reconnect),
         ),
         Cmd::Status { timeout } => status(&cli, *timeout),
+        Cmd::Catalog => catalog_json(&cli),
         Cmd::CalibrateCell {
             corners,
             tip_offset,
