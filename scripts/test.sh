@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The test command (README, CI): the systemd units' check, the Rust tests of the whole
-# workspace, then the Python tests (pytest): the training bindings (sim/py) and the client
-# (clients/python, against the herbd and herb-loopback that cargo test built), with maturin,
-# numpy, gymnasium, pytest and iceoryx2 in a virtualenv (.venv, or $HERB_VENV).
+# workspace, then the Python tests (pytest): the training bindings (sim/py), the client
+# (clients/python, against the herbd and herb-loopback that cargo test built) and its live view
+# (Rerun; in headless Chromium when installed: .ci/run installs it), with maturin, numpy,
+# gymnasium, pytest, iceoryx2 and rerun-sdk in a virtualenv (.venv, or $HERB_VENV).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
@@ -12,6 +13,6 @@ cargo test --workspace
 VENV=${HERB_VENV:-$ROOT/.venv}
 [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
 "$VENV/bin/pip" install -q --disable-pip-version-check maturin numpy gymnasium pytest
-"$VENV/bin/pip" install -q --disable-pip-version-check -e clients/python
+"$VENV/bin/pip" install -q --disable-pip-version-check -e "clients/python[view]"
 (cd sim/py && VIRTUAL_ENV="$VENV" PATH="$VENV/bin:$PATH" maturin develop -q)
 "$VENV/bin/python" -m pytest -q sim/py/tests clients/python/tests

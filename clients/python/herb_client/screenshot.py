@@ -40,13 +40,20 @@ class Chromium:
             f"--window-size={width},{height}",
             "about:blank",
         ]
-        # Chromium reads the protocol on fd 3 and writes on fd 4: the shell puts the pipes
-        # there (and Debian's launcher is itself a shell script that keeps them).
+        # Chromium reads the protocol on fd 3 and writes on fd 4: a trampoline puts the pipes
+        # there (moved above 9 first, so that neither overwrites the other) and execs it.
+        tramp = (
+            "import fcntl, os, sys\n"
+            "r, w = (fcntl.fcntl(int(f), fcntl.F_DUPFD, 10) for f in sys.argv[1:3])\n"
+            "os.dup2(r, 3)\n"
+            "os.dup2(w, 4)\n"
+            "os.execvp(sys.argv[3], sys.argv[3:])\n"
+        )
         self.proc = subprocess.Popen(
-            ["sh", "-c", f'exec "$@" 3<&{to_child_r} 4>&{from_child_w}', "sh", *args],
+            [sys.executable, "-c", tramp, str(to_child_r), str(from_child_w), *args],
             pass_fds=(to_child_r, from_child_w),
             stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
+            stderr=open(os.environ.get("HERB_CHROMIUM_LOG", os.devnull), "w"),
         )
         os.close(to_child_r)
         os.close(from_child_w)
