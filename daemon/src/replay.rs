@@ -59,7 +59,7 @@ pub struct Replayed {
     pub responses: u64,
     /// Placements decided (`Decided` statuses).
     pub decisions: u64,
-    /// Statuses other than heartbeats, with the cycle they came in.
+    /// Statuses other than heartbeats, with the cycle they came in (stamped with its time).
     pub statuses: Vec<(u64, Status)>,
     /// The heightmaps decisions were made on, by object index: (index, frame).
     pub decision_frames: Vec<(u32, Box<HeightmapFrame>)>,
@@ -352,6 +352,9 @@ pub fn replay(log: &Log, opts: &ReplayOptions) -> Result<(Outcome, Replayed), Re
                         out.decisions += 1;
                     }
                     if s.event != StatusEvent::Heartbeat as u32 {
+                        // Stamped with the cycle's time, as herbd stamps what it publishes.
+                        let mut s = s;
+                        s.header.stamp_ns = now;
                         out.statuses.push((out.cycles, s));
                     }
                 }

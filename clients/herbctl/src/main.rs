@@ -83,6 +83,11 @@ enum Cmd {
         /// Replay even if the catalog or a model differs from the run's.
         #[arg(long)]
         force: bool,
+        /// Also write what the replay saw as JSON lines for a recording
+        /// (`python -m herb_client.view --events FILE --save job.rrd`): each status but the
+        /// heartbeats, and each heightmap a decision was made on.
+        #[arg(long)]
+        events: Option<PathBuf>,
     },
     /// Why object N (1-based, as `herbctl pack` numbers them) went where it did: the
     /// heightmap it was decided on and the next one (PNGs), the policy's action, the z
@@ -759,7 +764,12 @@ fn cancel(cli: &Cli, job: Option<u64>, timeout: f64) -> Result<bool, String> {
 }
 
 /// `herbctl replay`.
-fn replay(cli: &Cli, path: &std::path::Path, force: bool) -> ExitCode {
+fn replay(
+    cli: &Cli,
+    path: &std::path::Path,
+    force: bool,
+    events: Option<&std::path::Path>,
+) -> ExitCode {
     let run = || -> Result<(Outcome, Replayed, Log), String> {
         let log = Log::read(path).map_err(|e| e.to_string())?;
         let opts = ReplayOptions {
@@ -780,6 +790,15 @@ fn replay(cli: &Cli, path: &std::path::Path, force: bool) -> ExitCode {
                 "{} (segment {}), recorded on {}",
                 log.header.herbd, log.header.segment, log.header.cpu
             );
+            if let Some(p) = events {
+                match write_events(p, &r) {
+                    Ok(n) => println!("{n} events written to {}", p.display()),
+                    Err(e) => {
+                        eprintln!("herbctl: error: {}: {e}", p.display());
+                        return ExitCode::from(2);
+                    }
+                }
+            }
             let done = format!(
                 "{} cycles, {} joint commands, {} planner responses, {} decisions",
                 r.cycles, r.joint_commands, r.responses, r.decisions
@@ -801,6 +820,52 @@ fn replay(cli: &Cli, path: &std::path::Path, force: bool) -> ExitCode {
             }
         }
     }
+}
+
+/// The replay's statuses (heartbeats left out) and decision heightmaps as JSON lines, in time
+/// order; the number of lines.
+fn write_events(path: &std::path::Path, r: &Replayed) -> std::io::Result<usize> {
+    use std::io::Write;
+    let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut n = 0;
+    for (_, s) in &r.statuses {
+        let line = serde_json::json!({
+            "status": {
+                "stamp_ns": s.header.stamp_ns,
+                "job_id": s.job_id,
+                "event": s.event,
+                "state": s.state,
+                "fault": s.fault,
+                "objects_total": s.objects_total,
+                "objects_done": s.objects_done,
+                "object_index": s.object_index,
+                "object_type": s.object_type,
+                "decision_wait_ms": s.decision_wait_ms,
+                "pose": s.pose,
+                "decision_ns": s.decision_ns,
+            }
+        });
+        writeln!(w, "{line}")?;
+        n += 1;
+        // The heightmap the object was decided on, at the time of its decision.
+        if s.event == StatusEvent::Decided as u32
+            && let Some((_, f)) = r.decision_frames.iter().find(|(i, _)| *i == s.object_index)
+        {
+            let line = serde_json::json!({
+                "heightmap": {
+                    "stamp_ns": s.header.stamp_ns,
+                    "nx": f.nx,
+                    "ny": f.ny,
+                    "cell_m": f.cell_m,
+                    "cells": f.cells(),
+                }
+            });
+            writeln!(w, "{line}")?;
+            n += 1;
+        }
+    }
+    w.flush()?;
+    Ok(n)
 }
 
 fn write_png(f: &HeightmapFrame, path: &std::path::Path) -> Result<(), String> {
@@ -1037,8 +1102,8 @@ fn main() -> ExitCode {
         } => watch(&cli, &catalog, *period, *duration, *plain),
         Cmd::Reset { timeout } => reset(&cli, *timeout),
         Cmd::Cancel { job, timeout } => cancel(&cli, *job, *timeout),
-        Cmd::Replay { log, force } => {
-            return replay(&cli, log, *force);
+        Cmd::Replay { log, force, events } => {
+            return replay(&cli, log, *force, events.as_deref());
         }
         Cmd::Explain {
             log,

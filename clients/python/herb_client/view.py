@@ -2,6 +2,8 @@
 
     python -m herb_client.view --prefix herb              # serve the web viewer, open a browser
     python -m herb_client.view --prefix herb --save job.rrd --until-job-end   # record a job
+    herbctl replay RUN.log --events job.jsonl             # a finished job, from herbd's run log,
+    python -m herb_client.view --events job.jsonl --save job.rrd   # recorded afterwards
 
 It subscribes like any client (one subscriber on each of ``status``, ``heightmap``,
 ``joint_state`` and, with the loopback, ``sim/outcome``) and reads nothing else of herbd. What
@@ -277,6 +279,44 @@ class View:
                 self.object(i, OUTSIDE)
 
 
+def replay_events(view: View, path: str) -> int:
+    """Feeds ``herbctl replay --events`` JSON lines (statuses and decision heightmaps of a run
+    log) to ``view``; the number of events."""
+    n = 0
+    with open(path) as f:
+        for line in f:
+            e = json.loads(line)
+            if "status" in e:
+                d, s = e["status"], Status()
+                s.header.stamp_ns = d["stamp_ns"]
+                for k in (
+                    "job_id",
+                    "event",
+                    "state",
+                    "fault",
+                    "objects_total",
+                    "objects_done",
+                    "object_index",
+                    "object_type",
+                    "decision_wait_ms",
+                    "decision_ns",
+                ):
+                    setattr(s, k, d[k])
+                s.pose[:] = d["pose"]
+                view.status(s)
+            elif "heightmap" in e:
+                d, h = e["heightmap"], HeightmapFrame()
+                h.header.stamp_ns, h.nx, h.ny, h.cell_m = d["stamp_ns"], d["nx"], d["ny"], d["cell_m"]
+                cells = np.asarray(d["cells"], dtype=np.float32)
+                np.ctypeslib.as_array(h.data)[: cells.size] = cells
+                view.last_pile_s = -math.inf  # one heightmap per decision: each is drawn
+                view.heightmap(h)
+            else:
+                raise SystemExit(f"{path}: an event of no known kind: {line[:80]!r}")
+            n += 1
+    return n
+
+
 def subscribe(node, prefix: str, leaf: str, payload, timeout_s: float):
     """A subscriber of ``<prefix>/<leaf>``, retried until the service exists."""
     deadline = time.monotonic() + timeout_s
@@ -305,6 +345,9 @@ def main(argv=None) -> int:
     ap.add_argument("--grpc-port", type=int, default=9876, help="the Rerun data server's port")
     ap.add_argument("--no-browser", action="store_true", help="serve without opening a browser")
     ap.add_argument("--save", help="write a recording (.rrd) instead of serving the viewer")
+    ap.add_argument(
+        "--events", help="record a finished job from `herbctl replay RUN.log --events FILE` (with --save)"
+    )
     ap.add_argument("--catalog", help="a `herbctl catalog` JSON file (default: run herbctl)")
     ap.add_argument("--boxed", help="the BoxED folder for the meshes (passed to herbctl)")
     ap.add_argument("--until-job-end", action="store_true", help="stop after the first job ends")
@@ -313,6 +356,8 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     import rerun as rr
 
+    if a.events and not a.save:
+        raise SystemExit("--events writes a recording: give --save FILE.rrd too")
     catalog = load_catalog(a.catalog, a.boxed)
     rr.init("herb", recording_id=f"herb-{a.prefix}-{int(time.time())}")
     if a.save:
@@ -321,6 +366,14 @@ def main(argv=None) -> int:
         uri = rr.serve_grpc(grpc_port=a.grpc_port)
         rr.serve_web_viewer(web_port=a.web_port, open_browser=not a.no_browser, connect_to=uri)
         print(f"viewer: http://localhost:{a.web_port}/?url={uri}", flush=True)
+    if a.events:
+        view = View(rr, catalog)
+        rr.send_blueprint(view.blueprint())
+        view.static()
+        n = replay_events(view, a.events)
+        rr.disconnect()
+        print(f"recording: {a.save} ({n} events)", flush=True)
+        return 0
     iox2.set_log_level(iox2.LogLevel.Error)
     node = (
         iox2.NodeBuilder.new()

@@ -1,7 +1,8 @@
 """The live view as a person uses it, against a real herbd and herb-loopback: the web viewer is
 opened in headless Chromium (Debian's package) while a job runs, and its screenshot must show
-the packed objects in the 3D panel; a recording (``--save``) of a job is read back and must
-hold every placed object.
+the packed objects in the 3D panel; a recording (``--save``) of a job, live or made afterwards
+from herbd's run log (``herbctl replay --events``), is read back and must hold every placed
+object.
 
 Needs ``rerun-sdk`` (the test command installs it) and, for the browser test, ``chromium``
 (``.ci/run`` installs it): without them the tests are skipped, except under ``CI=true``, where
@@ -47,11 +48,11 @@ def cell(tmp_path_factory):
     prefix = f"pyview{os.getpid()}"
     logs = tmp_path_factory.mktemp("view")
     procs = []
-    for exe in ("herb-loopback", "herbd"):
+    for exe, extra in (("herb-loopback", []), ("herbd", ["--record", str(logs / "runs")])):
         log = open(logs / f"{exe}.log", "w")
         procs.append(
             subprocess.Popen(
-                [str(BIN / exe), "--prefix", prefix],
+                [str(BIN / exe), "--prefix", prefix, *extra],
                 cwd=REPO,
                 stdout=subprocess.DEVNULL,
                 stderr=log,
@@ -154,3 +155,40 @@ def test_the_live_view_in_a_browser_shows_the_packed_objects(cell, tmp_path):
     finally:
         v.terminate()
         v.wait(timeout=15)
+
+
+def test_a_finished_job_is_recorded_from_herbds_run_log(cell, tmp_path):
+    if not CI:
+        pytest.importorskip("rerun")
+    from rerun.chunk import RrdReader
+
+    herb, prefix, logs = cell
+    pack(herb, ["004", "002"])
+    time.sleep(1.0)  # the run log's writer flushes every 100 ms
+    log = sorted((logs / "runs").glob("RUN-*.log"))[0]
+    events = tmp_path / "job.jsonl"
+    # herbd still writes the segment: its replay may end "incomplete" (exit 3) at the tail.
+    r = subprocess.run(
+        [str(BIN / "herbctl"), "--prefix", prefix, "replay", str(log), "--events", str(events)],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode in (0, 3), r.stdout + r.stderr
+    placed = [
+        line for line in events.read_text().splitlines() if '"event":%d,' % StatusEvent.Placed in line
+    ]
+    assert len(placed) >= 2, r.stdout
+    rrd = tmp_path / "job.rrd"
+    env = dict(os.environ, HERB_BIN_DIR=str(BIN))
+    v = subprocess.run(
+        [sys.executable, "-m", "herb_client.view", "--events", str(events), "--save", str(rrd)],
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+    assert v.returncode == 0, v.stderr
+    paths = {chunk.entity_path for chunk in RrdReader(str(rrd)).stream()}
+    objects = {p for p in paths if p.startswith("/cell/objects/") and p.count("/") == 3}
+    assert len(objects) >= 2 and "/cell/pile" in paths, sorted(paths)
