@@ -21,8 +21,11 @@ use herb_core::observation::placement_to_action;
 use herb_core::{SharedCatalog, TypeIdx};
 use herb_decide::policy::{DecisionInput, Policy};
 use herb_decide::{DecideError, Decider, HeightmapView};
-use herb_ipc::bus::{Bus, Sub};
-use herb_ipc::{Fault, HeightmapFrame, Services};
+use herb_ipc::bus::{Bus, Pub, Sub};
+use herb_ipc::{
+    CandidateReport, DecisionReport, Fault, Header, HeightmapFrame, MAX_REPORTED_CANDIDATES,
+    Services,
+};
 use herb_sim::WorldConfig;
 use herb_sim::search::{Budget, Search, SearchReport, SearchSettings};
 use iceoryx2::prelude::ipc;
@@ -216,6 +219,43 @@ impl DecisionCore {
         }
     }
 
+    /// What `d`, this core's last decision, was, for viewers: the method, and a search's
+    /// candidates with their rollouts' returns.
+    pub fn report(&self, d: &DecisionResponse) -> DecisionReport {
+        let mut r = DecisionReport {
+            header: Header::now(0),
+            job_id: d.job_id,
+            object_index: d.index,
+            object_type: d.object as u32,
+            method: 0,
+            feasible: 0,
+            allowed: 0,
+            count: 0,
+            pose: d.outcome.unwrap_or([0.0; 4]),
+            decided: d.outcome.is_ok() as u32,
+            reserved: 0,
+            decision_ns: d.decision_ns,
+            candidates: [CandidateReport::default(); MAX_REPORTED_CANDIDATES],
+        };
+        if let Some(rep) = self.search_report() {
+            r.method = 1;
+            r.feasible = rep.candidates as u32;
+            r.allowed = rep.finished.len() as u32;
+            for (slot, (c, o)) in r.candidates.iter_mut().zip(&rep.finished) {
+                *slot = CandidateReport {
+                    x: o.placement.x,
+                    y: o.placement.y,
+                    yaw: o.placement.theta(),
+                    ret: o.ret,
+                    packed: o.packed as u32,
+                    flags: o.success as u32 | (((rep.chosen == Some(*c)) as u32) << 1),
+                };
+                r.count += 1;
+            }
+        }
+        r
+    }
+
     /// The last search's report (`None` for a policy).
     pub fn search_report(&self) -> Option<&SearchReport> {
         match &self.method {
@@ -280,6 +320,9 @@ impl DecisionLink {
 struct Worker {
     core: DecisionCore,
     hm_sub: Sub<HeightmapFrame>,
+    /// Where each decision's report goes (viewers).
+    report: Pub<DecisionReport>,
+    seq: u64,
     latest: Option<Sample<ipc::Service, HeightmapFrame, ()>>,
     rejected_frames: Arc<AtomicU64>,
     record: Option<FrameLog>,
@@ -329,7 +372,13 @@ impl Worker {
         let Some(frame) = frame else {
             return no_fresh_frame(&r);
         };
-        self.core.decide_guarded(&r, frame, None)
+        let d = self.core.decide_guarded(&r, frame, None);
+        let mut report = self.core.report(&d);
+        self.seq += 1;
+        report.header = Header::now(self.seq);
+        // For viewers only: a full queue or no subscriber loses nothing herbd needs.
+        let _ = self.report.send_copy(report);
+        d
     }
 }
 
@@ -354,9 +403,12 @@ pub fn spawn(
                 let services = Services::new(&cfg.ipc_prefix)?;
                 let bus = Bus::open("herbd-decide", &services)?;
                 let hm_sub = bus.subscriber::<HeightmapFrame>(&services.heightmap())?;
+                let report = bus.publisher::<DecisionReport>(&services.decision())?;
                 Ok(Worker {
                     core: DecisionCore::new(&cfg, catalog)?,
                     hm_sub,
+                    report,
+                    seq: 0,
                     latest: None,
                     rejected_frames,
                     record,

@@ -186,6 +186,27 @@ fn layouts() -> String {
         yaw_rad: "rad, heading of its canonical x axis about z",
         lo: "m, lowest corner of its bounds in the box frame",
         hi: "m, highest corner of its bounds in the box frame");
+    layout!(s, DecisionReport,
+        header: "stamp: the decision's end",
+        job_id: "the job",
+        object_index: "index in the packing order",
+        object_type: "catalog type index",
+        method: "0 a placement policy, 1 the search",
+        feasible: "feasible candidates on the placement lattice (search; 0 for a policy)",
+        allowed: "rollouts the search's budget allowed (finished)",
+        count: "candidates listed",
+        pose: "m, m, m, rad: the placement decided (zeros when none)",
+        decided: "1 when a placement was decided",
+        reserved: "zero",
+        decision_ns: "ns, the decision's latency",
+        candidates: "the candidates rolled out, in the prior's order (the first `count`)");
+    layout!(s, CandidateReport,
+        x: "m, B x of the canonical origin",
+        y: "m, B y",
+        yaw: "rad, about B z",
+        ret: "the rollout's return (the configured reward)",
+        packed: "objects the rollout placed inside, the candidate's included",
+        flags: "bit 0: every object inside; bit 1: the candidate chosen");
     s
 }
 
@@ -276,6 +297,12 @@ fn services() -> String {
             "herbd, clients",
         ),
         (sv.status(), "Status", "herbd", "clients"),
+        (
+            sv.decision(),
+            "DecisionReport",
+            "herbd (decision thread)",
+            "clients (viewers)",
+        ),
         (
             sv.sim_outcome(),
             "SimOutcome",

@@ -175,6 +175,42 @@ class SimOutcome(_Payload):
     ]
 
 
+MAX_REPORTED_CANDIDATES = 64
+
+
+class CandidateReport(ctypes.Structure):
+    _fields_ = [
+        ("x", _f32),
+        ("y", _f32),
+        ("yaw", _f32),
+        ("ret", _f32),
+        ("packed", _u32),
+        ("flags", _u32),
+    ]
+
+    @classmethod
+    def type_name(cls) -> str:
+        return "herb::v1::CandidateReport"
+
+
+class DecisionReport(_Payload):
+    _fields_ = [
+        ("header", Header),
+        ("job_id", _u64),
+        ("object_index", _u32),
+        ("object_type", _u32),
+        ("method", _u32),
+        ("feasible", _u32),
+        ("allowed", _u32),
+        ("count", _u32),
+        ("pose", _f32 * 4),
+        ("decided", _u32),
+        ("reserved", _u32),
+        ("decision_ns", _u64),
+        ("candidates", CandidateReport * MAX_REPORTED_CANDIDATES),
+    ]
+
+
 #: Every payload of the contract, by name.
 PAYLOADS = {
     c.__name__: c
@@ -194,6 +230,8 @@ PAYLOADS = {
         SimReset,
         SimOutcome,
         SimObject,
+        DecisionReport,
+        CandidateReport,
     )
 }
 

@@ -5,8 +5,8 @@
     herbctl replay RUN.log --events job.jsonl             # a finished job, from herbd's run log,
     python -m herb_client.view --events job.jsonl --save job.rrd   # recorded afterwards
 
-It subscribes like any client (one subscriber on each of ``status``, ``heightmap``,
-``joint_state`` and, with the loopback, ``sim/outcome``) and reads nothing else of herbd. What
+It subscribes like any client (one subscriber on each of ``status``, ``decision``,
+``heightmap``, ``joint_state`` and, with the loopback, ``sim/outcome``) and reads nothing else of herbd. What
 it shows, on the timeline ``cell`` (seconds of the cell's monotonic clock):
 
 * ``cell/box``: the box (wireframe) in the box frame B (z up, origin at the inner floor's
@@ -15,6 +15,9 @@ it shows, on the timeline ``cell`` (seconds of the cell's monotonic clock):
 * ``cell/objects/<n>``: each object as its convex hull at its decided pose, labelled with its
   number and name: orange once decided, blue once placed, red when the loopback says it ended
   outside the success volume;
+* ``cell/decision/candidates``: the candidates the search rolled out for the current object
+  (herbd's ``decision`` service): a dot at each candidate's position, coloured from the lowest
+  return (grey) to the highest (green), labelled with its return; the chosen one larger;
 * ``arm/joints/<name>``: the arm's joint positions (rad) over time;
 * ``job/objects_done``, ``job/decision_ms``, ``job/decision_wait_ms``: the job's progress;
   ``loop/max_cycle_us``, ``loop/deadline_misses``: herbd's loop statistics (from its
@@ -47,6 +50,7 @@ import iceoryx2 as iox2
 from .payloads import (
     DOF,
     NO_OBJECT,
+    DecisionReport,
     Fault,
     HeightmapFrame,
     JointState,
@@ -263,6 +267,39 @@ class View:
         if ev in (StatusEvent.JobDone, StatusEvent.JobFailed, StatusEvent.JobCancelled):
             self.ended = True
 
+    def decision(self, d: DecisionReport) -> None:
+        """A search's candidates for the object just decided (a policy has none)."""
+        rr = self.rr
+        self.time(d.header.stamp_ns)
+        cands = d.candidates[: min(d.count, len(d.candidates))]
+        if d.method != 1 or not cands:
+            rr.log("cell/decision", rr.Clear(recursive=True))
+            return
+        rets = np.array([c.ret for c in cands])
+        lo, hi = float(rets.min()), float(rets.max())
+        share = (rets - lo) / (hi - lo) if hi > lo else np.ones_like(rets)
+        grey, green = np.array([150, 150, 150]), np.array([40, 200, 60])
+        colors = [tuple(int(v) for v in grey + f * (green - grey)) for f in share]
+        top = self.box["height"] + 0.02
+        chosen = [bool(c.flags & 2) for c in cands]
+        rr.log(
+            "cell/decision/candidates",
+            rr.Points3D(
+                [[c.x, c.y, top] for c in cands],
+                radii=[0.008 if ch else 0.004 for ch in chosen],
+                colors=colors,
+                labels=[f"{c.ret:+.2f}" + (" chosen" if ch else "") for c, ch in zip(cands, chosen)],
+            ),
+        )
+        rr.log(
+            "job/events",
+            rr.TextLog(
+                f"object {d.object_index + 1}: the search rolled out {d.allowed} of "
+                f"{d.feasible} candidates in {d.decision_ns / 1e6:.0f} ms",
+                level="DEBUG",
+            ),
+        )
+
     def joints(self, js: JointState) -> None:
         t = js.header.stamp_ns * 1e-9
         if t - self.last_joints_s < JOINT_PERIOD_S:
@@ -382,6 +419,7 @@ def main(argv=None) -> int:
     )
     subs = {
         "status": (subscribe(node, a.prefix, "status", Status, a.timeout), Status),
+        "decision": (subscribe(node, a.prefix, "decision", DecisionReport, a.timeout), DecisionReport),
         "heightmap": (subscribe(node, a.prefix, "heightmap", HeightmapFrame, a.timeout), HeightmapFrame),
         "joint_state": (subscribe(node, a.prefix, "joint_state", JointState, a.timeout), JointState),
     }
@@ -398,6 +436,7 @@ def main(argv=None) -> int:
     t0 = time.monotonic()
     handlers = {
         "status": view.status,
+        "decision": view.decision,
         "heightmap": view.heightmap,
         "joint_state": view.joints,
         "sim/outcome": view.outcome,

@@ -47,8 +47,12 @@ def cell(tmp_path_factory):
             pytest.fail(f"{BIN / exe} is missing: build the workspace first (cargo test --workspace)")
     prefix = f"pyview{os.getpid()}"
     logs = tmp_path_factory.mktemp("view")
+    # herbd decides by searching (a short budget): the view shows the search's candidates.
+    cfg = logs / "herbd.toml"
+    cfg.write_text('[decision]\nmethod = "search"\nbudget_s = 0.2\nk = 4\n')
     procs = []
-    for exe, extra in (("herb-loopback", []), ("herbd", ["--record", str(logs / "runs")])):
+    herbd = ["--record", str(logs / "runs"), "--config", str(cfg)]
+    for exe, extra in (("herb-loopback", []), ("herbd", herbd)):
         log = open(logs / f"{exe}.log", "w")
         procs.append(
             subprocess.Popen(
@@ -106,7 +110,14 @@ def test_a_recording_holds_every_placed_object(cell, tmp_path):
     for n in (1, 2, 3):
         assert f"/cell/objects/{n}" in paths, sorted(paths)
         assert f"/cell/objects/{n}/label" in paths
-    for p in ("/cell/box", "/cell/pile", "/job/events", "/arm/joints/s0", "/loop/max_cycle_us"):
+    for p in (
+        "/cell/box",
+        "/cell/pile",
+        "/cell/decision/candidates",
+        "/job/events",
+        "/arm/joints/s0",
+        "/loop/max_cycle_us",
+    ):
         assert p in paths, sorted(paths)
     assert "/cell/objects/4" not in paths
 
