@@ -149,3 +149,22 @@ fn a_job_with_no_object_left_has_no_placement() {
     let d = core.decide(&req, &frame(0.0), None);
     assert_eq!(d.outcome, Err(Fault::NoFeasiblePlacement));
 }
+
+#[test]
+fn a_job_whose_rest_cannot_fit_the_twin_still_gets_a_feasible_placement() {
+    // Twenty cracker boxes (about 1.3 l each) after the first: the box holds a few. The
+    // rollouts end in failures, the search still ranks them and places the first object.
+    let c = catalog();
+    let mut core = DecisionCore::new(&config(DecisionMethod::Search, 5.0), c.clone()).unwrap();
+    let cracker = c.by_id("003").unwrap().0;
+    let job = vec![cracker; 21];
+    let d = core.decide(&request(&job), &frame(0.0), Some(3));
+    assert_eq!(d.allowed, 3);
+    let pose = d.outcome.expect("a placement");
+    assert!(pose.iter().all(|v| v.is_finite()));
+    let report = core.search_report().unwrap();
+    assert!(
+        report.finished.iter().all(|(_, o)| !o.success),
+        "no rollout fits them all"
+    );
+}
