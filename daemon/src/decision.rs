@@ -47,8 +47,6 @@ const RING: usize = 4;
 const FRAME_WAIT: Duration = Duration::from_millis(500);
 /// How often a waiting decision looks for a new frame.
 const FRAME_POLL: Duration = Duration::from_millis(1);
-/// Longest sleep with no request (the loop wakes the thread when it sends one).
-const IDLE_PARK: Duration = Duration::from_millis(20);
 
 /// The search as a placement policy of the [`Decider`]: the candidate it chooses becomes the
 /// action, and the `Decider` checks it and estimates its z as for any policy.
@@ -392,66 +390,43 @@ pub fn spawn(
 ) -> Result<(DecisionLink, JoinHandle<()>), PlannerError> {
     let (tx, req_rx) = rtrb::RingBuffer::<DecisionRequest>::new(RING);
     let (resp_tx, rx) = rtrb::RingBuffer::<DecisionResponse>::new(RING);
-    let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), PlannerError>>();
     let cfg = cfg.clone();
     let shared_rejects = Arc::new(AtomicU64::new(0));
     let rejected_frames = shared_rejects.clone();
-    let handle = std::thread::Builder::new()
-        .name("herbd-decide".into())
-        .spawn(move || {
-            let setup = (|| -> Result<Worker, PlannerError> {
-                let services = Services::new(&cfg.ipc_prefix)?;
-                let bus = Bus::open("herbd-decide", &services)?;
-                let hm_sub = bus.subscriber::<HeightmapFrame>(&services.heightmap())?;
-                let report = bus.publisher::<DecisionReport>(&services.decision())?;
-                Ok(Worker {
-                    core: DecisionCore::new(&cfg, catalog)?,
-                    hm_sub,
-                    report,
-                    seq: 0,
-                    latest: None,
-                    rejected_frames,
-                    record,
-                    handled: 0,
-                    _bus: bus,
-                })
-            })();
-            let (mut w, mut req_rx, mut resp_tx) = match setup {
-                Ok(w) => {
-                    let _ = ready_tx.send(Ok(()));
-                    (w, req_rx, resp_tx)
-                }
-                Err(e) => {
-                    let _ = ready_tx.send(Err(e));
-                    return;
-                }
-            };
-            while !stop.load(Ordering::Relaxed) {
-                while let Ok(r) = req_rx.pop() {
-                    let resp = w.handle(r);
-                    if resp_tx.push(resp).is_err() {
-                        // The loop reads every cycle and has at most one decision out.
-                        crate::logfmt::log("bug", &[("what", &"decision response ring full")]);
-                    }
-                }
-                // Frames are checked as they come, not only when one is decided on.
-                w.drain_frames();
-                std::thread::park_timeout(IDLE_PARK);
-            }
+    let setup = move || -> Result<Worker, PlannerError> {
+        let services = Services::new(&cfg.ipc_prefix)?;
+        let bus = Bus::open("herbd-decide", &services)?;
+        let hm_sub = bus.subscriber::<HeightmapFrame>(&services.heightmap())?;
+        let report = bus.publisher::<DecisionReport>(&services.decision())?;
+        Ok(Worker {
+            core: DecisionCore::new(&cfg, catalog)?,
+            hm_sub,
+            report,
+            seq: 0,
+            latest: None,
+            rejected_frames,
+            record,
+            handled: 0,
+            _bus: bus,
         })
-        .map_err(PlannerError::Thread)?;
+    };
+    let handle = crate::planner::spawn_server(
+        "herbd-decide",
+        setup,
+        stop,
+        (req_rx, resp_tx),
+        |w, r| w.handle(r),
+        // Frames are checked as they come, not only when one is decided on.
+        |w| w.drain_frames(),
+    )?;
     let thread = handle.thread().clone();
-    match ready_rx.recv() {
-        Ok(Ok(())) => Ok((
-            DecisionLink {
-                tx,
-                rx,
-                thread,
-                rejected_frames: shared_rejects,
-            },
-            handle,
-        )),
-        Ok(Err(e)) => Err(e),
-        Err(_) => Err(PlannerError::Died),
-    }
+    Ok((
+        DecisionLink {
+            tx,
+            rx,
+            thread,
+            rejected_frames: shared_rejects,
+        },
+        handle,
+    ))
 }

@@ -295,16 +295,45 @@ pub fn spawn(
 ) -> Result<(PlannerLink, JoinHandle<()>), PlannerError> {
     let (tx, req_rx) = rtrb::RingBuffer::<Request>::new(RING);
     let (resp_tx, rx) = rtrb::RingBuffer::<Response>::new(RING);
-    let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), PlannerError>>();
     let cfg = cfg.clone();
+    let handle = spawn_server(
+        "herbd-planner",
+        move || PlannerCore::new(&cfg, catalog),
+        stop,
+        (req_rx, resp_tx),
+        |core, r| core.handle(r),
+        |_| {},
+    )?;
+    let thread = handle.thread().clone();
+    Ok((PlannerLink { tx, rx, thread }, handle))
+}
+
+/// Starts a thread called `name` that builds its state with `setup` (its error comes back
+/// here, before the daemon reports ready), then, until `stop`, answers each request of the
+/// ring with `serve`, and between rounds runs `idle` and sleeps until woken (or
+/// [`IDLE_PARK`]). herbd's planner and decision threads.
+pub(crate) fn spawn_server<W, Q, A>(
+    name: &str,
+    setup: impl FnOnce() -> Result<W, PlannerError> + Send + 'static,
+    stop: Arc<AtomicBool>,
+    (mut requests, mut answers): (rtrb::Consumer<Q>, rtrb::Producer<A>),
+    mut serve: impl FnMut(&mut W, Q) -> A + Send + 'static,
+    mut idle: impl FnMut(&mut W) + Send + 'static,
+) -> Result<JoinHandle<()>, PlannerError>
+where
+    W: 'static,
+    Q: Send + 'static,
+    A: Send + 'static,
+{
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), PlannerError>>();
+    let what = name.to_owned();
     let handle = std::thread::Builder::new()
-        .name("herbd-planner".into())
+        .name(name.into())
         .spawn(move || {
-            let setup = PlannerCore::new(&cfg, catalog.clone());
-            let (mut w, mut req_rx, mut resp_tx) = match setup {
+            let mut w = match setup() {
                 Ok(w) => {
                     let _ = ready_tx.send(Ok(()));
-                    (w, req_rx, resp_tx)
+                    w
                 }
                 Err(e) => {
                     let _ = ready_tx.send(Err(e));
@@ -312,20 +341,23 @@ pub fn spawn(
                 }
             };
             while !stop.load(Ordering::Relaxed) {
-                while let Ok(r) = req_rx.pop() {
-                    let resp = w.handle(r);
-                    if resp_tx.push(resp).is_err() {
-                        // The loop reads every cycle and has at most two requests out.
-                        crate::logfmt::log("bug", &[("what", &"planner response ring full")]);
+                while let Ok(r) = requests.pop() {
+                    let a = serve(&mut w, r);
+                    if answers.push(a).is_err() {
+                        // The loop reads every cycle and has few requests out.
+                        crate::logfmt::log(
+                            "bug",
+                            &[("what", &"response ring full"), ("thread", &what)],
+                        );
                     }
                 }
+                idle(&mut w);
                 std::thread::park_timeout(IDLE_PARK);
             }
         })
         .map_err(PlannerError::Thread)?;
-    let thread = handle.thread().clone();
     match ready_rx.recv() {
-        Ok(Ok(())) => Ok((PlannerLink { tx, rx, thread }, handle)),
+        Ok(Ok(())) => Ok(handle),
         Ok(Err(e)) => Err(e),
         Err(_) => Err(PlannerError::Died),
     }
