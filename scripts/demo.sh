@@ -5,6 +5,8 @@
 # processes (SIGTERM: herbd brakes, reports and exits 0). Everything it writes goes into a run
 # folder (DEMO_OUT, default runs/demo-<time>), never over committed files. DEMO_BIN names a
 # folder of binaries already built (the tests run this script so, with cargo test's) instead.
+# DEMO_DECISION=search makes herbd decide by searching ([decision] method = "search", its 1 s
+# budget) instead of its default policy.
 # DEMO_VIEW=web also serves the live 3D view (python -m herb_client.view) on localhost:9090 and
 # opens it in a browser; DEMO_VIEW=save records it into the run folder (job.rrd) instead. The
 # view needs the Python client with Rerun: the test command's virtualenv (.venv, or HERB_VENV),
@@ -23,7 +25,16 @@ mkdir -p "$OUT"
 P=demo$$
 "$BIN/herb-loopback" --prefix "$P" > "$OUT/demo-loopback.json" 2> "$OUT/demo-loopback.log" &
 LB=$!
-"$BIN/herbd" --prefix "$P" > "$OUT/demo-herbd.json" 2> "$OUT/demo-herbd.log" &
+HERBD_ARGS=()
+case "${DEMO_DECISION:-}" in
+  "" | policy) ;;
+  search)
+    printf '[decision]\nmethod = "search"\n' > "$OUT/herbd.toml"
+    HERBD_ARGS=(--config "$OUT/herbd.toml")
+    ;;
+  *) echo "DEMO_DECISION=$DEMO_DECISION: expected policy or search" >&2; exit 2 ;;
+esac
+"$BIN/herbd" --prefix "$P" "${HERBD_ARGS[@]}" > "$OUT/demo-herbd.json" 2> "$OUT/demo-herbd.log" &
 HD=$!
 VIEW=
 if [ -n "${DEMO_VIEW:-}" ]; then
