@@ -273,14 +273,10 @@ impl Effects for Outbox<'_> {
         if s.event == StatusEvent::Decided as u32 && s.decision_ns > 0 {
             self.decision_ns.saturating_record(s.decision_ns);
         }
-        if [
-            StatusEvent::JobDone,
-            StatusEvent::JobFailed,
-            StatusEvent::JobCancelled,
-        ]
-        .iter()
-        .any(|e| *e as u32 == s.event)
-        {
+        if matches!(
+            StatusEvent::from_code(s.event),
+            Some(StatusEvent::JobDone | StatusEvent::JobFailed | StatusEvent::JobCancelled)
+        ) {
             *self.jobs += 1;
             *self.decision_wait_ms += s.decision_wait_ms as u64;
         }

@@ -585,6 +585,7 @@ pub fn summarize(method: &str, results: &[EpisodeOutcome]) -> Summary {
     let n = ok.len().max(1) as f64;
     let placements: usize = ok.iter().map(|r| r.placements).sum();
     let stable: usize = ok.iter().map(|r| r.stable).sum();
+    let lat = latency(&ok);
     Summary {
         method: method.to_owned(),
         episodes: ok.len(),
@@ -598,8 +599,8 @@ pub fn summarize(method: &str, results: &[EpisodeOutcome]) -> Summary {
         ),
         stability_pct: 100.0 * stable as f64 / placements.max(1) as f64,
         failures: count_failures(&ok),
-        latency_ms: latency(&ok).map(|(m, sd, q)| (m, sd, q[2])),
-        latency_quantiles_ms: latency(&ok).map(|(_, _, q)| q),
+        latency_ms: lat.map(|(m, sd, q)| (m, sd, q[2])),
+        latency_quantiles_ms: lat.map(|(_, _, q)| q),
     }
 }
 
