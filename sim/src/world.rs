@@ -712,6 +712,16 @@ impl PackingWorld {
         out
     }
 
+    /// Makes every object placed so far fixed: later objects land on them and settle against
+    /// them but cannot move them. A diagnostic of the search's twin: a clone frozen so has the
+    /// twin's rigid pile with the objects' exact shapes (`examples/twin_fidelity.rs` in
+    /// herb-methods).
+    pub fn freeze_placed(&mut self) {
+        for p in &self.placed {
+            self.phys.bodies[p.body].set_body_type(RigidBodyType::Fixed, false);
+        }
+    }
+
     /// The collider set and body set, for queries in tests and tools (ray casting).
     pub fn physics(&self) -> &PhysicsWorld {
         &self.phys

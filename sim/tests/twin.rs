@@ -130,3 +130,31 @@ fn the_search_is_anytime_and_never_worse_than_its_prior_on_its_own_rollouts() {
     );
     assert!(late.report().finished.is_empty());
 }
+
+#[test]
+fn a_frozen_world_keeps_its_objects_where_they_are_when_another_settles_among_them() {
+    let c = common::primitives();
+    let mut w = exact(&c);
+    w.freeze_placed();
+    let poses = |w: &PackingWorld| -> Vec<_> {
+        w.placed()
+            .iter()
+            .map(|p| *w.physics().bodies[p.body].position())
+            .collect()
+    };
+    let before = poses(&w);
+    // The next object released where BLBF puts it settles; the frozen objects do not move.
+    let ty = c.by_id("006").unwrap();
+    let mut lattice = Lattice::new(&c);
+    lattice.compute(w.heightmap(), &c, ty);
+    let p = lattice.blbf().expect("a feasible placement");
+    let o = w.place(ty, p.x, p.y, p.theta()).unwrap();
+    assert!(o.settled, "the new object settles");
+    let after = poses(&w);
+    assert_eq!(
+        before[..],
+        after[..before.len()],
+        "the frozen objects did not move"
+    );
+    assert!(w.physics().bodies[w.placed()[before.len()].body].is_dynamic());
+}
