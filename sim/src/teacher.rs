@@ -45,6 +45,20 @@ pub struct CandidateOutcome {
     pub sum_s: f32,
     /// The rollout ended with a failure (an object outside, or no feasible placement).
     pub failed: bool,
+    /// Where and why it failed, when it did.
+    pub failure: Option<RolloutFailure>,
+}
+
+/// Where and why a rollout failed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RolloutFailure {
+    /// The step of the rollout (0: the candidate, 1: the next object...).
+    pub step: usize,
+    /// The bound crossed by the object found outside (e.g. `"+x wall"`), `None` when the
+    /// lattice held no feasible placement.
+    pub bound: Option<&'static str>,
+    /// The object found outside was in the world before the rollout (pushed out).
+    pub by_earlier: bool,
 }
 
 /// The lookahead teacher (see the module docs). Holds its lattices and outcome buffer.
@@ -168,7 +182,9 @@ pub fn rollout_until(
         sum_c: 0.0,
         sum_s: 0.0,
         failed: false,
+        failure: None,
     };
+    let earlier = w.placed().len();
     for (i, &ty) in remaining.iter().enumerate() {
         if deadline.is_some_and(|d| std::time::Instant::now() >= d) {
             return Ok(None);
@@ -182,6 +198,11 @@ pub fn rollout_until(
                 None => {
                     out.ret -= 1.0;
                     out.failed = true;
+                    out.failure = Some(RolloutFailure {
+                        step: i,
+                        bound: None,
+                        by_earlier: false,
+                    });
                     return Ok(Some(out));
                 }
             }
@@ -194,6 +215,11 @@ pub fn rollout_until(
         out.ret += r;
         if !o.inside {
             out.failed = true;
+            out.failure = Some(RolloutFailure {
+                step: i,
+                bound: o.violation.map(|v| v.0),
+                by_earlier: o.first_outside.is_some_and(|j| j < earlier),
+            });
             return Ok(Some(out));
         }
         out.sum_c += o.compactness;

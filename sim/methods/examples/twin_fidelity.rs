@@ -93,43 +93,21 @@ impl Tally {
     }
 }
 
-/// Why a rollout in `world` from `first` failed: the step ("candidate", "next", "later") and
-/// the reason (no feasible placement, or the bound crossed and whether by an object of the
-/// pile); `None` when it succeeds.
-fn failure(
-    lattice: &mut Lattice,
-    world: &PackingWorld,
-    remaining: &[TypeIdx],
-    first: Placement,
-) -> Result<Option<String>, Error> {
-    let mut w = world.clone();
-    let pile = w.placed().len();
-    for (i, &ty) in remaining.iter().enumerate() {
-        let step = match i {
-            0 => "candidate",
-            1 => "next",
-            _ => "later",
-        };
-        let p = if i == 0 {
-            first
-        } else {
-            lattice.compute(w.heightmap(), w.catalog(), ty);
-            match lattice.blbf() {
-                Some(p) => p,
-                None => return Ok(Some(format!("{step}: no feasible placement"))),
-            }
-        };
-        let o = w.place(ty, p.x, p.y, p.theta())?;
-        if !o.inside {
-            let bound = o.violation.map_or("?", |v| v.0);
-            let who = match o.first_outside {
-                Some(j) if j < pile => ", an object of the pile",
-                _ => "",
-            };
-            return Ok(Some(format!("{step}: {bound}{who}")));
-        }
+/// Where and why a rollout failed, in words.
+fn failure(o: &CandidateOutcome) -> String {
+    let Some(f) = o.failure else {
+        return "no failure".into();
+    };
+    let step = match f.step {
+        0 => "candidate",
+        1 => "next",
+        _ => "later",
+    };
+    match f.bound {
+        None => format!("{step}: no feasible placement"),
+        Some(b) if f.by_earlier => format!("{step}: {b}, an object of the pile"),
+        Some(b) => format!("{step}: {b}"),
     }
-    Ok(None)
 }
 
 /// The index of the greatest key, ties to the first.
@@ -186,14 +164,12 @@ fn probe(
                 .ok_or("a rollout without a deadline finished")?;
             t.rollouts[w.success as usize][e.success as usize] += 1;
             if w.success != e.success {
-                let (world, side) = if w.success {
-                    (env.world(), "the exact clone fails, the twin does not")
+                let why = if w.success {
+                    format!("the exact clone fails, the twin does not: {}", failure(&e))
                 } else {
-                    (&twin, "the twin fails, the exact clone does not")
+                    format!("the twin fails, the exact clone does not: {}", failure(&w))
                 };
-                if let Some(why) = failure(&mut roll, world, &remaining, c)? {
-                    *t.reasons.entry(format!("{side}: {why}")).or_default() += 1;
-                }
+                *t.reasons.entry(why).or_default() += 1;
             }
             exact.push(e);
             twins.push(w);
