@@ -43,10 +43,16 @@ pub struct CandidateOutcome {
     pub sum_c: f32,
     /// Sum of S (0 or 1) over the rollout's placements that ended inside.
     pub sum_s: f32,
-    /// The rollout ended with a failure (an object outside, or no feasible placement).
-    pub failed: bool,
-    /// Where and why it failed, when it did.
+    /// Where and why the rollout failed (an object outside, or no feasible placement), when
+    /// it did.
     pub failure: Option<RolloutFailure>,
+}
+
+impl CandidateOutcome {
+    /// The rollout ended with a failure (an object outside, or no feasible placement).
+    pub fn failed(&self) -> bool {
+        self.failure.is_some()
+    }
 }
 
 /// Where and why a rollout failed.
@@ -181,7 +187,6 @@ pub fn rollout_until(
         success: false,
         sum_c: 0.0,
         sum_s: 0.0,
-        failed: false,
         failure: None,
     };
     let earlier = w.placed().len();
@@ -197,7 +202,6 @@ pub fn rollout_until(
                 Some(p) => p,
                 None => {
                     out.ret -= 1.0;
-                    out.failed = true;
                     out.failure = Some(RolloutFailure {
                         step: i,
                         bound: None,
@@ -214,7 +218,6 @@ pub fn rollout_until(
         }
         out.ret += r;
         if !o.inside {
-            out.failed = true;
             out.failure = Some(RolloutFailure {
                 step: i,
                 bound: o.violation.map(|v| v.0),

@@ -142,6 +142,12 @@ fn a_frozen_world_keeps_its_objects_where_they_are_when_another_settles_among_th
             .map(|p| *w.physics().bodies[p.body].position())
             .collect()
     };
+    assert!(
+        w.placed()
+            .iter()
+            .all(|p| w.physics().bodies[p.body].is_fixed()),
+        "every object placed before is fixed"
+    );
     let before = poses(&w);
     // The next object released where BLBF puts it settles; the frozen objects do not move.
     let ty = c.by_id("006").unwrap();

@@ -9,10 +9,10 @@
 //!
 //! The episodes are `training/validate.py`'s (the bindings' sampler: 10 to 25 random catalog
 //! objects in HERB's order, one generator per episode seeded from `SEED`, default 777). Each is
-//! packed by the search in the twin (k = 8 candidates in lattice BLBF's order, each rolled out
-//! to the job's end, the best return chosen). At every decision each candidate is also rolled
-//! out in a clone of the episode's world (the exact clone), and placed once in both, so that the
-//! two can be compared on the same state:
+//! packed by the search (`herb_sim::search`: k = 8 candidates in lattice BLBF's order, each
+//! rolled out to the job's end in the twin, the best return chosen). At every decision the same
+//! search also runs in a clone of the episode's world (the exact clone), and each candidate is
+//! placed once in both, so that the two can be compared on the same state:
 //!
 //! - the first placement: how often both call it stable, the mean difference of its tilt;
 //! - the rollouts: how often both predict the same success, and where one fails and the other
@@ -29,7 +29,8 @@ use herb_sim::catalog::{Catalog, SharedCatalog, TypeIdx};
 use herb_sim::env::{PackingEnv, RewardMode};
 use herb_sim::lattice::{Lattice, Placement};
 use herb_sim::paths;
-use herb_sim::teacher::{CandidateOutcome, rollout_until};
+use herb_sim::search::{Budget, Search, SearchSettings, TwinKind};
+use herb_sim::teacher::CandidateOutcome;
 use herb_sim::world::{PackingWorld, WorldConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -131,7 +132,22 @@ fn probe(
     let cfg = WorldConfig::default();
     let mut env = PackingEnv::new(catalog.clone(), cfg.clone(), REWARD)?;
     env.reset(episode, 0)?;
-    let (mut lattice, mut roll) = (Lattice::new(catalog), Lattice::new(catalog));
+    let mut lattice = Lattice::new(catalog);
+    let settings = |twin| SearchSettings {
+        k: K,
+        budget: Budget::Rollouts(K),
+        horizon: None,
+        reward: REWARD,
+        twin,
+    };
+    let kind = if frozen {
+        TwinKind::ExactClone
+    } else {
+        TwinKind::Heightmap
+    };
+    let mut search_twin = Search::new(catalog.clone(), cfg.clone(), settings(kind));
+    let mut search_exact =
+        Search::new(catalog.clone(), cfg.clone(), settings(TwinKind::ExactClone));
     let mut success = false;
     while let Some(&next) = env.remaining().first() {
         let remaining = env.remaining().to_vec();
@@ -140,15 +156,16 @@ fn probe(
         if cands.is_empty() {
             break;
         }
-        let twin = if frozen {
+        // The twin the search rolls out in, or the frozen clone standing for it.
+        let frozen_world = frozen.then(|| {
             let mut w = env.world().clone();
             w.freeze_placed();
             w
-        } else {
-            PackingWorld::twin(catalog.clone(), cfg.clone(), env.world().heightmap())?
+        });
+        let twin = match &frozen_world {
+            Some(w) => w.clone(),
+            None => PackingWorld::twin(catalog.clone(), cfg.clone(), env.world().heightmap())?,
         };
-        let mut exact: Vec<CandidateOutcome> = Vec::with_capacity(K);
-        let mut twins: Vec<CandidateOutcome> = Vec::with_capacity(K);
         for &c in &cands {
             let (mut a, mut b) = (env.world().clone(), twin.clone());
             let (oa, ob) = (
@@ -158,24 +175,31 @@ fn probe(
             t.firsts += 1;
             t.stable_alike += (oa.stable == ob.stable) as usize;
             t.tilt_diff += (oa.tilt_rad - ob.tilt_rad).abs() as f64;
-            let e = rollout_until(&mut roll, REWARD, env.world(), &remaining, c, None)?
-                .ok_or("a rollout without a deadline finished")?;
-            let w = rollout_until(&mut roll, REWARD, &twin, &remaining, c, None)?
-                .ok_or("a rollout without a deadline finished")?;
+        }
+        // The search itself, in the twin (or the frozen clone) and in the exact clone: every
+        // candidate's rollout and the choice are its own.
+        let heightmap = env.world().heightmap();
+        let p = search_twin
+            .decide(heightmap, &remaining, frozen_world.as_ref())?
+            .ok_or("the lattice's candidates went missing")?;
+        search_exact.decide(heightmap, &remaining, Some(env.world()))?;
+        let outcomes = |s: &Search| -> Vec<CandidateOutcome> {
+            s.report().finished.iter().map(|(_, o)| *o).collect()
+        };
+        let (twins, exact) = (outcomes(&search_twin), outcomes(&search_exact));
+        for (w, e) in twins.iter().zip(&exact) {
             t.rollouts[w.success as usize][e.success as usize] += 1;
             if w.success != e.success {
                 let why = if w.success {
-                    format!("the exact clone fails, the twin does not: {}", failure(&e))
+                    format!("the exact clone fails, the twin does not: {}", failure(e))
                 } else {
-                    format!("the twin fails, the exact clone does not: {}", failure(&w))
+                    format!("the twin fails, the exact clone does not: {}", failure(w))
                 };
                 *t.reasons.entry(why).or_default() += 1;
             }
-            exact.push(e);
-            twins.push(w);
         }
-        let exact_best = best(exact.iter().map(|o| o.ret));
-        let chosen = best(twins.iter().map(|o| o.ret));
+        let chosen = search_twin.report().chosen.ok_or("the search chose")?;
+        let exact_best = search_exact.report().chosen.ok_or("the search chose")?;
         let success_first = best(
             twins
                 .iter()
@@ -188,7 +212,6 @@ fn probe(
         t.exact_best_ok += exact[exact_best].success as usize;
         t.twin_choice_ok += exact[chosen].success as usize;
         t.success_first_ok += exact[success_first].success as usize;
-        let p = cands[chosen];
         let r = env.step_placement(p.x, p.y, p.theta())?;
         if r.terminated {
             success = r.info.success;

@@ -555,7 +555,7 @@ impl VecEnv {
                             parts[3 * j..3 * j + 3].copy_from_slice(&[
                                 o.sum_c,
                                 o.sum_s,
-                                o.failed as u8 as f32,
+                                o.failed() as u8 as f32,
                             ]);
                         }
                         let choice = chosen
