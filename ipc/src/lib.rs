@@ -338,6 +338,29 @@ macro_rules! wire_enum {
             let _ = next;
         };
     };
+    // Each variant with a few words for an operator: `describe()` returns them.
+    (
+        $(#[$meta:meta])*
+        pub enum $name:ident ($what:literal) {
+            $($(#[$vmeta:meta])* $variant:ident = $code:literal => $words:literal,)+
+        }
+    ) => {
+        wire_enum! {
+            $(#[$meta])*
+            pub enum $name ($what) {
+                $($(#[$vmeta])* $variant = $code,)+
+            }
+        }
+
+        impl $name {
+            /// What it means, in a few words for an operator.
+            pub fn describe(self) -> &'static str {
+                match self {
+                    $(Self::$variant => $words,)+
+                }
+            }
+        }
+    };
 }
 
 wire_enum! {
@@ -349,8 +372,6 @@ wire_enum! {
         Close = 1,
     }
 }
-
-impl GripperAction {}
 
 /// A gripper command from `herbd`, published when it changes and repeated every 100 ms.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
@@ -578,81 +599,50 @@ wire_enum! {
     /// Why the daemon stopped or failed.
     pub enum Fault ("fault") {
         /// None.
-        None = 0,
+        None = 0 => "none",
         /// Joint states stopped arriving.
-        JointStateTimeout = 1,
+        JointStateTimeout = 1 => "adapter silent: no joint state from the arm adapter",
         /// Gripper states stopped arriving.
-        GripperStateTimeout = 2,
+        GripperStateTimeout = 2 => "no gripper state from the arm adapter",
         /// Heightmaps stopped arriving.
-        HeightmapTimeout = 3,
+        HeightmapTimeout = 3 => "no heightmap from the camera",
         /// The gripper did not reach the commanded state in time.
-        Gripper = 4,
+        Gripper = 4 => "the gripper did not reach its commanded state in time",
         /// A waypoint was out of reach (inverse kinematics).
-        Unreachable = 5,
+        Unreachable = 5 => "a waypoint is out of the arm's reach",
         /// The placement decision failed (policy, bad heightmap).
-        Decision = 6,
+        Decision = 6 => "the placement decision failed",
         /// Trajectory generation failed.
-        Motion = 7,
+        Motion = 7 => "trajectory generation failed",
         /// A stop was requested (SIGINT/SIGTERM).
-        Stop = 8,
+        Stop = 8 => "herbd is stopping",
         /// The object was lost from the gripper (e.g. the adapter restarted); it is picked again.
-        ObjectLost = 9,
+        ObjectLost = 9 => "the object was lost from the gripper",
         /// The placement lattice held no feasible placement for the next object (the box is
         /// full for it): the job ends, failed, with this reason.
-        NoFeasiblePlacement = 10,
+        NoFeasiblePlacement = 10 => "no feasible placement for the next object",
         /// herbd restarted (crashed or was killed) with this job unfinished and found it in its
         /// job journal: the job resumes from the measured robot state, or is abandoned when
         /// configured so (`journal.on_restart = "abandon"`).
-        Restarted = 11,
+        Restarted = 11 => "herbd restarted with this job unfinished",
         /// Joint states stopped: the adapter says the robot is disabled.
-        RobotDisabled = 12,
+        RobotDisabled = 12 => "robot disabled",
         /// Joint states stopped: the adapter says the robot's emergency stop is pressed.
-        RobotEStop = 13,
+        RobotEStop = 13 => "robot e-stopped",
         /// Joint states stopped: the adapter says the robot reports an error.
-        RobotError = 14,
+        RobotError = 14 => "robot in error",
         /// Joint states stopped: the adapter lost its middleware's master (ROS 1).
-        MasterLost = 15,
+        MasterLost = 15 => "ROS master lost",
         /// Joint states stopped: the adapter says the robot stopped reporting.
-        RobotSilent = 16,
+        RobotSilent = 16 => "robot silent: no state reaches the adapter",
         /// The gripper closed on nothing (or did not grip in time): it is opened, and the pick is
         /// tried again or the object skipped (`[recovery]`).
-        MissedGrasp = 17,
+        MissedGrasp = 17 => "missed grasp",
         /// Joint states stopped: the adapter refused a command too far from the measured position
         /// (its jump guard) and halted the arm; the job resumes from the measured state.
-        CommandRefused = 18,
+        CommandRefused = 18 => "the adapter refused a command far from the arm",
     }
 }
-
-impl Fault {
-    /// What the fault means, in a few words for an operator.
-    pub fn describe(self) -> &'static str {
-        match self {
-            Fault::None => "none",
-            Fault::JointStateTimeout => "adapter silent: no joint state from the arm adapter",
-            Fault::GripperStateTimeout => "no gripper state from the arm adapter",
-            Fault::HeightmapTimeout => "no heightmap from the camera",
-            Fault::Gripper => "the gripper did not reach its commanded state in time",
-            Fault::Unreachable => "a waypoint is out of the arm's reach",
-            Fault::Decision => "the placement decision failed",
-            Fault::Motion => "trajectory generation failed",
-            Fault::Stop => "herbd is stopping",
-            Fault::ObjectLost => "the object was lost from the gripper",
-            Fault::NoFeasiblePlacement => "no feasible placement for the next object",
-            Fault::Restarted => "herbd restarted with this job unfinished",
-            Fault::RobotDisabled => "robot disabled",
-            Fault::RobotEStop => "robot e-stopped",
-            Fault::RobotError => "robot in error",
-            Fault::MasterLost => "ROS master lost",
-            Fault::RobotSilent => "robot silent: no state reaches the adapter",
-            Fault::MissedGrasp => "missed grasp",
-            Fault::CommandRefused => "the adapter refused a command far from the arm",
-        }
-    }
-}
-
-impl JobState {}
-
-impl StatusEvent {}
 
 /// Job progress, per-object results and faults from `herbd`, to any client.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
@@ -766,8 +756,6 @@ wire_enum! {
     }
 }
 
-impl RejectReason {}
-
 impl PackJobRequest {
     /// A request for `objects` (at most [`MAX_JOB_OBJECTS`]; more are cut, and then
     /// [`Self::validate`] rejects the count as `TooMany` only if the caller set it so).
@@ -835,15 +823,20 @@ payload!(PackJobReply);
 impl PackJobReply {
     /// Header, flag and reason code.
     pub fn validate(&self) -> Result<RejectReason, Invalid> {
-        self.header.validate()?;
-        flag("accepted", self.accepted)?;
-        let r = RejectReason::from_code(self.reason)
-            .ok_or(Invalid::new("reason", Reason::UnknownCode))?;
-        if (self.accepted == 1) != (r == RejectReason::None) {
-            return Err(Invalid::new("reason", Reason::OutOfRange));
-        }
-        Ok(r)
+        reply_reason(&self.header, self.accepted, self.reason)
     }
+}
+
+/// A reply's header, `accepted` flag and reason code: the reason is `None` exactly when the
+/// request was accepted.
+fn reply_reason(header: &Header, accepted: u32, reason: u32) -> Result<RejectReason, Invalid> {
+    header.validate()?;
+    flag("accepted", accepted)?;
+    let r = RejectReason::from_code(reason).ok_or(Invalid::new("reason", Reason::UnknownCode))?;
+    if (accepted == 1) != (r == RejectReason::None) {
+        return Err(Invalid::new("reason", Reason::OutOfRange));
+    }
+    Ok(r)
 }
 
 /// A request to empty the simulated box (sim-only service, to the loopback; a real cell's box is
@@ -916,14 +909,7 @@ payload!(CancelJobReply);
 impl CancelJobReply {
     /// Header, flag and reason code.
     pub fn validate(&self) -> Result<RejectReason, Invalid> {
-        self.header.validate()?;
-        flag("accepted", self.accepted)?;
-        let r = RejectReason::from_code(self.reason)
-            .ok_or(Invalid::new("reason", Reason::UnknownCode))?;
-        if (self.accepted == 1) != (r == RejectReason::None) {
-            return Err(Invalid::new("reason", Reason::OutOfRange));
-        }
-        Ok(r)
+        reply_reason(&self.header, self.accepted, self.reason)
     }
 }
 
@@ -952,17 +938,26 @@ pub struct SimOutcome {
     pub compactness: f32,
     /// Release pose of the object's canonical origin in B: x, y, z (m), yaw (rad).
     pub release: [f32; 4],
-    /// Largest joint-limit excess seen in received commands (rad; 0 when none).
-    pub max_limit_excess_rad: f64,
-    /// Joint commands received / rejected as invalid so far.
-    pub commands: u64,
-    /// Joint commands rejected (out of limits, malformed).
-    pub commands_rejected: u64,
+    /// What the simulated arm found of the joint commands it received so far.
+    pub commands: CommandChecks,
     /// Every object in the box after this release, in placement order (the first
     /// `min(objects, MAX_JOB_OBJECTS)`): where it ended and whether it is inside.
     pub placed: [SimObject; MAX_JOB_OBJECTS],
 }
 payload!(SimOutcome);
+
+/// What the simulated arm found of the joint commands it received (part of [`SimOutcome`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::CommandChecks")]
+pub struct CommandChecks {
+    /// Largest joint-limit excess seen in received commands (rad; 0 when none).
+    pub max_limit_excess_rad: f64,
+    /// Joint commands received.
+    pub received: u64,
+    /// Joint commands rejected (out of limits, malformed).
+    pub rejected: u64,
+}
 
 /// Candidates a [`DecisionReport`] lists at most (the placement lattice's size).
 pub const MAX_REPORTED_CANDIDATES: usize = 64;
@@ -1084,6 +1079,10 @@ impl SimOutcome {
         finite_all("tilt_rad", &[self.tilt_rad])?;
         finite_all("compactness", &[self.compactness])?;
         finite_all("release", &self.release)?;
+        finite_all(
+            "commands.max_limit_excess_rad",
+            &[self.commands.max_limit_excess_rad],
+        )?;
         for o in self.objects_listed() {
             if o.bound as usize >= SIM_BOUNDS.len() {
                 return Err(Invalid::new("placed.bound", Reason::UnknownCode));

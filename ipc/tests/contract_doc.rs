@@ -1,7 +1,8 @@
-//! `ipc/CONTRACT.md` cannot drift from the Rust types: its generated blocks (payload layouts,
-//! code tables, services and their QoS) are rendered here from the types themselves and must
-//! match the file. `HERB_UPDATE_CONTRACT=1 cargo test -p herb-ipc --test contract_doc` rewrites
-//! the blocks after a deliberate change of the wire.
+//! `ipc/CONTRACT.md` and the Python client's payloads cannot drift from the Rust types: the
+//! document's generated blocks (payload layouts, code tables, services and their QoS) and the
+//! whole of `clients/python/herb_client/payloads.py` are rendered here from the types themselves
+//! and must match the files. `HERB_UPDATE_CONTRACT=1 cargo test -p herb-ipc --test contract_doc`
+//! rewrites them after a deliberate change of the wire.
 
 use herb_ipc::bus::{REQUEST_QOS, qos};
 use herb_ipc::*;
@@ -30,12 +31,32 @@ fn round_up(n: usize, align: usize) -> usize {
     n.div_ceil(align) * align
 }
 
-/// One table row per field: payload, field, type, byte offset, size, unit or meaning. The
-/// fields must be listed completely and in order: each starts where the previous ended (plus
-/// its alignment's padding) and the last ends the struct, so a field missing here fails.
+/// A field of a contract structure.
+struct Field {
+    name: &'static str,
+    /// The contract's type name: `u32`, `[f32; 4]`, `Header`.
+    ty: String,
+    offset: usize,
+    size: usize,
+    /// Unit or meaning.
+    unit: &'static str,
+}
+
+/// A contract structure, fields in order.
+struct Payload {
+    name: &'static str,
+    align: usize,
+    size: usize,
+    fields: Vec<Field>,
+}
+
+/// Push one [`Payload`] of its fields' names, types, offsets, sizes and units. The fields must
+/// be listed completely and in order: each starts where the previous ended (plus its alignment's
+/// padding) and the last ends the struct, so a field missing here fails.
 macro_rules! layout {
     ($out:expr, $t:ident, $( $f:ident : $unit:expr ),+ $(,)?) => {{
         let mut end = 0usize;
+        let mut fields = Vec::new();
         $(
             let (size, align, ty) = field::<$t, _>(|v| &v.$f);
             assert_eq!(
@@ -54,17 +75,13 @@ macro_rules! layout {
                 stringify!($f)
             );
             end = offset_of!($t, $f) + size;
-            writeln!(
-                $out,
-                "| `{}` | `{}` | `{}` | {} | {} | {} |",
-                stringify!($t),
-                stringify!($f),
+            fields.push(Field {
+                name: stringify!($f),
                 ty,
-                offset_of!($t, $f),
+                offset: offset_of!($t, $f),
                 size,
-                $unit
-            )
-            .unwrap();
+                unit: $unit,
+            });
         )+
         assert_eq!(
             round_up(end, align_of::<$t>()),
@@ -73,22 +90,42 @@ macro_rules! layout {
             stringify!($t)
         );
         assert_eq!(end, size_of::<$t>(), "{}: padding at its end", stringify!($t));
-        writeln!(
-            $out,
-            "| `{}` | (whole) | align {} | 0 | {} | type name `herb::v1::{}` |",
-            stringify!($t),
-            align_of::<$t>(),
-            size_of::<$t>(),
-            stringify!($t)
-        )
-        .unwrap();
+        $out.push(Payload {
+            name: stringify!($t),
+            align: align_of::<$t>(),
+            size: size_of::<$t>(),
+            fields,
+        });
     }};
 }
 
-fn layouts() -> String {
+/// The layout table of `ipc/CONTRACT.md`.
+fn layout_table(payloads: &[Payload]) -> String {
     let mut s = String::from(
         "| payload | field | type | offset (bytes) | size (bytes) | unit, meaning |\n| --- | --- | --- | ---: | ---: | --- |\n",
     );
+    for p in payloads {
+        for f in &p.fields {
+            writeln!(
+                s,
+                "| `{}` | `{}` | `{}` | {} | {} | {} |",
+                p.name, f.name, f.ty, f.offset, f.size, f.unit
+            )
+            .unwrap();
+        }
+        writeln!(
+            s,
+            "| `{0}` | (whole) | align {1} | 0 | {2} | type name `herb::v1::{0}` |",
+            p.name, p.align, p.size
+        )
+        .unwrap();
+    }
+    s
+}
+
+/// Every contract structure, each after the structures it contains.
+fn layouts() -> Vec<Payload> {
+    let mut s = Vec::new();
     layout!(s, Header,
         version: "protocol version, must be `PROTOCOL_VERSION`",
         reserved: "zero",
@@ -165,6 +202,17 @@ fn layouts() -> String {
         detail: "e.g. the position of an unknown object",
         reserved: "zero");
     layout!(s, SimReset, header: "stamp: the request's time");
+    layout!(s, SimObject,
+        object_type: "catalog type index",
+        bound: "0 inside the success volume, else the bound crossed most (`SimBound` code)",
+        over_m: "m by which it crosses that bound (0 inside)",
+        yaw_rad: "rad, heading of its canonical x axis about z",
+        lo: "m, lowest corner of its bounds in the box frame",
+        hi: "m, highest corner of its bounds in the box frame");
+    layout!(s, CommandChecks,
+        max_limit_excess_rad: "rad, largest joint-limit excess among received commands",
+        received: "joint commands received",
+        rejected: "joint commands rejected (out of limits, malformed)");
     layout!(s, SimOutcome,
         header: "",
         job_id: "the job whose gripper command released the object",
@@ -175,17 +223,15 @@ fn layouts() -> String {
         tilt_rad: "rad",
         compactness: "C of the box after settling",
         release: "m, m, m, rad: release pose in the box frame",
-        max_limit_excess_rad: "rad, largest joint-limit excess among received commands",
-        commands: "joint commands received",
-        commands_rejected: "joint commands rejected",
+        commands: "what the simulated arm found of the joint commands it received so far",
         placed: "every object in the box after the release, in placement order (the first `min(objects, 64)`)");
-    layout!(s, SimObject,
-        object_type: "catalog type index",
-        bound: "0 inside the success volume, else the bound crossed most (`SimBound` code)",
-        over_m: "m by which it crosses that bound (0 inside)",
-        yaw_rad: "rad, heading of its canonical x axis about z",
-        lo: "m, lowest corner of its bounds in the box frame",
-        hi: "m, highest corner of its bounds in the box frame");
+    layout!(s, CandidateReport,
+        x: "m, B x of the canonical origin",
+        y: "m, B y",
+        yaw: "rad, about B z",
+        ret: "the rollout's return (the configured reward)",
+        packed: "objects the rollout placed inside, the candidate's included",
+        flags: "bit 0: every object inside; bit 1: the candidate chosen");
     layout!(s, DecisionReport,
         header: "stamp: the decision's end",
         job_id: "the job",
@@ -200,67 +246,185 @@ fn layouts() -> String {
         reserved: "zero",
         decision_ns: "ns, the decision's latency",
         candidates: "the candidates rolled out, in the prior's order (the first `count`)");
-    layout!(s, CandidateReport,
-        x: "m, B x of the canonical origin",
-        y: "m, B y",
-        yaw: "rad, about B z",
-        ret: "the rollout's return (the configured reward)",
-        packed: "objects the rollout placed inside, the candidate's included",
-        flags: "bit 0: every object inside; bit 1: the candidate chosen");
     s
 }
 
-/// Every defined code of each enum, by probing its decoder.
+/// The names of an enum's codes 0, 1, 2..., by probing its decoder (codes are contiguous).
+fn names<E: std::fmt::Debug>(decode: fn(u32) -> Option<E>) -> Vec<String> {
+    (0..)
+        .map_while(|c| decode(c).map(|v| format!("{v:?}")))
+        .collect()
+}
+
+/// Every code table: the enum's name and its members' names by code.
+fn code_tables() -> Vec<(&'static str, Vec<String>)> {
+    vec![
+        ("GripperAction", names(GripperAction::from_code)),
+        ("JobState", names(JobState::from_code)),
+        ("StatusEvent", names(StatusEvent::from_code)),
+        ("Fault", names(Fault::from_code)),
+        ("ArmBlocker", names(ArmBlocker::from_code)),
+        (
+            "SimBound",
+            SIM_BOUNDS.iter().map(|b| b.to_string()).collect(),
+        ),
+        ("RejectReason", names(RejectReason::from_code)),
+    ]
+}
+
+/// The codes table of `ipc/CONTRACT.md`.
 fn codes() -> String {
     let mut s = String::from("| enum | name | code |\n| --- | --- | ---: |\n");
-    let mut add = |e: &str, name: Option<String>, c: u32| {
-        if let Some(n) = name {
+    for (e, members) in code_tables() {
+        for (c, n) in members.iter().enumerate() {
             writeln!(s, "| `{e}` | `{n}` | {c} |").unwrap();
         }
-    };
-    for c in 0..64 {
-        add(
-            "GripperAction",
-            GripperAction::from_code(c).map(|v| format!("{v:?}")),
-            c,
-        );
-    }
-    for c in 0..64 {
-        add(
-            "JobState",
-            JobState::from_code(c).map(|v| format!("{v:?}")),
-            c,
-        );
-    }
-    for c in 0..64 {
-        add(
-            "StatusEvent",
-            StatusEvent::from_code(c).map(|v| format!("{v:?}")),
-            c,
-        );
-    }
-    for c in 0..64 {
-        add("Fault", Fault::from_code(c).map(|v| format!("{v:?}")), c);
-    }
-    for c in 0..64 {
-        add(
-            "ArmBlocker",
-            ArmBlocker::from_code(c).map(|v| format!("{v:?}")),
-            c,
-        );
-    }
-    for (c, name) in SIM_BOUNDS.iter().enumerate() {
-        add("SimBound", Some(name.to_string()), c as u32);
-    }
-    for c in 0..64 {
-        add(
-            "RejectReason",
-            RejectReason::from_code(c).map(|v| format!("{v:?}")),
-            c,
-        );
     }
     s
 }
+
+/// The `ctypes` type of a contract type name.
+fn py_type(ty: &str) -> String {
+    if let Some((t, n)) = ty
+        .strip_prefix('[')
+        .and_then(|a| a.strip_suffix(']'))
+        .and_then(|a| a.split_once("; "))
+    {
+        return format!("{} * {n}", py_type(t));
+    }
+    match ty {
+        "u16" | "u32" | "u64" | "f32" | "f64" => format!("_{ty}"),
+        other => other.to_string(),
+    }
+}
+
+/// `items` joined by ", " after `head` and before `tail`, wrapped at 99 columns with
+/// continuation lines indented by `indent` spaces.
+fn wrapped(head: &str, items: &[String], tail: &str, indent: usize) -> String {
+    let mut out = String::from(head);
+    let mut line = head.len();
+    for (i, item) in items.iter().enumerate() {
+        let piece = if i + 1 == items.len() {
+            format!("{item}{tail}")
+        } else {
+            format!("{item},")
+        };
+        if i > 0 {
+            if line + 1 + piece.len() > 99 {
+                out.push('\n');
+                out.push_str(&" ".repeat(indent));
+                line = indent;
+            } else {
+                out.push(' ');
+                line += 1;
+            }
+        }
+        out.push_str(&piece);
+        line += piece.len();
+    }
+    out
+}
+
+/// The Python client's `payloads.py`: the constants, every structure as `ctypes` (in the order
+/// of [`layouts`], which puts a contained structure first), every code table as an `IntEnum`
+/// (`None` is a Python keyword: that member is `NONE`).
+fn python(payloads: &[Payload]) -> String {
+    let mut s = String::from(PY_HEAD);
+    writeln!(
+        s,
+        "PROTOCOL_VERSION = {PROTOCOL_VERSION}\nDOF = {DOF}\nHEIGHTMAP_MAX_CELLS = {HEIGHTMAP_MAX_CELLS}\nMAX_JOB_OBJECTS = {MAX_JOB_OBJECTS}\nMAX_REPORTED_CANDIDATES = {MAX_REPORTED_CANDIDATES}\nNO_OBJECT = 0x{NO_OBJECT:X}"
+    )
+    .unwrap();
+    s.push_str(PY_BASE);
+    for p in payloads {
+        let fields: Vec<String> = p
+            .fields
+            .iter()
+            .map(|f| format!("(\"{}\", {})", f.name, py_type(&f.ty)))
+            .collect();
+        writeln!(
+            s,
+            "\n\nclass {}(_Struct):\n{}",
+            p.name,
+            wrapped("    _fields_ = [", &fields, "]", 8)
+        )
+        .unwrap();
+    }
+    let names: Vec<String> = payloads.iter().map(|p| p.name.to_string()).collect();
+    writeln!(
+        s,
+        "\n\n#: Every structure of the contract, by name.\n{}",
+        wrapped("PAYLOADS = {c.__name__: c for c in (", &names, ")}", 4)
+    )
+    .unwrap();
+    let mut enums = Vec::new();
+    for (e, members) in code_tables() {
+        if e == "SimBound" {
+            let quoted: Vec<String> = members.iter().map(|m| format!("\"{m}\"")).collect();
+            writeln!(
+                s,
+                "\n\n#: Names of the success volume's bounds by `SimObject.bound` code.\n{}",
+                wrapped("SimBound = (", &quoted, ")", 4)
+            )
+            .unwrap();
+            continue;
+        }
+        write!(s, "\n\nclass {e}(enum.IntEnum):\n").unwrap();
+        for (c, m) in members.iter().enumerate() {
+            let m = if m == "None" { "NONE" } else { m };
+            writeln!(s, "    {m} = {c}").unwrap();
+        }
+        enums.push(format!("\"{e}\": {e}"));
+    }
+    writeln!(
+        s,
+        "\n\n#: Every code table of the contract (but `SimBound`), by enum name.\n{}",
+        wrapped("CODES = {", &enums, "}", 4)
+    )
+    .unwrap();
+    s.push_str(PY_TAIL);
+    s
+}
+
+/// The Python module's fixed head, up to its constants.
+const PY_HEAD: &str = r#""""HERB's IPC payloads as ``ctypes`` structures and its codes as ``enum.IntEnum``, field for field
+and code for code as ``ipc/CONTRACT.md`` lists them (natural alignment, no padding; little-endian
+x86-64). Each structure carries its iceoryx2 type name ``herb::v1::<Name>`` (``type_name()``),
+which iceoryx2 checks with the size and alignment when a service is opened.
+
+Generated from the Rust types by ``cargo test -p herb-ipc --test contract_doc``: do not edit
+(``HERB_UPDATE_CONTRACT=1`` rewrites it after a deliberate change of the wire).
+``tests/test_layout.py`` checks what ``ctypes`` makes of it against the contract's tables.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import enum
+
+"#;
+
+/// The Python module's base structure, after its constants.
+const PY_BASE: &str = r#"
+_u16, _u32, _u64 = ctypes.c_uint16, ctypes.c_uint32, ctypes.c_uint64
+_f32, _f64 = ctypes.c_float, ctypes.c_double
+
+
+class _Struct(ctypes.Structure):
+    """A contract structure: iceoryx2 registers it under ``herb::v1::<class name>``."""
+
+    @classmethod
+    def type_name(cls) -> str:
+        return f"herb::v1::{cls.__name__}"
+"#;
+
+/// The Python module's fixed tail.
+const PY_TAIL: &str = r#"
+
+def code_name(member: enum.IntEnum) -> str:
+    """The contract's name of a code (``None`` for the ``NONE`` members)."""
+    return "None" if member.name == "NONE" else member.name
+"#;
 
 fn constants() -> String {
     format!(
@@ -382,7 +546,7 @@ fn the_contract_document_matches_the_types() {
     let update = std::env::var_os("HERB_UPDATE_CONTRACT").is_some();
     let mut stale = Vec::new();
     for (name, want) in [
-        ("layout", layouts()),
+        ("layout", layout_table(&layouts())),
         ("codes", codes()),
         ("constants", constants()),
         ("services", services()),
@@ -403,6 +567,23 @@ fn the_contract_document_matches_the_types() {
         stale.is_empty(),
         "ipc/CONTRACT.md is out of date; the types say:\n{}\n(HERB_UPDATE_CONTRACT=1 rewrites the blocks)",
         stale.join("\n")
+    );
+}
+
+/// The Python client's payloads are the types' (generated; `HERB_UPDATE_CONTRACT=1` rewrites).
+#[test]
+fn the_python_payloads_match_the_types() {
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../clients/python/herb_client/payloads.py");
+    let want = python(&layouts());
+    let have = std::fs::read_to_string(&path).unwrap_or_default();
+    if have != want && std::env::var_os("HERB_UPDATE_CONTRACT").is_some() {
+        std::fs::write(&path, &want).unwrap();
+        return;
+    }
+    assert!(
+        have == want,
+        "clients/python/herb_client/payloads.py is out of date (HERB_UPDATE_CONTRACT=1 rewrites it)"
     );
 }
 

@@ -503,9 +503,9 @@ fn pack(
             "objects_in_box": o.objects,
             "all_inside": o.all_inside == 1,
             "compactness": o.compactness,
-            "joint_commands": o.commands,
-            "joint_commands_rejected": o.commands_rejected,
-            "max_limit_excess_rad": o.max_limit_excess_rad,
+            "joint_commands": o.commands.received,
+            "joint_commands_rejected": o.commands.rejected,
+            "max_limit_excess_rad": o.commands.max_limit_excess_rad,
             "objects": listed.iter().map(|(who, so)| serde_json::json!({
                 "n": who,
                 "id": id_of(catalog, so.object_type),

@@ -1,9 +1,9 @@
 """Python client of herbd, HERB's packing controller, over iceoryx2's own Python bindings.
 
 Submit a pack job, follow its ``Status`` live, read heightmap frames as numpy arrays without
-copying. The payloads (``herb_client.payloads``) mirror ``ipc/CONTRACT.md``, which is generated
-from the Rust types; ``tests/test_layout.py`` checks every size, offset, type name and code
-against it, so the two sides cannot drift.
+copying. The payloads and codes (``herb_client.payloads``) are generated from the Rust types,
+as ``ipc/CONTRACT.md`` is; ``tests/test_layout.py`` checks every size, offset, type name and code
+``ctypes`` makes of them against the contract, so the two sides cannot drift.
 """
 
 from .client import DaemonLost, Herb, JobResult, Rejected, catalog_ids

@@ -1,8 +1,11 @@
-"""HERB's IPC payloads as ``ctypes`` structures, field for field as ``ipc/CONTRACT.md`` lists them
-(natural alignment, no packing; little-endian x86-64). Each top-level payload carries its
-iceoryx2 type name ``herb::v1::<Name>`` (``type_name()``), which iceoryx2 checks with the size
-and alignment when a service is opened. ``tests/test_layout.py`` compares all of it, and the
-codes below, with the contract's generated tables.
+"""HERB's IPC payloads as ``ctypes`` structures and its codes as ``enum.IntEnum``, field for field
+and code for code as ``ipc/CONTRACT.md`` lists them (natural alignment, no padding; little-endian
+x86-64). Each structure carries its iceoryx2 type name ``herb::v1::<Name>`` (``type_name()``),
+which iceoryx2 checks with the size and alignment when a service is opened.
+
+Generated from the Rust types by ``cargo test -p herb-ipc --test contract_doc``: do not edit
+(``HERB_UPDATE_CONTRACT=1`` rewrites it after a deliberate change of the wire).
+``tests/test_layout.py`` checks what ``ctypes`` makes of it against the contract's tables.
 """
 
 from __future__ import annotations
@@ -12,228 +15,116 @@ import enum
 
 PROTOCOL_VERSION = 1
 DOF = 7
-HEIGHTMAP_MAX_CELLS = 224 * 224
+HEIGHTMAP_MAX_CELLS = 50176
 MAX_JOB_OBJECTS = 64
-NO_OBJECT = 0xFFFF_FFFF
+MAX_REPORTED_CANDIDATES = 64
+NO_OBJECT = 0xFFFFFFFF
 
 _u16, _u32, _u64 = ctypes.c_uint16, ctypes.c_uint32, ctypes.c_uint64
 _f32, _f64 = ctypes.c_float, ctypes.c_double
 
 
-class _Payload(ctypes.Structure):
-    """A top-level payload: iceoryx2 registers it under ``herb::v1::<class name>``."""
+class _Struct(ctypes.Structure):
+    """A contract structure: iceoryx2 registers it under ``herb::v1::<class name>``."""
 
     @classmethod
     def type_name(cls) -> str:
         return f"herb::v1::{cls.__name__}"
 
 
-class Header(ctypes.Structure):
-    _fields_ = [
-        ("version", _u32),
-        ("reserved", _u32),
-        ("seq", _u64),
-        ("stamp_ns", _u64),
-    ]
-
-    @classmethod
-    def type_name(cls) -> str:
-        return "herb::v1::Header"
+class Header(_Struct):
+    _fields_ = [("version", _u32), ("reserved", _u32), ("seq", _u64), ("stamp_ns", _u64)]
 
 
-class JointState(_Payload):
-    _fields_ = [("header", Header), ("position", _f64 * DOF), ("velocity", _f64 * DOF)]
+class JointState(_Struct):
+    _fields_ = [("header", Header), ("position", _f64 * 7), ("velocity", _f64 * 7)]
 
 
-class JointCommand(_Payload):
-    _fields_ = [
-        ("header", Header),
-        ("position", _f64 * DOF),
-        ("velocity", _f64 * DOF),
-        ("acceleration", _f64 * DOF),
-    ]
+class JointCommand(_Struct):
+    _fields_ = [("header", Header), ("position", _f64 * 7), ("velocity", _f64 * 7),
+        ("acceleration", _f64 * 7)]
 
 
-class GripperCommand(_Payload):
+class GripperCommand(_Struct):
     _fields_ = [("header", Header), ("job_id", _u64), ("action", _u32), ("object_type", _u32)]
 
 
-class GripperState(_Payload):
-    _fields_ = [
-        ("header", Header),
-        ("closed", _u32),
-        ("holding", _u32),
-        ("object_type", _u32),
-        ("reserved", _u32),
-    ]
+class GripperState(_Struct):
+    _fields_ = [("header", Header), ("closed", _u32), ("holding", _u32), ("object_type", _u32),
+        ("reserved", _u32)]
 
 
-class ArmStatus(_Payload):
-    _fields_ = [
-        ("header", Header),
-        ("blocker", _u32),
-        ("reserved", _u32),
-        ("commands_refused", _u64),
-    ]
+class ArmStatus(_Struct):
+    _fields_ = [("header", Header), ("blocker", _u32), ("reserved", _u32),
+        ("commands_refused", _u64)]
 
 
-class HeightmapFrame(_Payload):
-    _fields_ = [
-        ("header", Header),
-        ("nx", _u32),
-        ("ny", _u32),
-        ("cell_m", _f32),
-        ("objects", _u32),
-        ("data", _f32 * HEIGHTMAP_MAX_CELLS),
-    ]
+class HeightmapFrame(_Struct):
+    _fields_ = [("header", Header), ("nx", _u32), ("ny", _u32), ("cell_m", _f32),
+        ("objects", _u32), ("data", _f32 * 50176)]
 
 
-class CancelJobRequest(_Payload):
+class CancelJobRequest(_Struct):
     _fields_ = [("header", Header), ("job_id", _u64)]
 
 
-class CancelJobReply(_Payload):
+class CancelJobReply(_Struct):
     _fields_ = [("header", Header), ("job_id", _u64), ("accepted", _u32), ("reason", _u32)]
 
 
-class Status(_Payload):
-    _fields_ = [
-        ("header", Header),
-        ("job_id", _u64),
-        ("event", _u32),
-        ("state", _u32),
-        ("fault", _u32),
-        ("objects_total", _u32),
-        ("objects_done", _u32),
-        ("object_index", _u32),
-        ("object_type", _u32),
-        ("decision_wait_ms", _u32),
-        ("pose", _f32 * 4),
-        ("decision_ns", _u64),
-        ("cycles", _u64),
-        ("deadline_misses", _u64),
-        ("rejected_inputs", _u64),
-        ("max_cycle_ns", _u64),
-    ]
+class Status(_Struct):
+    _fields_ = [("header", Header), ("job_id", _u64), ("event", _u32), ("state", _u32),
+        ("fault", _u32), ("objects_total", _u32), ("objects_done", _u32), ("object_index", _u32),
+        ("object_type", _u32), ("decision_wait_ms", _u32), ("pose", _f32 * 4),
+        ("decision_ns", _u64), ("cycles", _u64), ("deadline_misses", _u64),
+        ("rejected_inputs", _u64), ("max_cycle_ns", _u64)]
 
 
-class PackJobRequest(_Payload):
-    _fields_ = [
-        ("header", Header),
-        ("job_id", _u64),
-        ("count", _u32),
-        ("reserved", _u32),
-        ("objects", _u16 * MAX_JOB_OBJECTS),
-    ]
+class PackJobRequest(_Struct):
+    _fields_ = [("header", Header), ("job_id", _u64), ("count", _u32), ("reserved", _u32),
+        ("objects", _u16 * 64)]
 
 
-class PackJobReply(_Payload):
-    _fields_ = [
-        ("header", Header),
-        ("job_id", _u64),
-        ("accepted", _u32),
-        ("reason", _u32),
-        ("detail", _u32),
-        ("reserved", _u32),
-    ]
+class PackJobReply(_Struct):
+    _fields_ = [("header", Header), ("job_id", _u64), ("accepted", _u32), ("reason", _u32),
+        ("detail", _u32), ("reserved", _u32)]
 
 
-class SimReset(_Payload):
+class SimReset(_Struct):
     _fields_ = [("header", Header)]
 
 
-class SimObject(ctypes.Structure):
-    _fields_ = [
-        ("object_type", _u32),
-        ("bound", _u32),
-        ("over_m", _f32),
-        ("yaw_rad", _f32),
-        ("lo", _f32 * 3),
-        ("hi", _f32 * 3),
-    ]
-
-    @classmethod
-    def type_name(cls) -> str:
-        return "herb::v1::SimObject"
+class SimObject(_Struct):
+    _fields_ = [("object_type", _u32), ("bound", _u32), ("over_m", _f32), ("yaw_rad", _f32),
+        ("lo", _f32 * 3), ("hi", _f32 * 3)]
 
 
-class SimOutcome(_Payload):
-    _fields_ = [
-        ("header", Header),
-        ("job_id", _u64),
-        ("objects", _u32),
-        ("object_type", _u32),
-        ("all_inside", _u32),
-        ("stable", _u32),
-        ("tilt_rad", _f32),
-        ("compactness", _f32),
-        ("release", _f32 * 4),
-        ("max_limit_excess_rad", _f64),
-        ("commands", _u64),
-        ("commands_rejected", _u64),
-        ("placed", SimObject * MAX_JOB_OBJECTS),
-    ]
+class CommandChecks(_Struct):
+    _fields_ = [("max_limit_excess_rad", _f64), ("received", _u64), ("rejected", _u64)]
 
 
-MAX_REPORTED_CANDIDATES = 64
+class SimOutcome(_Struct):
+    _fields_ = [("header", Header), ("job_id", _u64), ("objects", _u32), ("object_type", _u32),
+        ("all_inside", _u32), ("stable", _u32), ("tilt_rad", _f32), ("compactness", _f32),
+        ("release", _f32 * 4), ("commands", CommandChecks), ("placed", SimObject * 64)]
 
 
-class CandidateReport(ctypes.Structure):
-    _fields_ = [
-        ("x", _f32),
-        ("y", _f32),
-        ("yaw", _f32),
-        ("ret", _f32),
-        ("packed", _u32),
-        ("flags", _u32),
-    ]
-
-    @classmethod
-    def type_name(cls) -> str:
-        return "herb::v1::CandidateReport"
+class CandidateReport(_Struct):
+    _fields_ = [("x", _f32), ("y", _f32), ("yaw", _f32), ("ret", _f32), ("packed", _u32),
+        ("flags", _u32)]
 
 
-class DecisionReport(_Payload):
-    _fields_ = [
-        ("header", Header),
-        ("job_id", _u64),
-        ("object_index", _u32),
-        ("object_type", _u32),
-        ("method", _u32),
-        ("feasible", _u32),
-        ("allowed", _u32),
-        ("count", _u32),
-        ("pose", _f32 * 4),
-        ("decided", _u32),
-        ("reserved", _u32),
-        ("decision_ns", _u64),
-        ("candidates", CandidateReport * MAX_REPORTED_CANDIDATES),
-    ]
+class DecisionReport(_Struct):
+    _fields_ = [("header", Header), ("job_id", _u64), ("object_index", _u32),
+        ("object_type", _u32), ("method", _u32), ("feasible", _u32), ("allowed", _u32),
+        ("count", _u32), ("pose", _f32 * 4), ("decided", _u32), ("reserved", _u32),
+        ("decision_ns", _u64), ("candidates", CandidateReport * 64)]
 
 
-#: Every payload of the contract, by name.
-PAYLOADS = {
-    c.__name__: c
-    for c in (
-        Header,
-        JointState,
-        JointCommand,
-        GripperCommand,
-        GripperState,
-        ArmStatus,
-        HeightmapFrame,
-        CancelJobRequest,
-        CancelJobReply,
-        Status,
-        PackJobRequest,
-        PackJobReply,
-        SimReset,
-        SimOutcome,
-        SimObject,
-        DecisionReport,
-        CandidateReport,
-    )
-}
+#: Every structure of the contract, by name.
+PAYLOADS = {c.__name__: c for c in (Header, JointState, JointCommand, GripperCommand, GripperState,
+    ArmStatus, HeightmapFrame, CancelJobRequest, CancelJobReply, Status, PackJobRequest,
+    PackJobReply, SimReset, SimObject, CommandChecks, SimOutcome, CandidateReport, DecisionReport)}
 
 
 class GripperAction(enum.IntEnum):
@@ -267,7 +158,6 @@ class StatusEvent(enum.IntEnum):
 
 
 class Fault(enum.IntEnum):
-    # "None" is a Python keyword: the code-0 member is named NONE (the contract's `None`).
     NONE = 0
     JointStateTimeout = 1
     GripperStateTimeout = 2
@@ -299,6 +189,10 @@ class ArmBlocker(enum.IntEnum):
     CommandRefused = 6
 
 
+#: Names of the success volume's bounds by `SimObject.bound` code.
+SimBound = ("inside", "-x wall", "+x wall", "-y wall", "+y wall", "floor", "top")
+
+
 class RejectReason(enum.IntEnum):
     NONE = 0
     Busy = 1
@@ -312,18 +206,9 @@ class RejectReason(enum.IntEnum):
     Holding = 9
 
 
-#: Names of the success volume's bounds by ``SimObject.bound`` code (the contract's `SimBound`).
-SimBound = ("inside", "-x wall", "+x wall", "-y wall", "+y wall", "floor", "top")
-
-#: Every code table of the contract, by enum name.
-CODES = {
-    "GripperAction": GripperAction,
-    "JobState": JobState,
-    "StatusEvent": StatusEvent,
-    "Fault": Fault,
-    "ArmBlocker": ArmBlocker,
-    "RejectReason": RejectReason,
-}
+#: Every code table of the contract (but `SimBound`), by enum name.
+CODES = {"GripperAction": GripperAction, "JobState": JobState, "StatusEvent": StatusEvent,
+    "Fault": Fault, "ArmBlocker": ArmBlocker, "RejectReason": RejectReason}
 
 
 def code_name(member: enum.IntEnum) -> str:

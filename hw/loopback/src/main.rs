@@ -32,8 +32,8 @@ use herb_adapter::guard::{GuardSettings, JumpGuard, REFUSAL_HOLD_NS, Refusal};
 use herb_adapter::{ArmPorts, CameraPort, Heightmap};
 use herb_ipc::bus::Bus;
 use herb_ipc::{
-    ArmBlocker, GripperAction, GripperCommand, GripperState, Header, JointCommand, JointState,
-    MAX_JOB_OBJECTS, NO_OBJECT, SIM_BOUNDS, Services, SimObject, SimOutcome, SimReset,
+    ArmBlocker, CommandChecks, GripperAction, GripperCommand, GripperState, Header, JointCommand,
+    JointState, MAX_JOB_OBJECTS, NO_OBJECT, SIM_BOUNDS, Services, SimObject, SimOutcome, SimReset,
     monotonic_ns,
 };
 use herb_loopback::config::{ConfigFile, LoopbackConfig};
@@ -591,9 +591,11 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
                             tilt_rad: o.tilt_rad,
                             compactness: o.compactness,
                             release,
-                            max_limit_excess_rad: sim.max_excess,
-                            commands: arm.joint.received,
-                            commands_rejected: arm.joint.rejected,
+                            commands: CommandChecks {
+                                max_limit_excess_rad: sim.max_excess,
+                                received: arm.joint.received,
+                                rejected: arm.joint.rejected,
+                            },
                             placed: r.placed,
                         };
                         let _ = out_pub.send_copy(m);
