@@ -101,6 +101,27 @@ pub struct StepResult<'a> {
     pub info: StepInfo,
 }
 
+/// Seeds the release noise's generator (with the episode's seed).
+const NOISE_SEED: u64 = 0x6e6f_6973_6521;
+
+/// One release's offset off the pose it was given (release noise).
+#[derive(Debug, Clone, Copy)]
+struct ReleaseOffset {
+    dx: f32,
+    dy: f32,
+    dyaw: f32,
+}
+
+impl ReleaseOffset {
+    /// `pose` moved by the offset: x and y in B, yaw about B z.
+    fn apply(self, mut pose: Pose) -> Pose {
+        pose.translation.x += self.dx;
+        pose.translation.y += self.dy;
+        pose.rotation = Rotation::from_rotation_z(self.dyaw) * pose.rotation;
+        pose
+    }
+}
+
 /// The packing environment.
 #[derive(Debug)]
 pub struct PackingEnv {
@@ -112,6 +133,9 @@ pub struct PackingEnv {
     packed: usize,
     running: bool,
     rng: ChaCha8Rng,
+    /// Draws the release noise ([`WorldConfig::release_noise_m`]), apart from `rng` so that
+    /// noise does not change the random placer's actions.
+    noise_rng: ChaCha8Rng,
     obs: Vec<f32>,
 }
 
@@ -128,6 +152,7 @@ impl PackingEnv {
             packed: 0,
             running: false,
             rng: ChaCha8Rng::seed_from_u64(0),
+            noise_rng: ChaCha8Rng::seed_from_u64(NOISE_SEED),
             obs: vec![0.0; ObsLayout::LEN],
         })
     }
@@ -151,6 +176,7 @@ impl PackingEnv {
         self.packed = 0;
         self.running = true;
         self.rng = ChaCha8Rng::seed_from_u64(seed);
+        self.noise_rng = ChaCha8Rng::seed_from_u64(seed ^ NOISE_SEED);
         self.write_obs()?;
         Ok(&self.obs)
     }
@@ -181,22 +207,50 @@ impl PackingEnv {
     }
 
     /// Places the next object at `(x, y)` with any orientation `rot` of its canonical frame
-    /// (used to replay the humans' full, possibly tilted, placements).
+    /// (used to replay the humans' full, possibly tilted, placements). With release noise, at
+    /// the world's release pose moved by the noise.
     pub fn step_rotated(&mut self, x: f32, y: f32, rot: Rotation) -> Result<StepResult<'_>> {
+        let noise = self.draw_noise();
         self.step_with(
-            |w, object| w.place_rotated(object, x, y, rot),
+            |w, object| match noise {
+                None => w.place_rotated(object, x, y, rot),
+                Some(n) => {
+                    let pose = w.checked_release_pose(object, x, y, rot)?;
+                    w.place_pose(object, n.apply(pose))
+                }
+            },
             (x, y, crate::frames::yaw_of(rot)),
         )
     }
 
     /// Releases the next object at an explicit pose of its canonical frame (z included, no
-    /// estimate): the humans' recorded poses, or a gripper's.
+    /// estimate): the humans' recorded poses, or a gripper's. With release noise, at that pose
+    /// moved by the noise.
     pub fn step_pose(&mut self, pose: Pose) -> Result<StepResult<'_>> {
         let t = pose.translation;
+        let pose = self.draw_noise().map_or(pose, |n| n.apply(pose));
         self.step_with(
             |w, object| w.place_pose(object, pose),
             (t.x, t.y, crate::frames::yaw_of(pose.rotation)),
         )
+    }
+
+    /// The next release's noise, `None` without noise (nothing drawn).
+    fn draw_noise(&mut self) -> Option<ReleaseOffset> {
+        let cfg = self.world.config();
+        let (sxy, syaw) = (cfg.release_noise_m, cfg.release_noise_deg.to_radians());
+        if sxy == 0.0 && syaw == 0.0 {
+            return None;
+        }
+        let mut normal = || {
+            let (u1, u2): (f32, f32) = (self.noise_rng.random(), self.noise_rng.random());
+            (-2.0 * (1.0 - u1).ln()).sqrt() * (std::f32::consts::TAU * u2).cos()
+        };
+        Some(ReleaseOffset {
+            dx: sxy * normal(),
+            dy: sxy * normal(),
+            dyaw: syaw * normal(),
+        })
     }
 
     fn step_with(

@@ -55,6 +55,13 @@ pub struct WorldConfig {
     pub early_out_m: f32,
     /// Fastest speed at which the solver pushes overlapping bodies apart (m/s).
     pub max_corrective_speed_mps: f32,
+    /// Release noise of the evaluation: standard deviation (m) of the x and y offsets by which
+    /// [`crate::PackingEnv`] releases each object off the pose it was given, as a real gripper
+    /// does (0: exactly there). The world's own calls ([`PackingWorld::place_pose`]) and the
+    /// search's twins never add noise, so with noise the world is no longer their model.
+    pub release_noise_m: f32,
+    /// Release noise about z: standard deviation of the yaw offset (degrees).
+    pub release_noise_deg: f32,
 }
 
 impl Default for WorldConfig {
@@ -71,6 +78,8 @@ impl Default for WorldConfig {
             stability_tilt_deg: 10.0,
             early_out_m: 0.05,
             max_corrective_speed_mps: 3.0,
+            release_noise_m: 0.0,
+            release_noise_deg: 0.0,
         }
     }
 }
@@ -103,6 +112,8 @@ impl WorldConfig {
             0.01,
             10.0,
         )?;
+        check("release_noise_m", self.release_noise_m, 0.0, 0.05)?;
+        check("release_noise_deg", self.release_noise_deg, 0.0, 45.0)?;
         Ok(())
     }
 }
@@ -510,6 +521,19 @@ impl PackingWorld {
         y: f32,
         rot: Rotation,
     ) -> Result<PlacementOutcome> {
+        let pose = self.checked_release_pose(ty, x, y, rot)?;
+        self.place_pose(ty, pose)
+    }
+
+    /// [`PackingWorld::release_pose`] after checking the inputs: a catalog type, finite values,
+    /// (x, y) within 10 m.
+    pub fn checked_release_pose(
+        &mut self,
+        ty: TypeIdx,
+        x: f32,
+        y: f32,
+        rot: Rotation,
+    ) -> Result<Pose> {
         if !(x.is_finite() && y.is_finite() && rot.is_finite()) || x.abs() > 10.0 || y.abs() > 10.0
         {
             return Err(SimError::InvalidPlacement {
@@ -519,8 +543,7 @@ impl PackingWorld {
             });
         }
         self.check_type(ty)?;
-        let pose = self.release_pose(ty, x, y, rot);
-        self.place_pose(ty, pose)
+        Ok(self.release_pose(ty, x, y, rot))
     }
 
     /// The pose at which [`PackingWorld::place_rotated`] releases `ty`: orientation `rot`

@@ -155,6 +155,12 @@ struct EvalArgs {
     /// cell) or `exact` (a clone of the evaluation's world: the twin's fidelity bound).
     #[arg(long, default_value = "twin", value_parser = ["twin", "exact"])]
     search_world: String,
+    /// Release noise of the evaluation's world, `MM,DEG`: each object is released off the pose
+    /// its method decided by normal noise of these standard deviations in x and y (mm) and in
+    /// yaw (degrees), as a real gripper does; seeded by the episode's seed. The search's twin is
+    /// not told: with noise the world is no longer the model it rolls out in.
+    #[arg(long, value_parser = parse_noise)]
+    release_noise: Option<(f32, f32)>,
     /// Base seed (episode i uses seed + i).
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -375,7 +381,12 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
         None
     };
     let target = eval::mean_std(episodes.iter().map(|e| e.objects.len() as f64));
-    let cfg = WorldConfig::default();
+    let mut cfg = WorldConfig::default();
+    if let Some((mm, deg)) = a.release_noise {
+        cfg.release_noise_m = mm * 1e-3;
+        cfg.release_noise_deg = deg;
+        cfg.validate()?;
+    }
     let mut rows = Vec::new();
     let mut all_results = Vec::new();
     let mut csv_text = String::from(
@@ -532,6 +543,12 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
                 r.method
             ));
         }
+    }
+    if let Some((mm, deg)) = a.release_noise {
+        table.push_str(&format!(
+            "- release noise (every row): each object released off its decided pose by normal \
+             noise, sd {mm} mm in x and y, {deg} deg in yaw\n"
+        ));
     }
     if !bad.is_empty() {
         table.push_str(&format!(
@@ -794,4 +811,19 @@ fn pack_one(
     herb_sim::image::write_heightmap_png(png, env.world().heightmap(), 0.30, 3)?;
     println!("wrote {}", png.display());
     Ok(())
+}
+
+/// `MM,DEG` of `--release-noise`: two finite, non-negative numbers.
+fn parse_noise(s: &str) -> Result<(f32, f32), String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let [mm, deg] = parts[..] else {
+        return Err(format!("{s:?}: expected MM,DEG (e.g. 5,3)"));
+    };
+    let num = |v: &str, what: &str| -> Result<f32, String> {
+        match v.parse::<f32>() {
+            Ok(x) if x.is_finite() && x >= 0.0 => Ok(x),
+            _ => Err(format!("{what} {v:?}: expected a number >= 0")),
+        }
+    };
+    Ok((num(mm, "MM")?, num(deg, "DEG")?))
 }

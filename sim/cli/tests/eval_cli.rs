@@ -156,3 +156,35 @@ fn the_lookahead_horizon_names_its_row_and_refuses_zero() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn release_noise_is_said_in_the_table_and_bad_noise_is_refused() {
+    for bad in ["5", "5,-1", "x,3", "5,3,1", "100,3"] {
+        let out = herb_sim(&["eval", "--method", "blbf", "--release-noise", bad]);
+        assert!(!out.status.success(), "{bad} was accepted");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("release"), "{bad}: {err}");
+    }
+    let Some(root) = herb_sim::paths::boxed_root_for_tests() else {
+        return;
+    };
+    let dir = std::env::temp_dir().join(format!("herb-eval-noise-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (table, _) = eval_into(
+        &root,
+        &dir,
+        &[
+            "--method",
+            "blbf",
+            "--release-noise",
+            "5,3",
+            "--limit",
+            "1",
+        ],
+    );
+    assert!(
+        table.contains("release noise (every row)") && table.contains("sd 5 mm"),
+        "{table}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -1,11 +1,27 @@
 //! Where the search's twin and the world differ, decision by decision (a diagnostic; its
 //! figures are in docs/search.md).
 //!
-//!     cargo run --release -p herb-methods --example twin_fidelity -- [EPISODES] [SEED] [THREADS] [twin|frozen]
+//!     cargo run --release -p herb-methods --example twin_fidelity -- \
+//!         [EPISODES] [SEED] [THREADS] [twin|frozen|replay|replayfit|exact|blbf] [NOISE_MM] [NOISE_DEG]
 //!
-//! With `frozen`, the twin is replaced by a clone of the world whose objects are made fixed
-//! ([`PackingWorld::freeze_placed`]): the twin's rigid pile with the objects' exact shapes, to
-//! tell what the pile's shape costs from what its rigidity costs.
+//! What packs (and is compared with the exact clone at each decision):
+//!
+//! - `twin` (default): the search in the heightmap twin, as herbd runs it;
+//! - `frozen`: the search in a clone of the world whose objects are made fixed
+//!   ([`PackingWorld::freeze_placed`]): the twin's rigid pile with the objects' exact shapes, to
+//!   tell what the pile's shape costs from what its rigidity costs;
+//! - `replay`: the search in a world where the job's objects are replayed at their decided
+//!   release poses (what herbd knows of its own job), without looking at the heightmap;
+//! - `replayfit`: as `replay`, each replayed release then moved by the offset (of 5 x 5 x 3:
+//!   x and y within 8 mm, yaw within 4 deg) whose settled heightmap is nearest the world's;
+//! - `exact`: the search in the exact clone itself (the bound);
+//! - `blbf`: no rollout, the prior's first (lattice BLBF).
+//!
+//! `NOISE_MM`, `NOISE_DEG` (default 0): the world's release noise (`WorldConfig::
+//! release_noise_m`, `release_noise_deg`, as `herb-sim eval --release-noise MM,DEG`): each
+//! object released off its decided pose by normal noise of these standard deviations in x and
+//! y, and in yaw (seeded by the episode's index: runs reproduce); the twins are not told. Without noise the world is the twins'
+//! model exactly, and `replay` is the exact clone.
 //!
 //! The episodes are `training/validate.py`'s (the bindings' sampler: 10 to 25 random catalog
 //! objects in HERB's order, one generator per episode seeded from `SEED`, default 777). Each is
@@ -61,6 +77,10 @@ struct Tally {
     exact_best_ok: usize,
     twin_choice_ok: usize,
     success_first_ok: usize,
+    /// Replay mode: heightmap cells compared, sum of |replay - world| (m), cells off by > 10 mm.
+    cells: usize,
+    cell_diff: f64,
+    cells_off: usize,
     /// Rollouts by (twin succeeds, exact succeeds).
     rollouts: [[usize; 2]; 2],
     /// First placements, those both call stable or both unstable, sum of |tilt difference|.
@@ -73,6 +93,9 @@ struct Tally {
 
 impl Tally {
     fn add(&mut self, o: Tally) {
+        self.cells += o.cells;
+        self.cell_diff += o.cell_diff;
+        self.cells_off += o.cells_off;
         self.episodes += o.episodes;
         self.success += o.success;
         self.decisions += o.decisions;
@@ -122,16 +145,50 @@ fn best<K: PartialOrd>(keys: impl Iterator<Item = K>) -> usize {
     out.map_or(0, |(i, _)| i)
 }
 
+/// What the search rolls out in.
+#[derive(Clone, Copy, PartialEq)]
+enum Mode {
+    /// The heightmap twin.
+    Twin,
+    /// A clone of the world with its objects fixed.
+    Frozen,
+    /// The objects replayed at their decided release poses in an empty world (what herbd knows
+    /// of its own job), while the world releases them with noise.
+    Replay,
+    /// As `Replay`, each release pose then fitted to the world's heightmap after the release.
+    ReplayFit,
+    /// A clone of the world itself (the exact clone) packs.
+    Exact,
+    /// No rollout: the prior's first (lattice BLBF) packs.
+    Blbf,
+}
+
+/// Offsets of a replayed release tried by the fit: x and y (m), yaw (rad).
+const FIT_XY_M: [f32; 5] = [-0.008, -0.004, 0.0, 0.004, 0.008];
+const FIT_YAW_DEG: [f32; 3] = [-4.0, 0.0, 4.0];
+
+/// Mean |a - b| over the cells.
+fn mean_diff(a: &[f32], b: &[f32]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs() as f64)
+        .sum::<f64>()
+        / a.len().max(1) as f64
+}
+
 /// Packs `episode` with the twin's search, comparing it with the exact clone at each decision.
 fn probe(
     catalog: &SharedCatalog,
     episode: &[TypeIdx],
-    frozen: bool,
+    mode: Mode,
+    noisy: &WorldConfig,
+    seed: u64,
     t: &mut Tally,
 ) -> Result<(), Error> {
     let cfg = WorldConfig::default();
-    let mut env = PackingEnv::new(catalog.clone(), cfg.clone(), REWARD)?;
-    env.reset(episode, 0)?;
+    let mut replay = PackingWorld::new(catalog.clone(), cfg.clone())?;
+    let mut env = PackingEnv::new(catalog.clone(), noisy.clone(), REWARD)?;
+    env.reset(episode, seed)?;
     let mut lattice = Lattice::new(catalog);
     let settings = |twin| SearchSettings {
         k: K,
@@ -140,12 +197,15 @@ fn probe(
         reward: REWARD,
         twin,
     };
-    let kind = if frozen {
+    let kind = if !matches!(mode, Mode::Twin | Mode::Blbf) {
         TwinKind::ExactClone
     } else {
         TwinKind::Heightmap
     };
     let mut search_twin = Search::new(catalog.clone(), cfg.clone(), settings(kind));
+    if mode == Mode::Blbf {
+        search_twin.set_budget(Budget::Rollouts(0));
+    }
     let mut search_exact =
         Search::new(catalog.clone(), cfg.clone(), settings(TwinKind::ExactClone));
     let mut success = false;
@@ -157,11 +217,16 @@ fn probe(
             break;
         }
         // The twin the search rolls out in, or the frozen clone standing for it.
-        let frozen_world = frozen.then(|| {
-            let mut w = env.world().clone();
-            w.freeze_placed();
-            w
-        });
+        let frozen_world = match mode {
+            Mode::Frozen => {
+                let mut w = env.world().clone();
+                w.freeze_placed();
+                Some(w)
+            }
+            Mode::Replay | Mode::ReplayFit => Some(replay.clone()),
+            Mode::Exact => Some(env.world().clone()),
+            Mode::Twin | Mode::Blbf => None,
+        };
         let twin = match &frozen_world {
             Some(w) => w.clone(),
             None => PackingWorld::twin(catalog.clone(), cfg.clone(), env.world().heightmap())?,
@@ -212,9 +277,54 @@ fn probe(
         t.exact_best_ok += exact[exact_best].success as usize;
         t.twin_choice_ok += exact[chosen].success as usize;
         t.success_first_ok += exact[success_first].success as usize;
-        let r = env.step_placement(p.x, p.y, p.theta())?;
-        if r.terminated {
-            success = r.info.success;
+        // The world releases at the decided pose (plus its release noise); the replay at the
+        // decided pose.
+        let rot = rapier3d::math::Rotation::from_rotation_z(p.theta());
+        let decided = env.world_mut().release_pose(next, p.x, p.y, rot);
+        let before = replay.clone();
+        if matches!(mode, Mode::Replay | Mode::ReplayFit) {
+            replay.place_pose(next, decided)?;
+        }
+        let r = env.step_pose(decided)?;
+        let (terminated, ok) = (r.terminated, r.info.success);
+        if mode == Mode::ReplayFit {
+            // The release offset whose replay looks most like the world's heightmap.
+            let seen = env.world().heightmap().data();
+            let mut best = mean_diff(replay.heightmap().data(), seen);
+            for dyaw in FIT_YAW_DEG {
+                for dx in FIT_XY_M {
+                    for dy in FIT_XY_M {
+                        if dx == 0.0 && dy == 0.0 && dyaw == 0.0 {
+                            continue;
+                        }
+                        let mut pose = decided;
+                        pose.translation.x += dx;
+                        pose.translation.y += dy;
+                        pose.rotation =
+                            rapier3d::math::Rotation::from_rotation_z(dyaw.to_radians())
+                                * decided.rotation;
+                        let mut w = before.clone();
+                        w.place_pose(next, pose)?;
+                        let d = mean_diff(w.heightmap().data(), seen);
+                        if d < best {
+                            best = d;
+                            replay = w;
+                        }
+                    }
+                }
+            }
+        }
+        if matches!(mode, Mode::Replay | Mode::ReplayFit) {
+            let (a, b) = (replay.heightmap().data(), env.world().heightmap().data());
+            for (x, y) in a.iter().zip(b) {
+                let d = (x - y).abs();
+                t.cells += 1;
+                t.cell_diff += d as f64;
+                t.cells_off += (d > 0.01) as usize;
+            }
+        }
+        if terminated {
+            success = ok;
             break;
         }
     }
@@ -237,11 +347,24 @@ fn main() -> Result<(), Error> {
         arg(2, 777)?,
         arg(3, 2)?.max(1) as usize,
     );
-    let frozen = match std::env::args().nth(4).as_deref() {
-        None | Some("twin") => false,
-        Some("frozen") => true,
-        Some(other) => return Err(format!("argument 4 ({other:?}): twin or frozen").into()),
+    let mode = match std::env::args().nth(4).as_deref() {
+        None | Some("twin") => Mode::Twin,
+        Some("frozen") => Mode::Frozen,
+        Some("replay") => Mode::Replay,
+        Some("replayfit") => Mode::ReplayFit,
+        Some("exact") => Mode::Exact,
+        Some("blbf") => Mode::Blbf,
+        Some(other) => {
+            return Err(format!("argument 4 ({other:?}): twin, frozen or replay").into());
+        }
     };
+    let noisy = WorldConfig {
+        release_noise_m: arg(5, 0)? as f32 * 1e-3,
+        release_noise_deg: arg(6, 0)? as f32,
+        ..WorldConfig::default()
+    };
+    noisy.validate()?;
+    let frozen = mode == Mode::Frozen;
     let root = paths::boxed_root(None);
     let catalog: SharedCatalog = Arc::new(Catalog::builtin(&paths::mesh_source(
         None,
@@ -266,11 +389,11 @@ fn main() -> Result<(), Error> {
     std::thread::scope(|s| -> Result<(), Error> {
         let handles: Vec<_> = (0..threads)
             .map(|i| {
-                let (catalog, episodes) = (&catalog, &episodes);
+                let (catalog, episodes, noisy) = (&catalog, &episodes, &noisy);
                 s.spawn(move || -> Result<Tally, Error> {
                     let mut t = Tally::default();
-                    for ep in episodes.iter().skip(i).step_by(threads) {
-                        probe(catalog, ep, frozen, &mut t)?;
+                    for (e, ep) in episodes.iter().enumerate().skip(i).step_by(threads) {
+                        probe(catalog, ep, mode, noisy, e as u64, &mut t)?;
                     }
                     Ok(t)
                 })
@@ -306,6 +429,14 @@ fn main() -> Result<(), Error> {
         tt + tf + ft + ff,
         pct(tt + ff, tt + tf + ft + ff)
     );
+    if matches!(mode, Mode::Replay | Mode::ReplayFit) {
+        println!(
+            "replay against the world after each release: mean |height difference| {:.2} mm, \
+             cells off by more than 10 mm {:.2} %",
+            1e3 * t.cell_diff / t.cells.max(1) as f64,
+            pct(t.cells_off, t.cells)
+        );
+    }
     for (why, count) in &t.reasons {
         println!("  {count:5}  {why}");
     }
