@@ -14,8 +14,10 @@ daemon's BLBF heuristic, through the same action mapping as a policy), ``lattice
 restricted to the placement lattice), ``lattice-reserve`` (keeping room for later objects),
 ``lookahead`` (the teacher, ``--k`` candidates, rollouts of ``--horizon`` objects or to the end),
 ``geo-lookahead`` (the teacher's rollouts without physics), ``search`` (herbd's decision-time
-search: ``--k`` candidates, ``--rollouts`` rollouts, in a twin built from the heightmap) or
-``search-exact`` (the same search in a clone of the episode's world: the twin's fidelity bound).
+search: ``--k`` candidates, ``--rollouts`` rollouts, in a twin built from the heightmap),
+``search-job`` (the same search in the job's own twin: its decisions replayed, fitted to the
+heightmaps) or ``search-exact`` (the same search in a clone of the episode's world: the twins'
+fidelity bound).
 """
 
 import argparse
@@ -92,10 +94,11 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--policy", action="append", default=[], help="ONNX policy (repeat)")
     ap.add_argument("--rule", action="append", default=[],
-                    choices=["blbf", "lattice-blbf", "lookahead", "lattice-reserve", "geo-lookahead", "search", "search-exact"],
+                    choices=["blbf", "lattice-blbf", "lookahead", "lattice-reserve", "geo-lookahead", "search", "search-job", "search-exact"],
                     help="decision rule (repeat); search: the decision-time search in a twin built from "
-                         "the heightmap; search-exact: the same search in a clone of the world (the twin's "
-                         "fidelity bound)")
+                         "the heightmap; search-job: the same search in the job's own twin (its decisions replayed, "
+                         "fitted to the heightmaps); search-exact: the same search in a clone of the world (the "
+                         "twins' fidelity bound)")
     ap.add_argument("--rollouts", type=int, default=None, help="rollouts of the search per decision (default --k)")
     ap.add_argument("--k", type=int, default=8, help="candidates of the lookahead rules")
     ap.add_argument("--horizon", type=int, default=None,
@@ -122,10 +125,10 @@ def main():
         print(f"{p}: success {100 * s:.2f} %, objects packed {n:.2f}", flush=True)
     for r in a.rule:
         t = time.perf_counter()
-        rule = {"blbf": None, "search-exact": "search"}.get(r, r)
+        rule = {"blbf": None, "search-exact": "search", "search-job": "search"}.get(r, r)
         s, n = validate(None, a.episodes, a.seed, a.reward, a.boxed,
                         rule=rule, k=a.k, horizon=a.horizon, sequence=a.sequence,
-                        rollouts=a.rollouts, twin="exact" if r == "search-exact" else "heightmap",
+                        rollouts=a.rollouts, twin={"search-exact": "exact", "search-job": "job"}.get(r, "heightmap"),
                         threads=a.threads)
         label = f"{r} (k = {a.k})" if r in ("lookahead", "geo-lookahead") else r
         if rule == "search":

@@ -18,6 +18,8 @@ use crate::heightmap::Heightmap;
 use crate::lattice::{Lattice, Placement};
 use crate::teacher::{CandidateOutcome, rollout_until};
 use crate::world::{PackingWorld, WorldConfig};
+use crate::zestimate::{ZScratch, estimate_z_rotated};
+use rapier3d::math::{Pose, Rotation};
 use std::time::{Duration, Instant};
 
 /// What the search may spend on one decision.
@@ -38,7 +40,51 @@ pub enum TwinKind {
     /// A clone of the evaluation's own world (the lookahead teacher's): the twin's fidelity
     /// bound, for measurements only.
     ExactClone,
+    /// The job's own twin: the objects this search decided in the job, replayed as their hulls
+    /// at the release poses it decided, each moved by the small offset whose settle looks most
+    /// like the heightmap that followed its release ([`JOB_FIT_XY_M`], [`JOB_FIT_YAW_DEG`]).
+    /// Used while it agrees with the latest heightmap ([`JOB_MAX_OFF`]); where it does not (a
+    /// restart, an object skipped or knocked, a box emptied by hand), the heightmap twin.
+    /// Built from what herbd has in a real cell: its own decisions and the camera.
+    Job,
 }
+
+impl TwinKind {
+    /// Every kind, by its name.
+    pub const ALL: [(&'static str, TwinKind); 3] = [
+        ("heightmap", TwinKind::Heightmap),
+        ("exact", TwinKind::ExactClone),
+        ("job", TwinKind::Job),
+    ];
+
+    /// Its name in [`TwinKind::ALL`].
+    pub fn name(self) -> &'static str {
+        Self::ALL
+            .iter()
+            .find(|(_, k)| *k == self)
+            .map_or("?", |(n, _)| n)
+    }
+
+    /// The kind named `name` (`heightmap`, `exact` or `job`; `twin` is the heightmap's old
+    /// name); the error lists the names.
+    pub fn parse(name: &str) -> std::result::Result<Self, String> {
+        let name = if name == "twin" { "heightmap" } else { name };
+        Self::ALL
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|&(_, k)| k)
+            .ok_or_else(|| format!("twin {name:?}: expected heightmap, exact or job"))
+    }
+}
+
+/// Offsets (m) in x and in y of a replayed release that the job's twin tries, each with each.
+pub const JOB_FIT_XY_M: [f32; 5] = [-0.008, -0.004, 0.0, 0.004, 0.008];
+/// Offsets (degrees) of a replayed release's yaw that the job's twin tries.
+pub const JOB_FIT_YAW_DEG: [f32; 3] = [-4.0, 0.0, 4.0];
+/// A cell of the job's twin disagrees with the heightmap when their heights differ by more.
+pub const JOB_CELL_OFF_M: f32 = 0.01;
+/// The job's twin is used while at most this share of the heightmap's cells disagree.
+pub const JOB_MAX_OFF: f32 = 0.2;
 
 /// The search's settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -81,6 +127,33 @@ pub struct SearchReport {
     pub chosen: Option<usize>,
     /// Wall time of the decision.
     pub elapsed: Duration,
+    /// With [`TwinKind::Job`]: how the job's twin compared with the heightmap.
+    pub job: Option<JobAgreement>,
+}
+
+/// How the job's twin compared with the decision's heightmap ([`TwinKind::Job`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JobAgreement {
+    /// Objects in the job's twin.
+    pub objects: usize,
+    /// Mean |twin - heightmap| over the cells (m).
+    pub mean_diff_m: f32,
+    /// Share of the cells off by more than [`JOB_CELL_OFF_M`].
+    pub off: f32,
+    /// The rollouts ran in it (else in the heightmap twin).
+    pub used: bool,
+}
+
+/// The job's twin between decisions ([`TwinKind::Job`]).
+#[derive(Debug, Clone)]
+struct JobTwin {
+    /// The objects released so far, fitted.
+    world: PackingWorld,
+    /// The remaining objects at the last decision: the next decision continues the job when
+    /// its remaining objects are these without the first (that one was released).
+    remaining: Vec<TypeIdx>,
+    /// The release pose decided last.
+    release: Option<(TypeIdx, Pose)>,
 }
 
 /// The search (see the module docs): its lattices and the last decision's report.
@@ -92,6 +165,8 @@ pub struct Search {
     lattice: Lattice,
     rollout: Lattice,
     report: SearchReport,
+    job: Option<JobTwin>,
+    zscratch: ZScratch,
 }
 
 impl Search {
@@ -100,10 +175,12 @@ impl Search {
         Self {
             lattice: Lattice::new(&catalog),
             rollout: Lattice::new(&catalog),
+            zscratch: ZScratch::for_catalog(&catalog, cfg.heightmap_cell_m),
             settings,
             catalog,
             cfg,
             report: SearchReport::default(),
+            job: None,
         }
     }
 
@@ -121,6 +198,12 @@ impl Search {
     /// What the last decision did.
     pub fn report(&self) -> &SearchReport {
         &self.report
+    }
+
+    /// The job's twin, when the last decision's rollouts ran in it ([`TwinKind::Job`]).
+    pub fn job_twin(&self) -> Option<&PackingWorld> {
+        let used = self.report.job.is_some_and(|j| j.used);
+        self.job.as_ref().filter(|_| used).map(|j| &j.world)
     }
 
     /// The placement for `remaining[0]` over `heightmap`, `None` when the lattice holds no
@@ -148,10 +231,14 @@ impl Search {
             Budget::Time(d) => (usize::MAX, Some(t0 + d)),
         };
         let k = self.settings.k.clamp(1, n).min(count);
+        let agreed =
+            self.settings.twin == TwinKind::Job && self.follow_job(heightmap, remaining)?;
         if k > 0 {
             let twin;
-            let world = match (self.settings.twin, exact) {
-                (TwinKind::ExactClone, Some(w)) => w,
+            let job = self.job.as_ref().filter(|_| agreed).map(|j| &j.world);
+            let world = match (self.settings.twin, exact, job) {
+                (TwinKind::ExactClone, Some(w), _) => w,
+                (TwinKind::Job, _, Some(w)) => w,
                 _ => {
                     twin = PackingWorld::twin(self.catalog.clone(), self.cfg.clone(), heightmap)?;
                     &twin
@@ -189,9 +276,117 @@ impl Search {
             })
             .map_or(0, |(c, _)| c);
         self.report.chosen = Some(best);
+        let chosen = self.lattice.candidates()[best];
+        if let Some(job) = &mut self.job {
+            // Where the chosen placement will be released (the world's release pose: z
+            // estimated on this heightmap, plus the clearance), for the next decision's replay.
+            let rot = Rotation::from_rotation_z(chosen.theta()).normalize();
+            let z = estimate_z_rotated(
+                heightmap,
+                self.catalog.shape(next),
+                chosen.x,
+                chosen.y,
+                rot,
+                &mut self.zscratch,
+            ) + self.cfg.clearance_m;
+            job.release = Some((
+                next,
+                Pose::from_parts(rapier3d::math::Vector::new(chosen.x, chosen.y, z), rot),
+            ));
+        }
         self.report.elapsed = t0.elapsed();
-        Ok(Some(self.lattice.candidates()[best]))
+        Ok(Some(chosen))
     }
+
+    /// Brings the job's twin up to `heightmap`; whether it agrees with it (then the rollouts
+    /// run in it). The
+    /// decision continues the job when `remaining` is the last decision's without its first
+    /// object: that object was released where it was decided, and is replayed there, moved by
+    /// the offset that best explains `heightmap`. The same remaining objects again (a pick tried
+    /// again) add nothing; anything else starts a new job from an empty box.
+    fn follow_job(&mut self, heightmap: &Heightmap, remaining: &[TypeIdx]) -> Result<bool> {
+        let continues = |j: &JobTwin| j.remaining.get(1..) == Some(remaining);
+        match self.job.take() {
+            Some(mut j) if continues(&j) => {
+                if let Some((ty, pose)) = j.release.take() {
+                    j.world = fit_release(&j.world, ty, pose, heightmap)?;
+                }
+                self.job = Some(j);
+            }
+            Some(j) if j.remaining == remaining => self.job = Some(j),
+            _ => {
+                self.job = Some(JobTwin {
+                    world: PackingWorld::new(self.catalog.clone(), self.cfg.clone())?,
+                    remaining: Vec::new(),
+                    release: None,
+                })
+            }
+        }
+        let Some(j) = self.job.as_mut() else {
+            return Ok(false);
+        };
+        j.remaining.clear();
+        j.remaining.extend_from_slice(remaining);
+        j.release = None;
+        let (a, b) = (j.world.heightmap().data(), heightmap.data());
+        let (mut sum, mut off) = (0.0f64, 0usize);
+        for (x, y) in a.iter().zip(b) {
+            let d = (x - y).abs();
+            sum += d as f64;
+            off += (d > JOB_CELL_OFF_M) as usize;
+        }
+        let cells = a.len().max(1);
+        let agreement = JobAgreement {
+            objects: j.world.placed().len(),
+            mean_diff_m: (sum / cells as f64) as f32,
+            off: off as f32 / cells as f32,
+            used: off as f32 <= JOB_MAX_OFF * cells as f32,
+        };
+        self.report.job = Some(agreement);
+        Ok(agreement.used)
+    }
+}
+
+/// `world` with `ty` released at `pose` moved by the offset ([`JOB_FIT_XY_M`],
+/// [`JOB_FIT_YAW_DEG`]; no offset first, kept on ties) whose settled heightmap is nearest
+/// `seen` (mean |difference| over the cells).
+fn fit_release(
+    world: &PackingWorld,
+    ty: TypeIdx,
+    pose: Pose,
+    seen: &Heightmap,
+) -> Result<PackingWorld> {
+    let diff = |w: &PackingWorld| -> f64 {
+        w.heightmap()
+            .data()
+            .iter()
+            .zip(seen.data())
+            .map(|(a, b)| (a - b).abs() as f64)
+            .sum()
+    };
+    let mut best = world.clone();
+    best.place_pose(ty, pose)?;
+    let mut best_diff = diff(&best);
+    for dyaw in JOB_FIT_YAW_DEG {
+        for dx in JOB_FIT_XY_M {
+            for dy in JOB_FIT_XY_M {
+                if dx == 0.0 && dy == 0.0 && dyaw == 0.0 {
+                    continue;
+                }
+                let mut moved = pose;
+                moved.translation.x += dx;
+                moved.translation.y += dy;
+                moved.rotation = Rotation::from_rotation_z(dyaw.to_radians()) * pose.rotation;
+                let mut w = world.clone();
+                w.place_pose(ty, moved)?;
+                let d = diff(&w);
+                if d < best_diff {
+                    (best, best_diff) = (w, d);
+                }
+            }
+        }
+    }
+    Ok(best)
 }
 
 impl crate::eval::Placer for Search {
@@ -200,10 +395,7 @@ impl crate::eval::Placer for Search {
             Budget::Rollouts(r) => format!("{r} rollouts"),
             Budget::Time(d) => format!("{:.2} s", d.as_secs_f64()),
         };
-        let twin = match self.settings.twin {
-            TwinKind::Heightmap => "twin",
-            TwinKind::ExactClone => "exact clone",
-        };
+        let twin = self.settings.twin.name();
         format!("search ({budget}, {twin})")
     }
 

@@ -357,7 +357,11 @@ fn release_noise_moves_releases_reproducibly_and_none_changes_nothing() {
     for p in [pa, pc] {
         let off = ((p[0] - 0.1).powi(2) + p[1].powi(2)).sqrt();
         assert!(off > 0.0 && off < 0.03, "offset {off} m ({p:?})");
-        assert!(p[2].abs() < 18f32.to_radians(), "yaw {} deg", p[2].to_degrees());
+        assert!(
+            p[2].abs() < 18f32.to_radians(),
+            "yaw {} deg",
+            p[2].to_degrees()
+        );
     }
     // A bad noise setting names its field.
     let e = PackingEnv::new(

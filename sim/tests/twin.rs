@@ -164,3 +164,98 @@ fn a_frozen_world_keeps_its_objects_where_they_are_when_another_settles_among_th
     );
     assert!(w.physics().bodies[w.placed()[before.len()].body].is_dynamic());
 }
+
+/// Packs `ids` in an environment with release noise `(mm, deg)`, deciding with the search in
+/// its `twin` (3 candidates, 3 rollouts): each decision's placement and report.
+fn pack_with(
+    c: &SharedCatalog,
+    ids: &[&str],
+    twin: TwinKind,
+    noise: (f32, f32),
+) -> Vec<(herb_sim::lattice::Placement, herb_sim::search::SearchReport)> {
+    let cfg = WorldConfig {
+        release_noise_m: noise.0 * 1e-3,
+        release_noise_deg: noise.1,
+        ..WorldConfig::default()
+    };
+    let mut env = herb_sim::PackingEnv::new(c.clone(), cfg, RewardMode::Simple).unwrap();
+    env.reset_ids(ids, 1).unwrap();
+    let settings = SearchSettings {
+        k: 3,
+        budget: Budget::Rollouts(3),
+        horizon: Some(3),
+        reward: RewardMode::cs(0.6).unwrap(),
+        twin,
+    };
+    let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
+    let mut out = Vec::new();
+    while env.next_object().is_some() {
+        let exact = (twin == TwinKind::ExactClone).then(|| env.world());
+        let Some(p) = s
+            .decide(env.world().heightmap(), env.remaining(), exact)
+            .unwrap()
+        else {
+            break;
+        };
+        out.push((p, s.report().clone()));
+        let d = herb_sim::eval::release_at(&mut env, Some(p)).unwrap();
+        if herb_sim::eval::apply(&mut env, d).unwrap().terminated {
+            break;
+        }
+    }
+    out
+}
+
+#[test]
+fn the_jobs_twin_replays_its_decisions_and_falls_back_where_the_heightmap_disagrees() {
+    let c = common::primitives();
+    let ids = ["003", "005", "013", "007", "011", "004"];
+    // Without release noise the world is the job twin's model: it replays the world exactly
+    // (no cell differs) and the search decides as in the exact clone.
+    let job = pack_with(&c, &ids, TwinKind::Job, (0.0, 0.0));
+    let clone = pack_with(&c, &ids, TwinKind::ExactClone, (0.0, 0.0));
+    assert!(job.len() >= 4, "{} decisions", job.len());
+    for (i, ((pj, rj), (pe, _))) in job.iter().zip(&clone).enumerate() {
+        let a = rj.job.expect("the job's twin compared");
+        assert_eq!(a.objects, i, "one object replayed a decision");
+        assert!(a.used && a.mean_diff_m == 0.0 && a.off == 0.0, "{i}: {a:?}");
+        assert_eq!(pj, pe, "{i}: the exact clone's choice");
+    }
+    // With noise it is fitted, not exact, and still used while it agrees.
+    let noisy = pack_with(&c, &ids, TwinKind::Job, (5.0, 3.0));
+    let last = noisy.last().unwrap().1.job.unwrap();
+    assert!(last.objects > 0 && last.mean_diff_m > 0.0, "{last:?}");
+    // A box it did not fill (a restart, a box filled by hand): the heightmap disagrees, so the
+    // rollouts run in the heightmap twin, and the decision is the heightmap twin's.
+    let world = exact(&c);
+    let remaining: Vec<_> = ["006", "010"].map(|i| c.by_id(i).unwrap()).to_vec();
+    let settings = |twin| SearchSettings {
+        k: 3,
+        budget: Budget::Rollouts(3),
+        horizon: None,
+        reward: RewardMode::cs(0.6).unwrap(),
+        twin,
+    };
+    let mut s = Search::new(c.clone(), WorldConfig::default(), settings(TwinKind::Job));
+    let p = s.decide(world.heightmap(), &remaining, None).unwrap();
+    let a = s.report().job.unwrap();
+    assert!(!a.used && a.objects == 0 && a.off > 0.0, "{a:?}");
+    assert!(s.job_twin().is_none());
+    let mut h = Search::new(
+        c.clone(),
+        WorldConfig::default(),
+        settings(TwinKind::Heightmap),
+    );
+    assert_eq!(p, h.decide(world.heightmap(), &remaining, None).unwrap());
+    // Names.
+    for (name, kind) in TwinKind::ALL {
+        assert_eq!(TwinKind::parse(name), Ok(kind));
+        assert_eq!(kind.name(), name);
+    }
+    assert_eq!(TwinKind::parse("twin"), Ok(TwinKind::Heightmap));
+    assert!(
+        TwinKind::parse("clone")
+            .unwrap_err()
+            .contains("heightmap, exact or job")
+    );
+}

@@ -151,10 +151,12 @@ struct EvalArgs {
     /// Objects per search rollout, the candidate's included (to the job's end when absent).
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     search_horizon: Option<u64>,
-    /// The world the search's rollouts run in: `twin` (built from the heightmap, as in a real
-    /// cell) or `exact` (a clone of the evaluation's world: the twin's fidelity bound).
-    #[arg(long, default_value = "twin", value_parser = ["twin", "exact"])]
-    search_world: String,
+    /// The world the search's rollouts run in: `heightmap` (the twin built from the heightmap;
+    /// `twin` is its old name), `job` (the job's own twin: the search's decisions replayed and
+    /// fitted to the heightmaps, the heightmap twin where they disagree) or `exact` (a clone of
+    /// the evaluation's world: the twins' fidelity bound).
+    #[arg(long, default_value = "heightmap", value_parser = TwinKind::parse)]
+    search_world: TwinKind,
     /// Release noise of the evaluation's world, `MM,DEG`: each object is released off the pose
     /// its method decided by normal noise of these standard deviations in x and y (mm) and in
     /// yaw (degrees), as a real gripper does; seeded by the episode's seed. The search's twin is
@@ -414,10 +416,7 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
             },
             horizon: a.search_horizon.map(|h| h as usize),
             reward: lookahead_reward,
-            twin: match a.search_world.as_str() {
-                "exact" => TwinKind::ExactClone,
-                _ => TwinKind::Heightmap,
-            },
+            twin: a.search_world,
         },
         world: cfg.clone(),
     };
@@ -462,7 +461,11 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
                     Some(s) => format!("{s} s"),
                     None => format!("{} rollouts", a.search_rollouts),
                 };
-                format!("search ({budget}, k = {}, {})", a.search_k, a.search_world)
+                format!(
+                    "search ({budget}, k = {}, {})",
+                    a.search_k,
+                    a.search_world.name()
+                )
             }
             (Method::Lookahead, _) => {
                 let horizon = a

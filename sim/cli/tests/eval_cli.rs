@@ -173,14 +173,7 @@ fn release_noise_is_said_in_the_table_and_bad_noise_is_refused() {
     let (table, _) = eval_into(
         &root,
         &dir,
-        &[
-            "--method",
-            "blbf",
-            "--release-noise",
-            "5,3",
-            "--limit",
-            "1",
-        ],
+        &["--method", "blbf", "--release-noise", "5,3", "--limit", "1"],
     );
     assert!(
         table.contains("release noise (every row)") && table.contains("sd 5 mm"),

@@ -2,7 +2,7 @@
 //! figures are in docs/search.md).
 //!
 //!     cargo run --release -p herb-methods --example twin_fidelity -- \
-//!         [EPISODES] [SEED] [THREADS] [twin|frozen|replay|replayfit|exact|blbf] [NOISE_MM] [NOISE_DEG]
+//!         [EPISODES] [SEED] [THREADS] [twin|frozen|job|exact|blbf] [NOISE_MM] [NOISE_DEG]
 //!
 //! What packs (and is compared with the exact clone at each decision):
 //!
@@ -10,18 +10,17 @@
 //! - `frozen`: the search in a clone of the world whose objects are made fixed
 //!   ([`PackingWorld::freeze_placed`]): the twin's rigid pile with the objects' exact shapes, to
 //!   tell what the pile's shape costs from what its rigidity costs;
-//! - `replay`: the search in a world where the job's objects are replayed at their decided
-//!   release poses (what herbd knows of its own job), without looking at the heightmap;
-//! - `replayfit`: as `replay`, each replayed release then moved by the offset (of 5 x 5 x 3:
-//!   x and y within 8 mm, yaw within 4 deg) whose settled heightmap is nearest the world's;
+//! - `job`: the search in the job's own twin (`TwinKind::Job`: its decisions replayed, each
+//!   fitted to the heightmap that followed it);
 //! - `exact`: the search in the exact clone itself (the bound);
 //! - `blbf`: no rollout, the prior's first (lattice BLBF).
 //!
-//! `NOISE_MM`, `NOISE_DEG` (default 0): the world's release noise (`WorldConfig::
-//! release_noise_m`, `release_noise_deg`, as `herb-sim eval --release-noise MM,DEG`): each
-//! object released off its decided pose by normal noise of these standard deviations in x and
-//! y, and in yaw (seeded by the episode's index: runs reproduce); the twins are not told. Without noise the world is the twins'
-//! model exactly, and `replay` is the exact clone.
+//! `NOISE_MM`, `NOISE_DEG` (default 0): the world's release noise
+//! (`WorldConfig::release_noise_m`, `release_noise_deg`, as `herb-sim eval --release-noise
+//! MM,DEG`): each object released off its decided pose by normal noise of these standard
+//! deviations in x and y, and in yaw (seeded by the episode's index: runs reproduce); the twins
+//! are not told. Without noise the world is the twins' model exactly, and the job's twin
+//! replays it exactly.
 //!
 //! The episodes are `training/validate.py`'s (the bindings' sampler: 10 to 25 random catalog
 //! objects in HERB's order, one generator per episode seeded from `SEED`, default 777). Each is
@@ -77,10 +76,12 @@ struct Tally {
     exact_best_ok: usize,
     twin_choice_ok: usize,
     success_first_ok: usize,
-    /// Replay mode: heightmap cells compared, sum of |replay - world| (m), cells off by > 10 mm.
-    cells: usize,
-    cell_diff: f64,
-    cells_off: usize,
+    /// Job mode: decisions, those whose rollouts ran in the job's twin, sums of its mean
+    /// |height difference| to the heightmap (m) and of its share of cells off.
+    job_decisions: usize,
+    job_used: usize,
+    job_diff: f64,
+    job_off: f64,
     /// Rollouts by (twin succeeds, exact succeeds).
     rollouts: [[usize; 2]; 2],
     /// First placements, those both call stable or both unstable, sum of |tilt difference|.
@@ -93,9 +94,10 @@ struct Tally {
 
 impl Tally {
     fn add(&mut self, o: Tally) {
-        self.cells += o.cells;
-        self.cell_diff += o.cell_diff;
-        self.cells_off += o.cells_off;
+        self.job_decisions += o.job_decisions;
+        self.job_used += o.job_used;
+        self.job_diff += o.job_diff;
+        self.job_off += o.job_off;
         self.episodes += o.episodes;
         self.success += o.success;
         self.decisions += o.decisions;
@@ -152,28 +154,12 @@ enum Mode {
     Twin,
     /// A clone of the world with its objects fixed.
     Frozen,
-    /// The objects replayed at their decided release poses in an empty world (what herbd knows
-    /// of its own job), while the world releases them with noise.
-    Replay,
-    /// As `Replay`, each release pose then fitted to the world's heightmap after the release.
-    ReplayFit,
+    /// The job's own twin (`TwinKind::Job`).
+    Job,
     /// A clone of the world itself (the exact clone) packs.
     Exact,
     /// No rollout: the prior's first (lattice BLBF) packs.
     Blbf,
-}
-
-/// Offsets of a replayed release tried by the fit: x and y (m), yaw (rad).
-const FIT_XY_M: [f32; 5] = [-0.008, -0.004, 0.0, 0.004, 0.008];
-const FIT_YAW_DEG: [f32; 3] = [-4.0, 0.0, 4.0];
-
-/// Mean |a - b| over the cells.
-fn mean_diff(a: &[f32], b: &[f32]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).abs() as f64)
-        .sum::<f64>()
-        / a.len().max(1) as f64
 }
 
 /// Packs `episode` with the twin's search, comparing it with the exact clone at each decision.
@@ -186,7 +172,6 @@ fn probe(
     t: &mut Tally,
 ) -> Result<(), Error> {
     let cfg = WorldConfig::default();
-    let mut replay = PackingWorld::new(catalog.clone(), cfg.clone())?;
     let mut env = PackingEnv::new(catalog.clone(), noisy.clone(), REWARD)?;
     env.reset(episode, seed)?;
     let mut lattice = Lattice::new(catalog);
@@ -197,10 +182,10 @@ fn probe(
         reward: REWARD,
         twin,
     };
-    let kind = if !matches!(mode, Mode::Twin | Mode::Blbf) {
-        TwinKind::ExactClone
-    } else {
-        TwinKind::Heightmap
+    let kind = match mode {
+        Mode::Twin | Mode::Blbf => TwinKind::Heightmap,
+        Mode::Job => TwinKind::Job,
+        Mode::Frozen | Mode::Exact => TwinKind::ExactClone,
     };
     let mut search_twin = Search::new(catalog.clone(), cfg.clone(), settings(kind));
     if mode == Mode::Blbf {
@@ -216,20 +201,33 @@ fn probe(
         if cands.is_empty() {
             break;
         }
-        // The twin the search rolls out in, or the frozen clone standing for it.
-        let frozen_world = match mode {
+        // The search itself, in its twin (or the clone standing for it) and in the exact
+        // clone: every candidate's rollout and the choice are its own.
+        let given = match mode {
             Mode::Frozen => {
                 let mut w = env.world().clone();
                 w.freeze_placed();
                 Some(w)
             }
-            Mode::Replay | Mode::ReplayFit => Some(replay.clone()),
             Mode::Exact => Some(env.world().clone()),
-            Mode::Twin | Mode::Blbf => None,
+            Mode::Twin | Mode::Blbf | Mode::Job => None,
         };
-        let twin = match &frozen_world {
-            Some(w) => w.clone(),
-            None => PackingWorld::twin(catalog.clone(), cfg.clone(), env.world().heightmap())?,
+        let heightmap = env.world().heightmap();
+        let p = search_twin
+            .decide(heightmap, &remaining, given.as_ref())?
+            .ok_or("the lattice's candidates went missing")?;
+        search_exact.decide(heightmap, &remaining, Some(env.world()))?;
+        if let Some(j) = search_twin.report().job {
+            t.job_decisions += 1;
+            t.job_used += j.used as usize;
+            t.job_diff += j.mean_diff_m as f64;
+            t.job_off += j.off as f64;
+        }
+        // The world the search rolled out in, each candidate placed once there and in the
+        // world.
+        let twin = match (&given, search_twin.job_twin()) {
+            (Some(w), _) | (None, Some(w)) => w.clone(),
+            _ => PackingWorld::twin(catalog.clone(), cfg.clone(), heightmap)?,
         };
         for &c in &cands {
             let (mut a, mut b) = (env.world().clone(), twin.clone());
@@ -241,13 +239,6 @@ fn probe(
             t.stable_alike += (oa.stable == ob.stable) as usize;
             t.tilt_diff += (oa.tilt_rad - ob.tilt_rad).abs() as f64;
         }
-        // The search itself, in the twin (or the frozen clone) and in the exact clone: every
-        // candidate's rollout and the choice are its own.
-        let heightmap = env.world().heightmap();
-        let p = search_twin
-            .decide(heightmap, &remaining, frozen_world.as_ref())?
-            .ok_or("the lattice's candidates went missing")?;
-        search_exact.decide(heightmap, &remaining, Some(env.world()))?;
         let outcomes = |s: &Search| -> Vec<CandidateOutcome> {
             s.report().finished.iter().map(|(_, o)| *o).collect()
         };
@@ -277,52 +268,11 @@ fn probe(
         t.exact_best_ok += exact[exact_best].success as usize;
         t.twin_choice_ok += exact[chosen].success as usize;
         t.success_first_ok += exact[success_first].success as usize;
-        // The world releases at the decided pose (plus its release noise); the replay at the
-        // decided pose.
+        // Released at the world's release pose, plus the world's release noise.
         let rot = rapier3d::math::Rotation::from_rotation_z(p.theta());
         let decided = env.world_mut().release_pose(next, p.x, p.y, rot);
-        let before = replay.clone();
-        if matches!(mode, Mode::Replay | Mode::ReplayFit) {
-            replay.place_pose(next, decided)?;
-        }
         let r = env.step_pose(decided)?;
         let (terminated, ok) = (r.terminated, r.info.success);
-        if mode == Mode::ReplayFit {
-            // The release offset whose replay looks most like the world's heightmap.
-            let seen = env.world().heightmap().data();
-            let mut best = mean_diff(replay.heightmap().data(), seen);
-            for dyaw in FIT_YAW_DEG {
-                for dx in FIT_XY_M {
-                    for dy in FIT_XY_M {
-                        if dx == 0.0 && dy == 0.0 && dyaw == 0.0 {
-                            continue;
-                        }
-                        let mut pose = decided;
-                        pose.translation.x += dx;
-                        pose.translation.y += dy;
-                        pose.rotation =
-                            rapier3d::math::Rotation::from_rotation_z(dyaw.to_radians())
-                                * decided.rotation;
-                        let mut w = before.clone();
-                        w.place_pose(next, pose)?;
-                        let d = mean_diff(w.heightmap().data(), seen);
-                        if d < best {
-                            best = d;
-                            replay = w;
-                        }
-                    }
-                }
-            }
-        }
-        if matches!(mode, Mode::Replay | Mode::ReplayFit) {
-            let (a, b) = (replay.heightmap().data(), env.world().heightmap().data());
-            for (x, y) in a.iter().zip(b) {
-                let d = (x - y).abs();
-                t.cells += 1;
-                t.cell_diff += d as f64;
-                t.cells_off += (d > 0.01) as usize;
-            }
-        }
         if terminated {
             success = ok;
             break;
@@ -350,12 +300,11 @@ fn main() -> Result<(), Error> {
     let mode = match std::env::args().nth(4).as_deref() {
         None | Some("twin") => Mode::Twin,
         Some("frozen") => Mode::Frozen,
-        Some("replay") => Mode::Replay,
-        Some("replayfit") => Mode::ReplayFit,
+        Some("job") => Mode::Job,
         Some("exact") => Mode::Exact,
         Some("blbf") => Mode::Blbf,
         Some(other) => {
-            return Err(format!("argument 4 ({other:?}): twin, frozen or replay").into());
+            return Err(format!("argument 4 ({other:?}): twin, frozen, job, exact or blbf").into());
         }
     };
     let noisy = WorldConfig {
@@ -429,12 +378,16 @@ fn main() -> Result<(), Error> {
         tt + tf + ft + ff,
         pct(tt + ff, tt + tf + ft + ff)
     );
-    if matches!(mode, Mode::Replay | Mode::ReplayFit) {
+    if mode == Mode::Job {
+        let n = t.job_decisions.max(1) as f64;
         println!(
-            "replay against the world after each release: mean |height difference| {:.2} mm, \
-             cells off by more than 10 mm {:.2} %",
-            1e3 * t.cell_diff / t.cells.max(1) as f64,
-            pct(t.cells_off, t.cells)
+            "the job's twin against the heightmap at each decision: mean |height difference| \
+             {:.2} mm, cells off by more than 10 mm {:.2} %; rollouts ran in it in {:.1} % of {} \
+             decisions (else in the heightmap twin)",
+            1e3 * t.job_diff / n,
+            100.0 * t.job_off / n,
+            pct(t.job_used, t.job_decisions),
+            t.job_decisions
         );
     }
     for (why, count) in &t.reasons {

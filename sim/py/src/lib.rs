@@ -696,15 +696,7 @@ impl VecEnv {
         if horizon == Some(0) {
             return Err(value_err("horizon 0: need at least 1 object"));
         }
-        let twin = match twin {
-            "heightmap" => TwinKind::Heightmap,
-            "exact" => TwinKind::ExactClone,
-            _ => {
-                return Err(value_err(format!(
-                    "twin {twin:?}: expected heightmap or exact"
-                )));
-            }
-        };
+        let twin = TwinKind::parse(twin).map_err(value_err)?;
         let search_settings = SearchSettings {
             k,
             budget: Budget::Rollouts(rollouts.unwrap_or(k)),

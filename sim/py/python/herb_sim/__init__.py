@@ -115,8 +115,9 @@ class HerbVectorEnv(gym.vector.VectorEnv):
         Rust (``lattice-blbf``, ``lattice-reserve``, or ``lookahead`` or ``geo-lookahead`` with
         ``k`` candidates; ``horizon`` limits the rollouts to that many objects) or with the
         decision-time ``search`` (``k`` candidates, ``rollouts`` rollouts, default ``k``, in a
-        ``twin`` built from the heightmap, ``"heightmap"``, or a clone of the world,
-        ``"exact"``); returns as ``step``. See ``VecEnv.step_rule``."""
+        ``twin`` built from the heightmap, ``"heightmap"``, the job's own twin (its decisions
+        replayed, fitted to the heightmaps), ``"job"``, or a clone of the world, ``"exact"``);
+        returns as ``step``. See ``VecEnv.step_rule``."""
         if active is not None:
             active = np.ascontiguousarray(active, dtype=bool)
         obs, reward, terminated, info = self._env.step_rule(rule, k, active, horizon, rollouts, twin)
