@@ -157,6 +157,19 @@ pub enum DecisionMethod {
     Search,
 }
 
+/// The world the search's rollouts run in ([`herb_sim::search::TwinKind`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DecisionTwin {
+    /// A twin built from the latest heightmap alone: the pile as static cuboids.
+    #[default]
+    Heightmap,
+    /// The job's own twin: the objects herbd decided in the job replayed at their release
+    /// poses, each fitted to the heightmap that followed it; the heightmap twin whenever it
+    /// disagrees with the latest heightmap (a restart, a skipped or knocked object).
+    Job,
+}
+
 /// The decision worker ([`crate::decision`]): it decides while the arm picks.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -170,6 +183,8 @@ pub struct DecisionConfig {
     pub k: usize,
     /// Objects per rollout, the candidate's included (0: to the job's end).
     pub horizon: usize,
+    /// The world the search's rollouts run in.
+    pub twin: DecisionTwin,
     /// A decision not back this long after it was asked for (s) faults the job (`Decision`):
     /// a hung worker never holds the arm.
     pub timeout_s: f64,
@@ -182,6 +197,7 @@ impl Default for DecisionConfig {
             budget_s: 1.0,
             k: 8,
             horizon: 0,
+            twin: DecisionTwin::Heightmap,
             timeout_s: 10.0,
         }
     }
@@ -467,6 +483,7 @@ mod tests {
             ("[decision]\nbudget_s = nan\n", "decision.budget_s"),
             ("[decision]\nk = 0\n", "decision.k"),
             ("[decision]\nk = 65\n", "decision.k"),
+            ("[decision]\ntwin = \"exact\"\n", "twin"),
             ("[decision]\nhorizon = 65\n", "decision.horizon"),
             (
                 "[decision]\nbudget_s = 5.0\ntimeout_s = 2.0\n",

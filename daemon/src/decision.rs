@@ -14,7 +14,7 @@
 //! A method that panics answers `Decision` (the job faults with that reason; the worker goes
 //! on); one that hangs is caught by the job machine's `decision.timeout_s`.
 
-use crate::config::{Config, DecisionMethod};
+use crate::config::{Config, DecisionMethod, DecisionTwin};
 use crate::plan::{DecisionRequest, DecisionResponse, NOT_A_SEARCH};
 use crate::planner::PlannerError;
 use herb_core::observation::placement_to_action;
@@ -27,7 +27,7 @@ use herb_ipc::{
     Services,
 };
 use herb_sim::WorldConfig;
-use herb_sim::search::{Budget, Search, SearchReport, SearchSettings};
+use herb_sim::search::{Budget, Search, SearchReport, SearchSettings, TwinKind};
 use iceoryx2::prelude::ipc;
 use iceoryx2::sample::Sample;
 use std::sync::Arc;
@@ -127,6 +127,10 @@ impl DecisionCore {
                     k: d.k,
                     budget,
                     horizon: (d.horizon > 0).then_some(d.horizon),
+                    twin: match d.twin {
+                        DecisionTwin::Heightmap => TwinKind::Heightmap,
+                        DecisionTwin::Job => TwinKind::Job,
+                    },
                     ..SearchSettings::default()
                 };
                 let policy = Box::new(SearchPolicy::new(catalog.clone(), settings));

@@ -168,3 +168,28 @@ fn a_job_whose_rest_cannot_fit_the_twin_still_gets_a_feasible_placement() {
         "no rollout fits them all"
     );
 }
+
+#[test]
+fn the_jobs_twin_follows_the_job_and_falls_back_on_a_box_it_did_not_fill() {
+    let c = catalog();
+    let mut cfg = config(DecisionMethod::Search, 0.0);
+    cfg.decision.twin = herb_daemon::config::DecisionTwin::Job;
+    let mut core = DecisionCore::new(&cfg, c.clone()).unwrap();
+    // An empty box: the job's twin (no object yet) agrees with it.
+    let d = core.decide(&request(&[5, 9, 11]), &frame(0.0), None);
+    assert!(d.outcome.is_ok(), "{d:?}");
+    let j = core
+        .search_report()
+        .unwrap()
+        .job
+        .expect("the job's twin compared");
+    assert!(j.used && j.objects == 0, "{j:?}");
+    // The next decision of the job, on a box holding a block the job never placed: its one
+    // replayed object does not explain it, so the rollouts run in the heightmap twin.
+    let mut next = request(&[5, 9, 11]);
+    next.index = 1;
+    let d = core.decide(&next, &frame(0.04), None);
+    assert!(d.outcome.is_ok(), "{d:?}");
+    let j = core.search_report().unwrap().job.unwrap();
+    assert!(j.objects == 1 && !j.used && j.off > 0.2, "{j:?}");
+}
