@@ -6,7 +6,8 @@
 # folder (DEMO_OUT, default runs/demo-<time>), never over committed files. DEMO_BIN names a
 # folder of binaries already built (the tests run this script so, with cargo test's) instead.
 # DEMO_DECISION=search makes herbd decide by searching ([decision] method = "search", its 1 s
-# budget) instead of its default policy.
+# budget) instead of its default policy; DEMO_DECISION=search-job searches in the job's own twin
+# ([decision] twin = "job").
 # DEMO_VIEW=web also serves the live 3D view (python -m herb_client.view) on localhost:9090 and
 # opens it in a browser; DEMO_VIEW=save records it into the run folder (job.rrd) instead. The
 # view needs the Python client with Rerun: the test command's virtualenv (.venv, or HERB_VENV),
@@ -32,7 +33,11 @@ case "${DEMO_DECISION:-}" in
     printf '[decision]\nmethod = "search"\n' > "$OUT/herbd.toml"
     HERBD_ARGS=(--config "$OUT/herbd.toml")
     ;;
-  *) echo "DEMO_DECISION=$DEMO_DECISION: expected policy or search" >&2; exit 2 ;;
+  search-job)
+    printf '[decision]\nmethod = "search"\ntwin = "job"\n' > "$OUT/herbd.toml"
+    HERBD_ARGS=(--config "$OUT/herbd.toml")
+    ;;
+  *) echo "DEMO_DECISION=$DEMO_DECISION: expected policy, search or search-job" >&2; exit 2 ;;
 esac
 "$BIN/herbd" --prefix "$P" "${HERBD_ARGS[@]}" > "$OUT/demo-herbd.json" 2> "$OUT/demo-herbd.log" &
 HD=$!

@@ -13,7 +13,7 @@
 
 use crate::catalog::{SharedCatalog, TypeIdx};
 use crate::env::{PackingEnv, RewardMode};
-use crate::error::Result;
+use crate::error::{Result, SimError};
 use crate::heightmap::Heightmap;
 use crate::lattice::{Lattice, Placement};
 use crate::teacher::{CandidateOutcome, rollout_until};
@@ -67,13 +67,15 @@ impl TwinKind {
 
     /// The kind named `name` (`heightmap`, `exact` or `job`; `twin` is the heightmap's old
     /// name); the error lists the names.
-    pub fn parse(name: &str) -> std::result::Result<Self, String> {
+    pub fn parse(name: &str) -> Result<Self> {
         let name = if name == "twin" { "heightmap" } else { name };
         Self::ALL
             .iter()
             .find(|(n, _)| *n == name)
             .map(|&(_, k)| k)
-            .ok_or_else(|| format!("twin {name:?}: expected heightmap, exact or job"))
+            .ok_or_else(|| {
+                SimError::Config(format!("twin {name:?}: expected heightmap, exact or job"))
+            })
     }
 }
 
