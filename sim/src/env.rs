@@ -227,12 +227,10 @@ impl PackingEnv {
     /// estimate): the humans' recorded poses, or a gripper's. With release noise, at that pose
     /// moved by the noise.
     pub fn step_pose(&mut self, pose: Pose) -> Result<StepResult<'_>> {
-        let t = pose.translation;
-        let pose = self.draw_noise().map_or(pose, |n| n.apply(pose));
-        self.step_with(
-            |w, object| w.place_pose(object, pose),
-            (t.x, t.y, crate::frames::yaw_of(pose.rotation)),
-        )
+        // The step reports the pose given; the world gets it moved by the noise.
+        let (t, yaw) = (pose.translation, crate::frames::yaw_of(pose.rotation));
+        let released = self.draw_noise().map_or(pose, |n| n.apply(pose));
+        self.step_with(|w, object| w.place_pose(object, released), (t.x, t.y, yaw))
     }
 
     /// The next release's noise, `None` without noise (nothing drawn).

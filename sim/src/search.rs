@@ -45,7 +45,9 @@ pub enum TwinKind {
     /// like the heightmap that followed its release ([`JOB_FIT_XY_M`], [`JOB_FIT_YAW_DEG`]).
     /// Used while it agrees with the latest heightmap ([`JOB_MAX_OFF`]); where it does not (a
     /// restart, an object skipped or knocked, a box emptied by hand), the heightmap twin.
-    /// Built from what herbd has in a real cell: its own decisions and the camera.
+    /// Built from what herbd has in a real cell: its own decisions and the camera. The fit runs
+    /// at every decision whatever the budget (75 settles of one object), so that the twin
+    /// follows the job.
     Job,
 }
 
