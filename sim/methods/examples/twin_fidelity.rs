@@ -313,7 +313,6 @@ fn main() -> Result<(), Error> {
         ..WorldConfig::default()
     };
     noisy.validate()?;
-    let frozen = mode == Mode::Frozen;
     let root = paths::boxed_root(None);
     let catalog: SharedCatalog = Arc::new(Catalog::builtin(&paths::mesh_source(
         None,
@@ -356,13 +355,17 @@ fn main() -> Result<(), Error> {
     let pct = |a: usize, b: usize| 100.0 * a as f64 / b.max(1) as f64;
     let [[ff, ft], [tf, tt]] = t.rollouts;
     println!(
-        "{} episodes (seed {seed}), {}, {:.0} s: its search packs {:.2} %",
+        "{} episodes (seed {seed}), {}, release noise {} mm / {} deg, {:.0} s: packs {:.2} %",
         t.episodes,
-        if frozen {
-            "a frozen clone as the twin"
-        } else {
-            "the twin"
+        match mode {
+            Mode::Twin => "the search in the heightmap twin",
+            Mode::Frozen => "the search in a frozen clone",
+            Mode::Job => "the search in the job's twin",
+            Mode::Exact => "the search in the exact clone",
+            Mode::Blbf => "BLBF (no rollout)",
         },
+        1e3 * noisy.release_noise_m,
+        noisy.release_noise_deg,
         t0.elapsed().as_secs_f64(),
         pct(t.success, t.episodes)
     );
