@@ -104,7 +104,7 @@ def test_step_rule_steps_only_the_active_environments():
 def test_step_rule_search_places_through_the_twin_and_the_exact_clone():
     # The decision-time search through the bindings: each twin places the first object of
     # every environment, and a bad twin name is a clear error.
-    for twin in ("heightmap", "exact"):
+    for twin in ("heightmap", "job", "exact"):
         v = herb_sim.HerbVectorEnv(2, reward="simple", seed=5, threads=2, **FAST)
         v.reset(seed=5)
         _, rew, term, _, info = v.step_rule("search", k=2, rollouts=2, horizon=2, twin=twin)
