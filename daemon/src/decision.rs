@@ -375,6 +375,19 @@ impl Worker {
             return no_fresh_frame(&r);
         };
         let d = self.core.decide_guarded(&r, frame, None);
+        // With the job's twin, whether the rollouts ran in it (this thread may format).
+        if let Some(j) = self.core.search_report().and_then(|s| s.job) {
+            crate::logfmt::log(
+                "job_twin",
+                &[
+                    ("index", &r.index),
+                    ("objects", &j.objects),
+                    ("used", &j.used),
+                    ("mean_diff_mm", &format_args!("{:.2}", 1e3 * j.mean_diff_m)),
+                    ("cells_off_pct", &format_args!("{:.2}", 100.0 * j.off)),
+                ],
+            );
+        }
         let mut report = self.core.report(&d);
         self.seq += 1;
         report.header = Header::now(self.seq);
