@@ -104,7 +104,7 @@ pub struct StepResult<'a> {
 /// Seeds the release noise's generator (with the episode's seed).
 const NOISE_SEED: u64 = 0x6e6f_6973_6521;
 
-/// One release's offset off the pose it was given (release noise).
+/// One release's offset off the pose it was given (release noise): x, y (m), yaw (rad).
 #[derive(Debug, Clone, Copy)]
 struct ReleaseOffset {
     dx: f32,
@@ -113,12 +113,8 @@ struct ReleaseOffset {
 }
 
 impl ReleaseOffset {
-    /// `pose` moved by the offset: x and y in B, yaw about B z.
-    fn apply(self, mut pose: Pose) -> Pose {
-        pose.translation.x += self.dx;
-        pose.translation.y += self.dy;
-        pose.rotation = Rotation::from_rotation_z(self.dyaw) * pose.rotation;
-        pose
+    fn apply(self, pose: Pose) -> Pose {
+        crate::world::offset_pose(pose, self.dx, self.dy, self.dyaw)
     }
 }
 

@@ -17,8 +17,8 @@ use crate::error::{Result, SimError};
 use crate::heightmap::Heightmap;
 use crate::lattice::{Lattice, Placement};
 use crate::teacher::{CandidateOutcome, rollout_until};
-use crate::world::{PackingWorld, WorldConfig};
-use crate::zestimate::{ZScratch, estimate_z_rotated};
+use crate::world::{PackingWorld, WorldConfig, offset_pose, release_pose_on};
+use crate::zestimate::ZScratch;
 use rapier3d::math::{Pose, Rotation};
 use std::time::{Duration, Instant};
 
@@ -284,19 +284,18 @@ impl Search {
         if let Some(job) = &mut self.job {
             // Where the chosen placement will be released (the world's release pose: z
             // estimated on this heightmap, plus the clearance), for the next decision's replay.
-            let rot = Rotation::from_rotation_z(chosen.theta()).normalize();
-            let z = estimate_z_rotated(
+            let pose = release_pose_on(
                 heightmap,
                 self.catalog.shape(next),
-                chosen.x,
-                chosen.y,
-                rot,
+                (
+                    chosen.x,
+                    chosen.y,
+                    Rotation::from_rotation_z(chosen.theta()),
+                ),
+                self.cfg.clearance_m,
                 &mut self.zscratch,
-            ) + self.cfg.clearance_m;
-            job.release = Some((
-                next,
-                Pose::from_parts(rapier3d::math::Vector::new(chosen.x, chosen.y, z), rot),
-            ));
+            );
+            job.release = Some((next, pose));
         }
         self.report.elapsed = t0.elapsed();
         Ok(Some(chosen))
@@ -332,14 +331,8 @@ impl Search {
         j.remaining.clear();
         j.remaining.extend_from_slice(remaining);
         j.release = None;
-        let (a, b) = (j.world.heightmap().data(), heightmap.data());
-        let (mut sum, mut off) = (0.0f64, 0usize);
-        for (x, y) in a.iter().zip(b) {
-            let d = (x - y).abs();
-            sum += d as f64;
-            off += (d > JOB_CELL_OFF_M) as usize;
-        }
-        let cells = a.len().max(1);
+        let (sum, off) = compare(j.world.heightmap(), heightmap);
+        let cells = heightmap.data().len().max(1);
         let agreement = JobAgreement {
             objects: j.world.placed().len(),
             mean_diff_m: (sum / cells as f64) as f32,
@@ -351,6 +344,18 @@ impl Search {
     }
 }
 
+/// The sum of |a - b| over the cells (m), and the cells that differ by more than
+/// [`JOB_CELL_OFF_M`].
+fn compare(a: &Heightmap, b: &Heightmap) -> (f64, usize) {
+    a.data()
+        .iter()
+        .zip(b.data())
+        .fold((0.0, 0), |(sum, off), (x, y)| {
+            let d = (x - y).abs();
+            (sum + d as f64, off + (d > JOB_CELL_OFF_M) as usize)
+        })
+}
+
 /// `world` with `ty` released at `pose` moved by the offset ([`JOB_FIT_XY_M`],
 /// [`JOB_FIT_YAW_DEG`]; no offset first, kept on ties) whose settled heightmap is nearest
 /// `seen` (mean |difference| over the cells).
@@ -360,14 +365,7 @@ fn fit_release(
     pose: Pose,
     seen: &Heightmap,
 ) -> Result<PackingWorld> {
-    let diff = |w: &PackingWorld| -> f64 {
-        w.heightmap()
-            .data()
-            .iter()
-            .zip(seen.data())
-            .map(|(a, b)| (a - b).abs() as f64)
-            .sum()
-    };
+    let diff = |w: &PackingWorld| compare(w.heightmap(), seen).0;
     let mut best = world.clone();
     best.place_pose(ty, pose)?;
     let mut best_diff = diff(&best);
@@ -377,12 +375,8 @@ fn fit_release(
                 if dx == 0.0 && dy == 0.0 && dyaw == 0.0 {
                     continue;
                 }
-                let mut moved = pose;
-                moved.translation.x += dx;
-                moved.translation.y += dy;
-                moved.rotation = Rotation::from_rotation_z(dyaw.to_radians()) * pose.rotation;
                 let mut w = world.clone();
-                w.place_pose(ty, moved)?;
+                w.place_pose(ty, offset_pose(pose, dx, dy, dyaw.to_radians()))?;
                 let d = diff(&w);
                 if d < best_diff {
                     (best, best_diff) = (w, d);

@@ -551,9 +551,13 @@ impl PackingWorld {
     /// caller decide (and time) the release height once and then release with
     /// [`PackingWorld::place_pose`]. `ty` must be a catalog type and the inputs finite.
     pub fn release_pose(&mut self, ty: TypeIdx, x: f32, y: f32, rot: Rotation) -> Pose {
-        let rot = rot.normalize();
-        let z = self.estimate_z_rotated(ty, x, y, rot) + self.cfg.clearance_m;
-        Pose::from_parts(Vector::new(x, y, z), rot)
+        release_pose_on(
+            &self.heightmap,
+            self.catalog.shape(ty),
+            (x, y, rot),
+            self.cfg.clearance_m,
+            &mut self.zscratch,
+        )
     }
 
     /// Releases `ty` at an explicit pose (e.g. the gripper's) and settles. The outcome's `z` is
@@ -786,6 +790,31 @@ impl SuccessVolume {
         ];
         over.into_iter().max_by(|a, b| a.1.total_cmp(&b.1))
     }
+}
+
+/// The release pose of `shape` at `(x, y, rot)` over `heightmap`: orientation `rot`
+/// (normalised), origin at `(x, y)` and at the estimated height plus `clearance_m`. What
+/// [`PackingWorld::release_pose`] does on the world's own heightmap, and the search on a
+/// camera's.
+pub fn release_pose_on(
+    heightmap: &Heightmap,
+    shape: &crate::catalog::ObjectShape,
+    (x, y, rot): (f32, f32, Rotation),
+    clearance_m: f32,
+    scratch: &mut ZScratch,
+) -> Pose {
+    let rot = rot.normalize();
+    let z = estimate_z_rotated(heightmap, shape, x, y, rot, scratch) + clearance_m;
+    Pose::from_parts(Vector::new(x, y, z), rot)
+}
+
+/// `pose` moved by `dx`, `dy` (m) in B and turned by `dyaw` (rad) about B z: a release off
+/// the pose it was decided at (the evaluation's release noise, the job twin's fit).
+pub fn offset_pose(mut pose: Pose, dx: f32, dy: f32, dyaw: f32) -> Pose {
+    pose.translation.x += dx;
+    pose.translation.y += dy;
+    pose.rotation = Rotation::from_rotation_z(dyaw) * pose.rotation;
+    pose
 }
 
 /// The axis-aligned bounds of `points` (`(MAX, MIN)` for none).
