@@ -74,7 +74,10 @@ impl Policy for SearchPolicy {
         "search"
     }
 
-    fn begin_episode(&mut self, _seed: u64) {}
+    /// A new job: the job's twin starts from an empty box.
+    fn begin_episode(&mut self, _seed: u64) {
+        self.search.new_job();
+    }
 
     fn decide(&mut self, input: &DecisionInput) -> herb_decide::Result<[f32; 3]> {
         let mut remaining = Vec::with_capacity(1 + input.after.len());
@@ -107,6 +110,9 @@ enum Method {
 pub struct DecisionCore {
     method: Method,
     budget: Budget,
+    /// The job of the last decision: a decision of another job starts the method's episode
+    /// (the search's job twin forgets the last job's objects).
+    job: Option<u64>,
 }
 
 impl DecisionCore {
@@ -137,7 +143,11 @@ impl DecisionCore {
                 Method::Search(Decider::new(policy, catalog, clearance))
             }
         };
-        Ok(Self { method, budget })
+        Ok(Self {
+            method,
+            budget,
+            job: None,
+        })
     }
 
     /// As [`DecisionCore::new`] with `policy` instead of the configured method (the planner's
@@ -146,6 +156,7 @@ impl DecisionCore {
         Self {
             method: Method::Policy(Decider::new(policy, catalog, cfg.models.clearance_m as f32)),
             budget: Budget::Rollouts(0),
+            job: None,
         }
     }
 
@@ -166,6 +177,12 @@ impl DecisionCore {
         let remaining: Vec<TypeIdx> = req.remaining().iter().map(|&o| TypeIdx(o)).collect();
         let object = req.remaining().first().copied().unwrap_or(0);
         let t0 = Instant::now();
+        if self.job.replace(req.job_id) != Some(req.job_id) {
+            match &mut self.method {
+                Method::Policy(p) => p.begin_episode(req.job_id),
+                Method::Search(s) => s.begin_episode(req.job_id),
+            }
+        }
         let (d, allowed) = match (&mut self.method, remaining.split_first()) {
             (_, None) => (Err(DecideError::NoFeasiblePlacement), NOT_A_SEARCH),
             (Method::Policy(p), Some((&o, after))) => {

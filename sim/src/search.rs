@@ -204,6 +204,12 @@ impl Search {
         &self.report
     }
 
+    /// Starts a new job: the job's twin forgets what it replayed ([`TwinKind::Job`]). Without
+    /// it a job is told apart by its remaining objects alone, which a new job can repeat.
+    pub fn new_job(&mut self) {
+        self.job = None;
+    }
+
     /// The job's twin, when the last decision's rollouts ran in it ([`TwinKind::Job`]).
     pub fn job_twin(&self) -> Option<&PackingWorld> {
         let used = self.report.job.is_some_and(|j| j.used);
@@ -305,7 +311,8 @@ impl Search {
     /// run in it). The
     /// decision continues the job when `remaining` is the last decision's without its first
     /// object: that object was released where it was decided, and is replayed there, moved by
-    /// the offset that best explains `heightmap`. The same remaining objects again (a pick tried
+    /// the offset that best explains `heightmap`, or left out when the box without it explains
+    /// `heightmap` better (it was skipped after a missed grasp). The same remaining objects again (a pick tried
     /// again) add nothing; anything else starts a new job from an empty box.
     fn follow_job(&mut self, heightmap: &Heightmap, remaining: &[TypeIdx]) -> Result<bool> {
         let continues = |j: &JobTwin| j.remaining.get(1..) == Some(remaining);
@@ -358,7 +365,8 @@ fn compare(a: &Heightmap, b: &Heightmap) -> (f64, usize) {
 
 /// `world` with `ty` released at `pose` moved by the offset ([`JOB_FIT_XY_M`],
 /// [`JOB_FIT_YAW_DEG`]; no offset first, kept on ties) whose settled heightmap is nearest
-/// `seen` (mean |difference| over the cells).
+/// `seen` (mean |difference| over the cells); `world` itself when it is nearer still (the
+/// object was never released: a pick skipped after a missed grasp).
 fn fit_release(
     world: &PackingWorld,
     ty: TypeIdx,
@@ -384,6 +392,9 @@ fn fit_release(
             }
         }
     }
+    if diff(world) < best_diff {
+        return Ok(world.clone());
+    }
     Ok(best)
 }
 
@@ -395,6 +406,16 @@ impl crate::eval::Placer for Search {
         };
         let twin = self.settings.twin.name();
         format!("search ({budget}, {twin})")
+    }
+
+    /// A new episode is a new job: the job's twin starts from an empty box.
+    fn begin_episode(
+        &mut self,
+        _ep: &crate::boxed::Episode,
+        _seed: u64,
+    ) -> std::result::Result<(), crate::eval::PlaceError> {
+        self.new_job();
+        Ok(())
     }
 
     /// The search over the environment's heightmap and remaining objects, released at the

@@ -256,3 +256,41 @@ fn the_jobs_twin_replays_its_decisions_and_falls_back_where_the_heightmap_disagr
     let e = TwinKind::parse("clone").unwrap_err().to_string();
     assert!(e.contains("heightmap, exact or job"), "{e}");
 }
+
+#[test]
+fn the_jobs_twin_leaves_out_an_object_never_released_and_forgets_a_finished_job() {
+    let c = common::primitives();
+    let ids: Vec<_> = ["003", "005", "013"].map(|i| c.by_id(i).unwrap()).to_vec();
+    let settings = SearchSettings {
+        k: 2,
+        budget: Budget::Rollouts(2),
+        horizon: Some(2),
+        reward: RewardMode::cs(0.6).unwrap(),
+        twin: TwinKind::Job,
+    };
+    let empty = PackingWorld::new(c.clone(), WorldConfig::default()).unwrap();
+    let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
+    let first = s.decide(empty.heightmap(), &ids, None).unwrap().unwrap();
+    // The first object was skipped (a missed grasp): the box is still empty when the job goes
+    // on with the second. The twin leaves it out and still agrees with the camera.
+    s.decide(empty.heightmap(), &ids[1..], None).unwrap();
+    let a = s.report().job.unwrap();
+    assert!(a.objects == 0 && a.used && a.off == 0.0, "{a:?}");
+    // Released this time: the next decision replays it.
+    let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
+    s.decide(empty.heightmap(), &ids, None).unwrap();
+    let mut world = empty.clone();
+    world
+        .place(ids[0], first.x, first.y, first.theta())
+        .unwrap();
+    let mut replayed = s.clone();
+    replayed.decide(world.heightmap(), &ids[1..], None).unwrap();
+    let a = replayed.report().job.unwrap();
+    assert!(a.objects == 1 && a.used, "{a:?}");
+    // A new job whose objects happen to be the last job's remaining ones starts from an empty
+    // box: the object in the box is not one of its decisions.
+    s.new_job();
+    s.decide(world.heightmap(), &ids[1..], None).unwrap();
+    let a = s.report().job.unwrap();
+    assert!(a.objects == 0 && a.off > 0.0, "{a:?}");
+}
