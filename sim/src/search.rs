@@ -46,8 +46,10 @@ pub enum TwinKind {
     /// Used while it agrees with the latest heightmap ([`JOB_MAX_OFF`]); where it does not (a
     /// restart, an object skipped or knocked, a box emptied by hand), the heightmap twin.
     /// Built from what herbd has in a real cell: its own decisions and the camera. The fit runs
-    /// at every decision whatever the budget (75 settles of one object), so that the twin
-    /// follows the job.
+    /// at every decision whatever the budget, so that the twin follows the job: one settle of
+    /// the object when its decided pose already explains the heightmap
+    /// ([`JOB_FIT_GOOD_M`]), else a climb over the offsets, a few settles each step (75 at
+    /// most).
     Job,
 }
 
@@ -81,10 +83,13 @@ impl TwinKind {
     }
 }
 
-/// Offsets (m) in x and in y of a replayed release that the job's twin tries, each with each.
+/// Offsets (m) in x and in y of a replayed release that the job's twin may try, each with each.
 pub const JOB_FIT_XY_M: [f32; 5] = [-0.008, -0.004, 0.0, 0.004, 0.008];
-/// Offsets (degrees) of a replayed release's yaw that the job's twin tries.
+/// Offsets (degrees) of a replayed release's yaw that the job's twin may try.
 pub const JOB_FIT_YAW_DEG: [f32; 3] = [-4.0, 0.0, 4.0];
+/// A replayed release whose settled heightmap is this near the camera's (mean |difference|
+/// over the cells, m) explains it: the fit stops there.
+pub const JOB_FIT_GOOD_M: f64 = 0.0005;
 /// A cell of the job's twin disagrees with the heightmap when their heights differ by more.
 pub const JOB_CELL_OFF_M: f32 = 0.01;
 /// The job's twin is used while at most this share of the heightmap's cells disagree.
@@ -363,36 +368,60 @@ fn compare(a: &Heightmap, b: &Heightmap) -> (f64, usize) {
         })
 }
 
-/// `world` with `ty` released at `pose` moved by the offset ([`JOB_FIT_XY_M`],
-/// [`JOB_FIT_YAW_DEG`]; no offset first, kept on ties) whose settled heightmap is nearest
-/// `seen` (mean |difference| over the cells); `world` itself when it is nearer still (the
-/// object was never released: a pick skipped after a missed grasp).
+/// `world` with `ty` released at `pose` moved by the offset of [`JOB_FIT_XY_M`] x
+/// [`JOB_FIT_XY_M`] x [`JOB_FIT_YAW_DEG`] whose settled heightmap is nearest `seen` (mean
+/// |difference| over the cells), found by a climb: from no offset, to the best of the six
+/// next offsets (one step in x, in y or in yaw) while it is nearer, until none is or the
+/// release explains `seen` ([`JOB_FIT_GOOD_M`]). Ties keep the earlier. `world` itself when
+/// it is nearer still (the object was never released: a pick skipped after a missed grasp).
+/// Deterministic, so that a replay rebuilds the same twin.
 fn fit_release(
     world: &PackingWorld,
     ty: TypeIdx,
     pose: Pose,
     seen: &Heightmap,
 ) -> Result<PackingWorld> {
-    let diff = |w: &PackingWorld| compare(w.heightmap(), seen).0;
-    let mut best = world.clone();
-    best.place_pose(ty, pose)?;
-    let mut best_diff = diff(&best);
-    for dyaw in JOB_FIT_YAW_DEG {
-        for dx in JOB_FIT_XY_M {
-            for dy in JOB_FIT_XY_M {
-                if dx == 0.0 && dy == 0.0 && dyaw == 0.0 {
+    let cells = seen.data().len().max(1) as f64;
+    let (nx, nyaw) = (JOB_FIT_XY_M.len(), JOB_FIT_YAW_DEG.len());
+    let mut tried = [false; JOB_FIT_XY_M.len() * JOB_FIT_XY_M.len() * JOB_FIT_YAW_DEG.len()];
+    let released = |at: [usize; 3]| -> Result<(PackingWorld, f64)> {
+        let [ix, iy, iyaw] = at;
+        let mut w = world.clone();
+        let (dx, dy) = (JOB_FIT_XY_M[ix], JOB_FIT_XY_M[iy]);
+        let dyaw = JOB_FIT_YAW_DEG[iyaw].to_radians();
+        w.place_pose(ty, offset_pose(pose, dx, dy, dyaw))?;
+        let d = compare(w.heightmap(), seen).0 / cells;
+        Ok((w, d))
+    };
+    let index = |[ix, iy, iyaw]: [usize; 3]| (iyaw * nx + iy) * nx + ix;
+    let mut at = [nx / 2, nx / 2, nyaw / 2];
+    tried[index(at)] = true;
+    let (mut best, mut best_diff) = released(at)?;
+    while best_diff > JOB_FIT_GOOD_M {
+        let mut step = None;
+        for (axis, len) in [(0, nx), (1, nx), (2, nyaw)] {
+            for next in [
+                at[axis].checked_sub(1),
+                Some(at[axis] + 1).filter(|&i| i < len),
+            ] {
+                let Some(i) = next else { continue };
+                let mut to = at;
+                to[axis] = i;
+                if std::mem::replace(&mut tried[index(to)], true) {
                     continue;
                 }
-                let mut w = world.clone();
-                w.place_pose(ty, offset_pose(pose, dx, dy, dyaw.to_radians()))?;
-                let d = diff(&w);
+                let (w, d) = released(to)?;
                 if d < best_diff {
-                    (best, best_diff) = (w, d);
+                    (best, best_diff, step) = (w, d, Some(to));
                 }
             }
         }
+        match step {
+            Some(to) => at = to,
+            None => break,
+        }
     }
-    if diff(world) < best_diff {
+    if compare(world.heightmap(), seen).0 / cells < best_diff {
         return Ok(world.clone());
     }
     Ok(best)
