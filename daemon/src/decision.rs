@@ -402,6 +402,7 @@ impl Worker {
                     ("used", &j.used),
                     ("mean_diff_mm", &format_args!("{:.2}", 1e3 * j.mean_diff_m)),
                     ("cells_off_pct", &format_args!("{:.2}", 100.0 * j.off)),
+                    ("fit_ms", &format_args!("{:.1}", 1e3 * j.fit.as_secs_f64())),
                 ],
             );
         }

@@ -151,6 +151,8 @@ pub struct JobAgreement {
     pub off: f32,
     /// The rollouts ran in it (else in the heightmap twin).
     pub used: bool,
+    /// Time spent fitting the last released object (part of the decision's time and budget).
+    pub fit: Duration,
 }
 
 /// The job's twin between decisions ([`TwinKind::Job`]).
@@ -321,10 +323,13 @@ impl Search {
     /// again) add nothing; anything else starts a new job from an empty box.
     fn follow_job(&mut self, heightmap: &Heightmap, remaining: &[TypeIdx]) -> Result<bool> {
         let continues = |j: &JobTwin| j.remaining.get(1..) == Some(remaining);
+        let mut fit = Duration::ZERO;
         match self.job.take() {
             Some(mut j) if continues(&j) => {
                 if let Some((ty, pose)) = j.release.take() {
+                    let t0 = Instant::now();
                     j.world = fit_release(&j.world, ty, pose, heightmap)?;
+                    fit = t0.elapsed();
                 }
                 self.job = Some(j);
             }
@@ -350,6 +355,7 @@ impl Search {
             mean_diff_m: (sum / cells as f64) as f32,
             off: off as f32 / cells as f32,
             used: off as f32 <= JOB_MAX_OFF * cells as f32,
+            fit,
         };
         self.report.job = Some(agreement);
         Ok(agreement.used)

@@ -77,11 +77,14 @@ struct Tally {
     twin_choice_ok: usize,
     success_first_ok: usize,
     /// Job mode: decisions, those whose rollouts ran in the job's twin, sums of its mean
-    /// |height difference| to the heightmap (m) and of its share of cells off.
+    /// |height difference| to the heightmap (m) and of its share of cells off, the fits' total
+    /// and longest time (s).
     job_decisions: usize,
     job_used: usize,
     job_diff: f64,
     job_off: f64,
+    job_fit: f64,
+    job_fit_max: f64,
     /// Rollouts by (twin succeeds, exact succeeds).
     rollouts: [[usize; 2]; 2],
     /// First placements, those both call stable or both unstable, sum of |tilt difference|.
@@ -98,6 +101,8 @@ impl Tally {
         self.job_used += o.job_used;
         self.job_diff += o.job_diff;
         self.job_off += o.job_off;
+        self.job_fit += o.job_fit;
+        self.job_fit_max = self.job_fit_max.max(o.job_fit_max);
         self.episodes += o.episodes;
         self.success += o.success;
         self.decisions += o.decisions;
@@ -222,6 +227,8 @@ fn probe(
             t.job_used += j.used as usize;
             t.job_diff += j.mean_diff_m as f64;
             t.job_off += j.off as f64;
+            t.job_fit += j.fit.as_secs_f64();
+            t.job_fit_max = t.job_fit_max.max(j.fit.as_secs_f64());
         }
         // The world the search rolled out in, each candidate placed once there and in the
         // world.
@@ -386,11 +393,14 @@ fn main() -> Result<(), Error> {
         println!(
             "the job's twin against the heightmap at each decision: mean |height difference| \
              {:.2} mm, cells off by more than 10 mm {:.2} %; rollouts ran in it in {:.1} % of {} \
-             decisions (else in the heightmap twin)",
+             decisions (else in the heightmap twin); its fit took {:.1} ms a decision on \
+             average, {:.1} ms at most",
             1e3 * t.job_diff / n,
             100.0 * t.job_off / n,
             pct(t.job_used, t.job_decisions),
-            t.job_decisions
+            t.job_decisions,
+            1e3 * t.job_fit / n,
+            1e3 * t.job_fit_max
         );
     }
     for (why, count) in &t.reasons {
