@@ -14,7 +14,7 @@
 use crate::catalog::{SharedCatalog, TypeIdx};
 use crate::error::{Result, SimError};
 use crate::observation::{ObsLayout, Projections, action_to_placement};
-use crate::world::{PackingWorld, PlacementOutcome, WorldConfig};
+use crate::world::{PackingWorld, PlacementOutcome, ReleaseNoise, WorldConfig, offset_pose};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rapier3d::math::{Pose, Rotation};
@@ -104,20 +104,6 @@ pub struct StepResult<'a> {
 /// Seeds the release noise's generator (with the episode's seed).
 const NOISE_SEED: u64 = 0x6e6f_6973_6521;
 
-/// One release's offset off the pose it was given (release noise): x, y (m), yaw (rad).
-#[derive(Debug, Clone, Copy)]
-struct ReleaseOffset {
-    dx: f32,
-    dy: f32,
-    dyaw: f32,
-}
-
-impl ReleaseOffset {
-    fn apply(self, pose: Pose) -> Pose {
-        crate::world::offset_pose(pose, self.dx, self.dy, self.dyaw)
-    }
-}
-
 /// The packing environment.
 #[derive(Debug)]
 pub struct PackingEnv {
@@ -206,13 +192,13 @@ impl PackingEnv {
     /// (used to replay the humans' full, possibly tilted, placements). With release noise, at
     /// the world's release pose moved by the noise.
     pub fn step_rotated(&mut self, x: f32, y: f32, rot: Rotation) -> Result<StepResult<'_>> {
-        let noise = self.draw_noise();
+        let offset = self.draw_noise();
         self.step_with(
-            |w, object| match noise {
+            |w, object| match offset {
                 None => w.place_rotated(object, x, y, rot),
-                Some(n) => {
+                Some((dx, dy, dyaw)) => {
                     let pose = w.checked_release_pose(object, x, y, rot)?;
-                    w.place_pose(object, n.apply(pose))
+                    w.place_pose(object, offset_pose(pose, dx, dy, dyaw))
                 }
             },
             (x, y, crate::frames::yaw_of(rot)),
@@ -225,26 +211,21 @@ impl PackingEnv {
     pub fn step_pose(&mut self, pose: Pose) -> Result<StepResult<'_>> {
         // The step reports the pose given; the world gets it moved by the noise.
         let (t, yaw) = (pose.translation, crate::frames::yaw_of(pose.rotation));
-        let released = self.draw_noise().map_or(pose, |n| n.apply(pose));
+        let released = self
+            .draw_noise()
+            .map_or(pose, |(dx, dy, dyaw)| offset_pose(pose, dx, dy, dyaw));
         self.step_with(|w, object| w.place_pose(object, released), (t.x, t.y, yaw))
     }
 
-    /// The next release's noise, `None` without noise (nothing drawn).
-    fn draw_noise(&mut self) -> Option<ReleaseOffset> {
+    /// The next release's offset (x, y, yaw) by the world's release noise, `None` without
+    /// noise (nothing drawn).
+    fn draw_noise(&mut self) -> Option<(f32, f32, f32)> {
         let cfg = self.world.config();
-        let (sxy, syaw) = (cfg.release_noise_m, cfg.release_noise_deg.to_radians());
-        if sxy == 0.0 && syaw == 0.0 {
-            return None;
-        }
-        let mut normal = || {
-            let (u1, u2): (f32, f32) = (self.noise_rng.random(), self.noise_rng.random());
-            (-2.0 * (1.0 - u1).ln()).sqrt() * (std::f32::consts::TAU * u2).cos()
+        let n = ReleaseNoise {
+            sigma_m: cfg.release_noise_m,
+            sigma_deg: cfg.release_noise_deg,
         };
-        Some(ReleaseOffset {
-            dx: sxy * normal(),
-            dy: sxy * normal(),
-            dyaw: syaw * normal(),
-        })
+        (!n.is_zero()).then(|| n.draw(&mut self.noise_rng))
     }
 
     fn step_with(

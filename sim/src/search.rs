@@ -17,8 +17,10 @@ use crate::error::{Result, SimError};
 use crate::heightmap::Heightmap;
 use crate::lattice::{Lattice, Placement};
 use crate::teacher::{CandidateOutcome, rollout_until};
-use crate::world::{PackingWorld, WorldConfig, offset_pose, release_pose_on};
+use crate::world::{PackingWorld, ReleaseNoise, WorldConfig, offset_pose, release_pose_on};
 use crate::zestimate::ZScratch;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
 use rapier3d::math::{Pose, Rotation};
 use std::time::{Duration, Instant};
 
@@ -108,6 +110,9 @@ pub struct SearchSettings {
     pub reward: RewardMode,
     /// The world the rollouts run in.
     pub twin: TwinKind,
+    /// Rollouts under a gripper's release error (`None`: each candidate rolled out once, every
+    /// object released where it was placed).
+    pub robust: Option<RobustRollouts>,
 }
 
 impl Default for SearchSettings {
@@ -118,9 +123,25 @@ impl Default for SearchSettings {
             horizon: None,
             reward: RewardMode::CompactnessStability { alpha: 0.6 },
             twin: TwinKind::Heightmap,
+            robust: None,
         }
     }
 }
+
+/// The robust search: each candidate rolled out `samples` times, every object of each rollout
+/// released off its placement by `noise`, ranked by the mean return. Sample `i` draws the same
+/// offsets for every candidate (seeded by `i` alone), so that candidates are compared under
+/// the same releases and a replay draws them again.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RobustRollouts {
+    /// The release error assumed.
+    pub noise: ReleaseNoise,
+    /// Rollouts per candidate (at least 1).
+    pub samples: usize,
+}
+
+/// Seeds sample `i`'s release offsets (with `i`).
+const ROBUST_SEED: u64 = 0x726f_6275_7374;
 
 /// What one decision's search did.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -269,9 +290,9 @@ impl Search {
                     break;
                 }
                 let first = self.lattice.candidates()[c];
-                match rollout_until(
+                match evaluate(
                     &mut self.rollout,
-                    self.settings.reward,
+                    &self.settings,
                     world,
                     &remaining[..end],
                     first,
@@ -360,6 +381,43 @@ impl Search {
         self.report.job = Some(agreement);
         Ok(agreement.used)
     }
+}
+
+/// `first`'s rollout of `remaining` in `world` by the settings: once, or, robust, the mean of
+/// its noisy samples (the sample whose return is lowest stands for the rest, with the mean
+/// return, and succeeds only when every sample did). `None` when `deadline` cut it.
+fn evaluate(
+    lattice: &mut Lattice,
+    settings: &SearchSettings,
+    world: &PackingWorld,
+    remaining: &[TypeIdx],
+    first: Placement,
+    deadline: Option<Instant>,
+) -> Result<Option<CandidateOutcome>> {
+    let reward = settings.reward;
+    let Some(robust) = settings.robust.filter(|r| !r.noise.is_zero()) else {
+        return rollout_until(lattice, reward, world, remaining, first, deadline, None);
+    };
+    let samples = robust.samples.max(1);
+    let (mut sum, mut all, mut worst) = (0.0f32, true, None::<CandidateOutcome>);
+    for i in 0..samples {
+        let mut rng = ChaCha8Rng::seed_from_u64(ROBUST_SEED ^ i as u64);
+        let noise = Some((robust.noise, &mut rng));
+        let Some(o) = rollout_until(lattice, reward, world, remaining, first, deadline, noise)?
+        else {
+            return Ok(None);
+        };
+        sum += o.ret;
+        all &= o.success;
+        if worst.as_ref().is_none_or(|w| o.ret < w.ret) {
+            worst = Some(o);
+        }
+    }
+    Ok(worst.map(|mut o| {
+        o.ret = sum / samples as f32;
+        o.success = all;
+        o
+    }))
 }
 
 /// The sum of |a - b| over the cells (m), and the cells that differ by more than

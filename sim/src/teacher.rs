@@ -21,8 +21,9 @@ use crate::error::Result;
 use crate::heightmap::Heightmap;
 use crate::lattice::{Lattice, Placement};
 use crate::reserve::Reserve;
-use crate::world::PackingWorld;
-use rapier3d::math::Vector;
+use crate::world::{PackingWorld, ReleaseNoise};
+use rand_chacha::ChaCha8Rng;
+use rapier3d::math::{Rotation, Vector};
 
 /// What the rollout after one candidate placement achieved.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -164,12 +165,13 @@ pub fn rollout(
     remaining: &[TypeIdx],
     first: Placement,
 ) -> Result<CandidateOutcome> {
-    let o = rollout_until(lattice, reward, world, remaining, first, None)?;
+    let o = rollout_until(lattice, reward, world, remaining, first, None, None)?;
     Ok(o.expect("a rollout without a deadline always finishes"))
 }
 
 /// [`rollout`] that gives up when `deadline` passes (checked before each placement): `None`
-/// then, the rollout unfinished.
+/// then, the rollout unfinished. With `noise`, each object (the candidate's included) is
+/// released off its placement by an offset drawn from the generator, as a gripper would.
 pub fn rollout_until(
     lattice: &mut Lattice,
     reward: RewardMode,
@@ -177,6 +179,7 @@ pub fn rollout_until(
     remaining: &[TypeIdx],
     first: Placement,
     deadline: Option<std::time::Instant>,
+    mut noise: Option<(ReleaseNoise, &mut ChaCha8Rng)>,
 ) -> Result<Option<CandidateOutcome>> {
     let mut w = world.clone();
     let mut out = CandidateOutcome {
@@ -211,7 +214,14 @@ pub fn rollout_until(
                 }
             }
         };
-        let o = w.place(ty, p.x, p.y, p.theta())?;
+        let o = match noise.as_mut() {
+            None => w.place(ty, p.x, p.y, p.theta())?,
+            Some((n, rng)) => {
+                let rot = Rotation::from_rotation_z(p.theta());
+                let pose = w.checked_release_pose(ty, p.x, p.y, rot)?;
+                w.place_pose(ty, n.apply(pose, &mut **rng))?
+            }
+        };
         let r = reward.reward(&o);
         if i == 0 {
             out.reward = r;

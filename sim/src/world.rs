@@ -817,6 +817,40 @@ pub fn offset_pose(mut pose: Pose, dx: f32, dy: f32, dyaw: f32) -> Pose {
     pose
 }
 
+/// A gripper's release error: each release off its decided pose by normal noise of these
+/// standard deviations in x and y and in yaw (the evaluation's release noise, the robust
+/// search's rollouts).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ReleaseNoise {
+    /// Standard deviation in x and in y (m).
+    pub sigma_m: f32,
+    /// Standard deviation in yaw (degrees).
+    pub sigma_deg: f32,
+}
+
+impl ReleaseNoise {
+    /// No noise: nothing is drawn.
+    pub fn is_zero(&self) -> bool {
+        self.sigma_m == 0.0 && self.sigma_deg == 0.0
+    }
+
+    /// One release's offset from `rng`: x, y (m) and yaw (rad), drawn in that order.
+    pub fn draw(&self, rng: &mut impl rand::Rng) -> (f32, f32, f32) {
+        let mut normal = || {
+            let (u1, u2): (f32, f32) = (rng.random(), rng.random());
+            (-2.0 * (1.0 - u1).ln()).sqrt() * (std::f32::consts::TAU * u2).cos()
+        };
+        let (dx, dy) = (self.sigma_m * normal(), self.sigma_m * normal());
+        (dx, dy, self.sigma_deg.to_radians() * normal())
+    }
+
+    /// `pose` moved by one offset drawn from `rng` ([`offset_pose`]).
+    pub fn apply(&self, pose: Pose, rng: &mut impl rand::Rng) -> Pose {
+        let (dx, dy, dyaw) = self.draw(rng);
+        offset_pose(pose, dx, dy, dyaw)
+    }
+}
+
 /// The axis-aligned bounds of `points` (`(MAX, MIN)` for none).
 pub fn bounds_of(points: &[Vector]) -> (Vector, Vector) {
     points.iter().fold(

@@ -75,6 +75,7 @@ fn the_search_is_anytime_and_never_worse_than_its_prior_on_its_own_rollouts() {
         horizon: None,
         reward: RewardMode::cs(0.6).unwrap(),
         twin: TwinKind::Heightmap,
+        robust: None,
     };
     let mut s = Search::new(
         c.clone(),
@@ -186,6 +187,7 @@ fn pack_with(
         horizon: Some(3),
         reward: RewardMode::cs(0.6).unwrap(),
         twin,
+        robust: None,
     };
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
     let mut out = Vec::new();
@@ -235,6 +237,7 @@ fn the_jobs_twin_replays_its_decisions_and_falls_back_where_the_heightmap_disagr
         horizon: None,
         reward: RewardMode::cs(0.6).unwrap(),
         twin,
+        robust: None,
     };
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings(TwinKind::Job));
     let p = s.decide(world.heightmap(), &remaining, None).unwrap();
@@ -267,6 +270,7 @@ fn the_jobs_twin_leaves_out_an_object_never_released_and_forgets_a_finished_job(
         horizon: Some(2),
         reward: RewardMode::cs(0.6).unwrap(),
         twin: TwinKind::Job,
+        robust: None,
     };
     let empty = PackingWorld::new(c.clone(), WorldConfig::default()).unwrap();
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
@@ -293,4 +297,58 @@ fn the_jobs_twin_leaves_out_an_object_never_released_and_forgets_a_finished_job(
     s.decide(world.heightmap(), &ids[1..], None).unwrap();
     let a = s.report().job.unwrap();
     assert!(a.objects == 0 && a.off > 0.0, "{a:?}");
+}
+
+#[test]
+fn the_robust_search_ranks_by_noisy_rollouts_that_a_replay_draws_again() {
+    use herb_sim::search::RobustRollouts;
+    use herb_sim::world::ReleaseNoise;
+    let c = common::primitives();
+    let world = exact(&c);
+    let remaining: Vec<_> = ["006", "010", "003"].map(|i| c.by_id(i).unwrap()).to_vec();
+    let search = |noise: ReleaseNoise| {
+        let settings = SearchSettings {
+            k: 3,
+            budget: Budget::Rollouts(3),
+            horizon: None,
+            reward: RewardMode::cs(0.6).unwrap(),
+            twin: TwinKind::Heightmap,
+            robust: Some(RobustRollouts { noise, samples: 3 }),
+        };
+        let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
+        let p = s.decide(world.heightmap(), &remaining, None).unwrap();
+        (p, s.report().clone())
+    };
+    let plain = {
+        let mut s = Search::new(
+            c.clone(),
+            WorldConfig::default(),
+            SearchSettings {
+                k: 3,
+                budget: Budget::Rollouts(3),
+                horizon: None,
+                reward: RewardMode::cs(0.6).unwrap(),
+                twin: TwinKind::Heightmap,
+                robust: None,
+            },
+        );
+        let p = s.decide(world.heightmap(), &remaining, None).unwrap();
+        (p, s.report().clone())
+    };
+    // No noise: the plain search.
+    let (p, r) = search(ReleaseNoise::default());
+    assert_eq!((p, &r.finished), (plain.0, &plain.1.finished));
+    // With noise: other returns (the releases moved), the same ones when run again.
+    let noise = ReleaseNoise {
+        sigma_m: 0.005,
+        sigma_deg: 3.0,
+    };
+    let (p, r) = search(noise);
+    assert_eq!(r.finished.len(), 3, "{r:?}");
+    let rets = |r: &herb_sim::search::SearchReport| -> Vec<f32> {
+        r.finished.iter().map(|(_, o)| o.ret).collect()
+    };
+    assert_ne!(rets(&r), rets(&plain.1), "the noisy rollouts moved");
+    let (again, r2) = search(noise);
+    assert_eq!((p, rets(&r)), (again, rets(&r2)), "drawn again alike");
 }

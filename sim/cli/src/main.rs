@@ -417,6 +417,7 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
             horizon: a.search_horizon.map(|h| h as usize),
             reward: lookahead_reward,
             twin: a.search_world,
+            robust: None,
         },
         world: cfg.clone(),
     };

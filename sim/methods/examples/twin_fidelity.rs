@@ -2,7 +2,8 @@
 //! figures are in docs/search.md).
 //!
 //!     cargo run --release -p herb-methods --example twin_fidelity -- \
-//!         [EPISODES] [SEED] [THREADS] [twin|frozen|job|exact|blbf] [NOISE_MM] [NOISE_DEG]
+//!         [EPISODES] [SEED] [THREADS] [twin|frozen|job|exact|blbf] [NOISE_MM] [NOISE_DEG] \
+//!         [SAMPLES]
 //!
 //! What packs (and is compared with the exact clone at each decision):
 //!
@@ -21,6 +22,10 @@
 //! deviations in x and y, and in yaw (seeded by the episode's index: runs reproduce); the twins
 //! are not told. Without noise the world is the twins' model exactly, and the job's twin
 //! replays it exactly.
+//!
+//! `SAMPLES` (default 0): the search that packs is the robust one (`RobustRollouts`): each
+//! candidate rolled out `SAMPLES` times under the world's release noise, ranked by the mean
+//! return. The exact clone's search it is compared with stays plain.
 //!
 //! The episodes are `training/validate.py`'s (the bindings' sampler: 10 to 25 random catalog
 //! objects in HERB's order, one generator per episode seeded from `SEED`, default 777). Each is
@@ -44,9 +49,9 @@ use herb_sim::catalog::{Catalog, SharedCatalog, TypeIdx};
 use herb_sim::env::{PackingEnv, RewardMode};
 use herb_sim::lattice::{Lattice, Placement};
 use herb_sim::paths;
-use herb_sim::search::{Budget, Search, SearchSettings, TwinKind};
+use herb_sim::search::{Budget, RobustRollouts, Search, SearchSettings, TwinKind};
 use herb_sim::teacher::CandidateOutcome;
-use herb_sim::world::{PackingWorld, WorldConfig};
+use herb_sim::world::{PackingWorld, ReleaseNoise, WorldConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::BTreeMap;
@@ -173,6 +178,7 @@ fn probe(
     episode: &[TypeIdx],
     mode: Mode,
     noisy: &WorldConfig,
+    robust: Option<RobustRollouts>,
     seed: u64,
     t: &mut Tally,
 ) -> Result<(), Error> {
@@ -186,13 +192,21 @@ fn probe(
         horizon: None,
         reward: REWARD,
         twin,
+        robust: None,
     };
     let kind = match mode {
         Mode::Twin | Mode::Blbf => TwinKind::Heightmap,
         Mode::Job => TwinKind::Job,
         Mode::Frozen | Mode::Exact => TwinKind::ExactClone,
     };
-    let mut search_twin = Search::new(catalog.clone(), cfg.clone(), settings(kind));
+    let mut search_twin = Search::new(
+        catalog.clone(),
+        cfg.clone(),
+        SearchSettings {
+            robust,
+            ..settings(kind)
+        },
+    );
     if mode == Mode::Blbf {
         search_twin.set_budget(Budget::Rollouts(0));
     }
@@ -320,6 +334,14 @@ fn main() -> Result<(), Error> {
         ..WorldConfig::default()
     };
     noisy.validate()?;
+    let samples = arg(7, 0)? as usize;
+    let robust = (samples > 0).then_some(RobustRollouts {
+        noise: ReleaseNoise {
+            sigma_m: noisy.release_noise_m,
+            sigma_deg: noisy.release_noise_deg,
+        },
+        samples,
+    });
     let root = paths::boxed_root(None);
     let catalog: SharedCatalog = Arc::new(Catalog::builtin(&paths::mesh_source(
         None,
@@ -345,10 +367,11 @@ fn main() -> Result<(), Error> {
         let handles: Vec<_> = (0..threads)
             .map(|i| {
                 let (catalog, episodes, noisy) = (&catalog, &episodes, &noisy);
+                let robust = robust;
                 s.spawn(move || -> Result<Tally, Error> {
                     let mut t = Tally::default();
                     for (e, ep) in episodes.iter().enumerate().skip(i).step_by(threads) {
-                        probe(catalog, ep, mode, noisy, e as u64, &mut t)?;
+                        probe(catalog, ep, mode, noisy, robust, e as u64, &mut t)?;
                     }
                     Ok(t)
                 })
@@ -362,7 +385,7 @@ fn main() -> Result<(), Error> {
     let pct = |a: usize, b: usize| 100.0 * a as f64 / b.max(1) as f64;
     let [[ff, ft], [tf, tt]] = t.rollouts;
     println!(
-        "{} episodes (seed {seed}), {}, release noise {} mm / {} deg, {:.0} s: packs {:.2} %",
+        "{} episodes (seed {seed}), {}{}, release noise {} mm / {} deg, {:.0} s: packs {:.2} %",
         t.episodes,
         match mode {
             Mode::Twin => "the search in the heightmap twin",
@@ -370,6 +393,10 @@ fn main() -> Result<(), Error> {
             Mode::Job => "the search in the job's twin",
             Mode::Exact => "the search in the exact clone",
             Mode::Blbf => "BLBF (no rollout)",
+        },
+        match robust {
+            Some(r) => format!(", robust ({} noisy rollouts a candidate)", r.samples),
+            None => String::new(),
         },
         1e3 * noisy.release_noise_m,
         noisy.release_noise_deg,

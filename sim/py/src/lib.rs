@@ -706,6 +706,7 @@ impl VecEnv {
                 .first()
                 .map_or(RewardMode::Simple, |s| s.env.reward_mode()),
             twin,
+            robust: None,
         };
         let horizon = horizon.unwrap_or(usize::MAX);
         let method = match rule.parse::<Method>() {
