@@ -367,7 +367,6 @@ fn main() -> Result<(), Error> {
         let handles: Vec<_> = (0..threads)
             .map(|i| {
                 let (catalog, episodes, noisy) = (&catalog, &episodes, &noisy);
-                let robust = robust;
                 s.spawn(move || -> Result<Tally, Error> {
                     let mut t = Tally::default();
                     for (e, ep) in episodes.iter().enumerate().skip(i).step_by(threads) {
