@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
 # The main job: builds the release binaries, starts herb-loopback (simulated Baxter, gripper and
-# camera) and herbd (the controller, placing with its configured method: BLBF by default), packs
+# camera) and herbd (the controller, placing with its configured method: by default the search in
+# the job's twin, 1 s a decision, hidden behind the pick), packs
 # one BoxED episode (default p1_s1), prints progress, draws the final pack, and stops both
 # processes (SIGTERM: herbd brakes, reports and exits 0). Everything it writes goes into a run
 # folder (DEMO_OUT, default runs/demo-<time>), never over committed files. DEMO_BIN names a
 # folder of binaries already built (the tests run this script so, with cargo test's) instead.
-# DEMO_DECISION=search makes herbd decide by searching ([decision] method = "search", its 1 s
-# budget) instead of its default policy; DEMO_DECISION=search-job searches in the job's own twin
-# ([decision] twin = "job").
+# DEMO_DECISION=policy makes herbd place with its policy alone ([decision] method = "policy":
+# BLBF); DEMO_DECISION=search-heightmap searches in the twin built from the heightmap alone
+# ([decision] twin = "heightmap"); DEMO_DECISION=search (or search-job) is the default.
 # DEMO_VIEW=web also serves the live 3D view (python -m herb_client.view) on localhost:9090 and
 # opens it in a browser; DEMO_VIEW=save records it into the run folder (job.rrd) instead. The
 # view needs the Python client with Rerun: the test command's virtualenv (.venv, or HERB_VENV),
@@ -28,16 +29,16 @@ P=demo$$
 LB=$!
 HERBD_ARGS=()
 case "${DEMO_DECISION:-}" in
-  "" | policy) ;;
-  search)
-    printf '[decision]\nmethod = "search"\n' > "$OUT/herbd.toml"
+  "" | search | search-job) ;;
+  policy)
+    printf '[decision]\nmethod = "policy"\n' > "$OUT/herbd.toml"
     HERBD_ARGS=(--config "$OUT/herbd.toml")
     ;;
-  search-job)
-    printf '[decision]\nmethod = "search"\ntwin = "job"\n' > "$OUT/herbd.toml"
+  search-heightmap)
+    printf '[decision]\nmethod = "search"\ntwin = "heightmap"\n' > "$OUT/herbd.toml"
     HERBD_ARGS=(--config "$OUT/herbd.toml")
     ;;
-  *) echo "DEMO_DECISION=$DEMO_DECISION: expected policy, search or search-job" >&2; exit 2 ;;
+  *) echo "DEMO_DECISION=$DEMO_DECISION: expected search, search-job, search-heightmap or policy" >&2; exit 2 ;;
 esac
 "$BIN/herbd" --prefix "$P" "${HERBD_ARGS[@]}" > "$OUT/demo-herbd.json" 2> "$OUT/demo-herbd.log" &
 HD=$!

@@ -150,10 +150,10 @@ pub struct Config {
 pub enum DecisionMethod {
     /// The placement policy of `[models] policy` (BLBF or a learned policy): under a
     /// millisecond.
-    #[default]
     Policy,
-    /// The search: the lattice's best `k` candidates each rolled out to the job's end (or
-    /// `horizon` objects) in a physics twin built from the heightmap, within `budget_s`.
+    /// The search (the default): the lattice's best `k` candidates each rolled out to the
+    /// job's end (or `horizon` objects) in a physics twin, within `budget_s`.
+    #[default]
     Search,
 }
 
@@ -162,11 +162,12 @@ pub enum DecisionMethod {
 #[serde(rename_all = "snake_case")]
 pub enum DecisionTwin {
     /// A twin built from the latest heightmap alone: the pile as static cuboids.
-    #[default]
     Heightmap,
-    /// The job's own twin: the objects herbd decided in the job replayed at their release
-    /// poses, each fitted to the heightmap that followed it; the heightmap twin whenever it
-    /// disagrees with the latest heightmap (a restart, a skipped or knocked object).
+    /// The job's own twin (the default): the objects herbd decided in the job replayed at
+    /// their release poses, each fitted to the heightmap that followed it; the heightmap twin
+    /// whenever it disagrees with the latest heightmap (a restart, a knocked object, a box
+    /// filled by hand).
+    #[default]
     Job,
 }
 
@@ -193,11 +194,11 @@ pub struct DecisionConfig {
 impl Default for DecisionConfig {
     fn default() -> Self {
         Self {
-            method: DecisionMethod::Policy,
+            method: DecisionMethod::Search,
             budget_s: 1.0,
             k: 8,
             horizon: 0,
-            twin: DecisionTwin::Heightmap,
+            twin: DecisionTwin::Job,
             timeout_s: 10.0,
         }
     }

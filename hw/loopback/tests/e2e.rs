@@ -97,8 +97,8 @@ fn setup_with(tag: &str, policy: &str) -> (PathBuf, String, PathBuf) {
     (dir, prefix, cfg)
 }
 
-/// With the shipped SAC policy (CS0.6): herbd loads it and decides every placement with it; the
-/// other tests use BLBF.
+/// With the shipped SAC policy (CS0.6, `[decision] method = "policy"`): herbd loads it and
+/// decides every placement with it; the other tests decide by herbd's default, the search.
 #[test]
 fn packs_a_boxed_episode_end_to_end_with_real_processes() {
     pack_shortest_episode_with("episode", &repo().join("models/policy-cs06.onnx"));
@@ -161,6 +161,10 @@ fn pack_shortest_episode_with(tag: &str, policy: &Path) {
     };
     let (session, n) = shortest_session(&root);
     let (dir, prefix, cfg) = setup_with(tag, policy.to_str().unwrap());
+    // The policy decides, not the default search.
+    let mut text = std::fs::read_to_string(&cfg).unwrap();
+    text.push_str("\n[decision]\nmethod = \"policy\"\n");
+    std::fs::write(&cfg, text).unwrap();
     let claims = herb_testkit::claims::Claims::watch(&prefix);
     let cfg_s = cfg.to_str().unwrap();
     let boxed = root.to_str().unwrap();
@@ -245,9 +249,10 @@ fn pack_shortest_episode_with(tag: &str, policy: &Path) {
     claims.check();
 }
 
-/// With the search deciding (`[decision] method = "search"`, a short budget): the episode is
-/// packed with every decision made while the arm picks, the run log replays bit for bit (each
-/// search re-run with the rollouts its budget allowed), and `herbctl explain` lists the
+/// With the search deciding in the job's twin (herbd's default method and twin, a short
+/// budget): the episode is packed with every decision made while the arm picks, the run log
+/// replays bit for bit (each search re-run with the rollouts its budget allowed, the job's
+/// twin rebuilt from the recorded decisions and heightmaps), and `herbctl explain` lists the
 /// candidates the search tried.
 #[test]
 fn packs_an_episode_with_the_search_and_replays_it_bit_for_bit() {
@@ -1137,7 +1142,17 @@ fn a_job_survives_herbd_killed_mid_motion() {
         }
         std::thread::sleep(Duration::from_millis(10));
     }
-    std::thread::sleep(Duration::from_millis(400));
+    // Carrying: killed once the journal has it held (on a loaded machine herbd may write it
+    // a while after the gripper closed).
+    let t1 = Instant::now();
+    while !std::fs::read_to_string(&journal).is_ok_and(|j| j.contains("\"holding\": true")) {
+        assert!(
+            t1.elapsed() < Duration::from_secs(20),
+            "never journalled as held"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    std::thread::sleep(Duration::from_millis(100));
     hd.signal(libc::SIGKILL);
     hd.wait_for(Duration::from_secs(5));
     drain(&mut events, &mut released);
