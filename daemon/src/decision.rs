@@ -6,10 +6,13 @@
 //! heightmap (every cell checked on receipt; a bad frame is dropped and counted), waits for
 //! one newer than the last release, and decides with the configured method
 //! (`[decision] method`): the placement policy of `[models] policy` through the
-//! [`herb_decide::Decider`], or the search ([`herb_sim::search`]) through the same `Decider`
-//! (the same heightmap checks and the same z estimate), the search's twin built from that
-//! heightmap alone. A search's time budget is not reproducible, so a response says what it
-//! allowed (`allowed`: rollouts finished), and a replay runs exactly that count.
+//! [`herb_decide::Decider`], or the search ([`herb_sim::search`], the default) through the
+//! same `Decider` (the same heightmap checks and the same z estimate). The search's twin is the
+//! job's own (`[decision] twin = "job"`, the default: the job's decisions replayed, fitted to
+//! the heightmaps; a new job id starts it from an empty box) or one built from the heightmap
+//! alone. A search's time budget is not reproducible, so a response says what it allowed
+//! (`allowed`: rollouts finished), and a replay runs exactly that count; the job's twin is
+//! rebuilt from the same decisions and frames.
 //!
 //! A method that panics answers `Decision` (the job faults with that reason; the worker goes
 //! on); one that hangs is caught by the job machine's `decision.timeout_s`.
