@@ -336,12 +336,12 @@ impl Search {
     }
 
     /// Brings the job's twin up to `heightmap`; whether it agrees with it (then the rollouts
-    /// run in it). The
-    /// decision continues the job when `remaining` is the last decision's without its first
-    /// object: that object was released where it was decided, and is replayed there, moved by
-    /// the offset that best explains `heightmap`, or left out when the box without it explains
-    /// `heightmap` better (it was skipped after a missed grasp). The same remaining objects again (a pick tried
-    /// again) add nothing; anything else starts a new job from an empty box.
+    /// run in it). The decision continues the job when `remaining` is the last decision's
+    /// without its first object: that object was released where it was decided, and is
+    /// replayed there, moved by the offset that best explains `heightmap`, or left out when the
+    /// box without it explains `heightmap` better (it was skipped after a missed grasp). The
+    /// same remaining objects again (a pick tried again) add nothing; anything else starts a
+    /// new job from an empty box.
     fn follow_job(&mut self, heightmap: &Heightmap, remaining: &[TypeIdx]) -> Result<bool> {
         let continues = |j: &JobTwin| j.remaining.get(1..) == Some(remaining);
         let mut fit = Duration::ZERO;
