@@ -444,7 +444,7 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
     );
     assert!(st.success(), "{out}");
     for want in [
-        "method: blbf",
+        "method: search",
         "placement",
         "z ",
         "outcome: released",
