@@ -306,35 +306,21 @@ fn the_robust_search_ranks_by_noisy_rollouts_that_a_replay_draws_again() {
     let c = common::primitives();
     let world = exact(&c);
     let remaining: Vec<_> = ["006", "010", "003"].map(|i| c.by_id(i).unwrap()).to_vec();
-    let search = |noise: ReleaseNoise| {
+    let run = |robust: Option<RobustRollouts>| {
         let settings = SearchSettings {
             k: 3,
             budget: Budget::Rollouts(3),
             horizon: None,
             reward: RewardMode::cs(0.6).unwrap(),
             twin: TwinKind::Heightmap,
-            robust: Some(RobustRollouts { noise, samples: 3 }),
+            robust,
         };
         let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
         let p = s.decide(world.heightmap(), &remaining, None).unwrap();
         (p, s.report().clone())
     };
-    let plain = {
-        let mut s = Search::new(
-            c.clone(),
-            WorldConfig::default(),
-            SearchSettings {
-                k: 3,
-                budget: Budget::Rollouts(3),
-                horizon: None,
-                reward: RewardMode::cs(0.6).unwrap(),
-                twin: TwinKind::Heightmap,
-                robust: None,
-            },
-        );
-        let p = s.decide(world.heightmap(), &remaining, None).unwrap();
-        (p, s.report().clone())
-    };
+    let search = |noise| run(Some(RobustRollouts { noise, samples: 3 }));
+    let plain = run(None);
     // No noise: the plain search.
     let (p, r) = search(ReleaseNoise::default());
     assert_eq!((p, &r.finished), (plain.0, &plain.1.finished));
