@@ -14,7 +14,7 @@
 use crate::catalog::{SharedCatalog, TypeIdx};
 use crate::error::{Result, SimError};
 use crate::observation::{ObsLayout, Projections, action_to_placement};
-use crate::world::{PackingWorld, PlacementOutcome, ReleaseNoise, WorldConfig, offset_pose};
+use crate::world::{PackingWorld, PlacementOutcome, WorldConfig, offset_pose};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rapier3d::math::{Pose, Rotation};
@@ -220,11 +220,7 @@ impl PackingEnv {
     /// The next release's offset (x, y, yaw) by the world's release noise, `None` without
     /// noise (nothing drawn).
     fn draw_noise(&mut self) -> Option<(f32, f32, f32)> {
-        let cfg = self.world.config();
-        let n = ReleaseNoise {
-            sigma_m: cfg.release_noise_m,
-            sigma_deg: cfg.release_noise_deg,
-        };
+        let n = self.world.config().release_noise();
         (!n.is_zero()).then(|| n.draw(&mut self.noise_rng))
     }
 

@@ -85,6 +85,15 @@ impl Default for WorldConfig {
 }
 
 impl WorldConfig {
+    /// The release noise of [`WorldConfig::release_noise_m`] and
+    /// [`WorldConfig::release_noise_deg`].
+    pub fn release_noise(&self) -> ReleaseNoise {
+        ReleaseNoise {
+            sigma_m: self.release_noise_m,
+            sigma_deg: self.release_noise_deg,
+        }
+    }
+
     /// Checks every value; the error names the field.
     pub fn validate(&self) -> Result<()> {
         let check = |name: &str, v: f32, lo: f32, hi: f32| {

@@ -51,7 +51,7 @@ use herb_sim::lattice::{Lattice, Placement};
 use herb_sim::paths;
 use herb_sim::search::{Budget, RobustRollouts, Search, SearchSettings, TwinKind};
 use herb_sim::teacher::CandidateOutcome;
-use herb_sim::world::{PackingWorld, ReleaseNoise, WorldConfig};
+use herb_sim::world::{PackingWorld, WorldConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::BTreeMap;
@@ -186,32 +186,28 @@ fn probe(
     let mut env = PackingEnv::new(catalog.clone(), noisy.clone(), REWARD)?;
     env.reset(episode, seed)?;
     let mut lattice = Lattice::new(catalog);
-    let settings = |twin| SearchSettings {
+    let settings = |twin, robust| SearchSettings {
         k: K,
         budget: Budget::Rollouts(K),
         horizon: None,
         reward: REWARD,
         twin,
-        robust: None,
+        robust,
     };
     let kind = match mode {
         Mode::Twin | Mode::Blbf => TwinKind::Heightmap,
         Mode::Job => TwinKind::Job,
         Mode::Frozen | Mode::Exact => TwinKind::ExactClone,
     };
-    let mut search_twin = Search::new(
-        catalog.clone(),
-        cfg.clone(),
-        SearchSettings {
-            robust,
-            ..settings(kind)
-        },
-    );
+    let mut search_twin = Search::new(catalog.clone(), cfg.clone(), settings(kind, robust));
     if mode == Mode::Blbf {
         search_twin.set_budget(Budget::Rollouts(0));
     }
-    let mut search_exact =
-        Search::new(catalog.clone(), cfg.clone(), settings(TwinKind::ExactClone));
+    let mut search_exact = Search::new(
+        catalog.clone(),
+        cfg.clone(),
+        settings(TwinKind::ExactClone, None),
+    );
     let mut success = false;
     while let Some(&next) = env.remaining().first() {
         let remaining = env.remaining().to_vec();
@@ -336,10 +332,7 @@ fn main() -> Result<(), Error> {
     noisy.validate()?;
     let samples = arg(7, 0)? as usize;
     let robust = (samples > 0).then_some(RobustRollouts {
-        noise: ReleaseNoise {
-            sigma_m: noisy.release_noise_m,
-            sigma_deg: noisy.release_noise_deg,
-        },
+        noise: noisy.release_noise(),
         samples,
     });
     let root = paths::boxed_root(None);
