@@ -212,12 +212,40 @@ pub struct RecoveryConfig {
     /// tried again with the same placement this many times (0 to 5); then the object is skipped
     /// (status `Skipped`, fault `MissedGrasp`) and the job goes on with the next one.
     pub grasp_retries: u32,
+    /// What a measured joint outside `[limits]` (but inside the arm's own limits, e.g. an arm
+    /// that sagged while disabled) means when a job starts or resumes.
+    pub outside_limits: OutsideLimits,
+    /// With `outside_limits = "recover"`: the fraction (0 < f <= 1) of `[limits]`' speed,
+    /// acceleration and jerk at which the arm is brought back inside.
+    pub recover_speed: f64,
+    /// With `outside_limits = "recover"`: how far inside the limit a joint is brought (rad,
+    /// 0 to 0.05).
+    pub recover_margin_rad: f64,
 }
 
 impl Default for RecoveryConfig {
     fn default() -> Self {
-        Self { grasp_retries: 1 }
+        Self {
+            grasp_retries: 1,
+            outside_limits: OutsideLimits::Recover,
+            recover_speed: 0.1,
+            recover_margin_rad: 0.005,
+        }
     }
+}
+
+/// What herbd does with an arm measured outside its configured joint limits (but inside the
+/// arm's own) when a job starts or resumes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OutsideLimits {
+    /// Report it (fault `OutsideLimits`, naming the joint) and bring the joints outside back in,
+    /// slowly and toward the limit only, as the first motion; then the job goes on.
+    #[default]
+    Recover,
+    /// Refuse jobs as "robot not ready" (`NotReady`, fault `OutsideLimits`) and hold a running
+    /// job until the arm is moved inside by hand.
+    Refuse,
 }
 
 /// What a restarted herbd does with an unfinished job found in its journal.
@@ -348,6 +376,21 @@ impl ConfigFile for Config {
             return Err(format!(
                 "recovery.grasp_retries {} outside 0..=5",
                 self.recovery.grasp_retries
+            )
+            .into());
+        }
+        let r = &self.recovery;
+        if !(r.recover_speed.is_finite() && r.recover_speed > 0.0 && r.recover_speed <= 1.0) {
+            return Err(format!(
+                "recovery.recover_speed {} outside (0, 1] (a fraction of [limits])",
+                r.recover_speed
+            )
+            .into());
+        }
+        if !(r.recover_margin_rad.is_finite() && (0.0..=0.05).contains(&r.recover_margin_rad)) {
+            return Err(format!(
+                "recovery.recover_margin_rad {} outside 0..=0.05 rad",
+                r.recover_margin_rad
             )
             .into());
         }

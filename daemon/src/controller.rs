@@ -18,9 +18,9 @@ use crate::plan::{DecisionRequest, MotionPlan, Request};
 use crate::planner::PlannerLink;
 use crate::record::{DecisionRec, FRAME_META, LoopRec, OutDigest, Recorder, RespRec, Sent};
 use hdrhistogram::Histogram;
-use herb_ipc::bus::{Bus, CancelServer, JobServer, Pub, Sub};
+use herb_ipc::bus::{Bus, CancelServer, ConfirmServer, JobServer, Pub, Sub};
 use herb_ipc::{
-    ArmStatus, CancelJobReply, CancelJobRequest, GripperAction, GripperCommand, GripperState,
+    ArmStatus, CancelJobReply, CancelJobRequest, ConfirmPickReply, ConfirmPickRequest, GripperAction, GripperCommand, GripperState,
     Header, HeightmapFrame, JointCommand, JointState, PackJobReply, PackJobRequest, Payload,
     RejectReason, Status, StatusEvent, monotonic_ns,
 };
@@ -126,6 +126,7 @@ pub struct Ports {
     hm: Sub<HeightmapFrame>,
     jobs: JobServer,
     cancel: CancelServer,
+    confirm: ConfirmServer,
     out: OutPorts,
     _bus: Bus,
 }
@@ -151,6 +152,7 @@ impl Ports {
             hm: bus.subscriber(&s.heightmap())?,
             jobs: bus.job_server()?,
             cancel: bus.cancel_server()?,
+            confirm: bus.confirm_server()?,
             out: OutPorts {
                 cmd: bus.publisher(&s.joint_command())?,
                 grip: bus.publisher(&s.gripper_command())?,
@@ -166,6 +168,9 @@ impl Ports {
 type JobRequest = ActiveRequest<ipc::Service, PackJobRequest, (), PackJobReply, ()>;
 /// A cancel request being answered.
 type CancelRequest = ActiveRequest<ipc::Service, CancelJobRequest, (), CancelJobReply, ()>;
+/// A pick confirmation being answered.
+type ConfirmRequest =
+    ActiveRequest<ipc::Service, ConfirmPickRequest, (), ConfirmPickReply, ()>;
 
 /// The loop's counters reported in every status.
 #[derive(Debug, Clone, Copy, Default)]
@@ -189,6 +194,7 @@ struct Outbox<'a> {
     counters: LoopCounters,
     request: Option<JobRequest>,
     cancel: Option<CancelRequest>,
+    confirm: Option<ConfirmRequest>,
     /// Digest of the machine's outputs this cycle (run log).
     digest: OutDigest,
     /// Planner and decision requests handed over so far.
@@ -221,6 +227,7 @@ impl<'a> Outbox<'a> {
             counters,
             request: None,
             cancel: None,
+            confirm: None,
             digest: OutDigest::new(),
             sent,
             log_dropped: 0,
@@ -254,6 +261,19 @@ impl Effects for Outbox<'_> {
         let header = self.header();
         if let Some(req) = &self.cancel {
             let _ = req.send_copy(CancelJobReply {
+                header,
+                job_id,
+                accepted: (reason == RejectReason::None) as u32,
+                reason: reason as u32,
+            });
+        }
+    }
+
+    fn confirm_reply(&mut self, job_id: u64, reason: RejectReason) {
+        self.digest.confirm_reply(job_id, reason);
+        let header = self.header();
+        if let Some(req) = &self.confirm {
+            let _ = req.send_copy(ConfirmPickReply {
                 header,
                 job_id,
                 accepted: (reason == RejectReason::None) as u32,
@@ -595,6 +615,13 @@ impl Controller {
             fx.cancel = Some(req);
             job.cancel_request(&r, &mut fx);
             fx.cancel = None;
+        }
+        while let Ok(Some(req)) = p.confirm.receive() {
+            let r = *req.payload();
+            log(LoopRec::Confirm(r));
+            fx.confirm = Some(req);
+            job.confirm_request(&r, &mut fx);
+            fx.confirm = None;
         }
         let stop = self.shared.stop.load(Ordering::Relaxed);
         let finished = job.tick(now, stop, &mut fx);

@@ -68,14 +68,15 @@
 
 use crate::config::{Timeouts, secs_to_ns};
 use crate::plan::{DecisionRequest, DecisionResponse, Motion, MotionPlan, Request, Response};
+use crate::config::OutsideLimits;
 use herb_ipc::{
-    ARM_STATUS_PERIOD_NS, ArmBlocker, ArmStatus, CancelJobRequest, Fault, GRIPPER_REPEAT_NS,
-    GripperAction, GripperState, HEARTBEAT_PERIOD_NS, Header, HeightmapFrame, InOrder, JobState,
-    JointState, MAX_FUTURE_STAMP_NS, MAX_JOB_OBJECTS, NO_OBJECT, PackJobRequest, RejectReason,
-    Status, StatusEvent,
+    ARM_STATUS_PERIOD_NS, ArmBlocker, ArmStatus, CancelJobRequest, ConfirmPickRequest, Fault,
+    GRIPPER_REPEAT_NS, GripperAction, GripperState, HEARTBEAT_PERIOD_NS, Header, HeightmapFrame,
+    InOrder, JobState, JointState, MAX_FUTURE_STAMP_NS, MAX_JOB_OBJECTS, NO_JOINT, NO_OBJECT,
+    PackJobRequest, RejectReason, Status, StatusEvent,
 };
 use herb_robot::kinematics::DOF;
-use herb_robot::motion::Setpoint;
+use herb_robot::motion::{Excess, Setpoint, excess_of};
 
 pub mod record;
 pub use record::{JobRecord, JobRecordError, ObjectPhase, Placement};
@@ -126,6 +127,12 @@ pub struct JobParams {
     /// A decision not back this long after it was asked for faults the job
     /// (`decision.timeout_s`).
     pub decision_timeout_ns: u64,
+    /// The arm's own position limits (lower, upper; rad), wider than `lower`..`upper`: a joint
+    /// measured beyond them is never moved.
+    pub arm_range: ([f64; DOF], [f64; DOF]),
+    /// What a joint measured outside `lower`..`upper` (inside `arm_range`) means
+    /// (`recovery.outside_limits`).
+    pub outside: OutsideLimits,
 }
 
 impl JobParams {
@@ -138,6 +145,8 @@ impl JobParams {
             catalog_len,
             grasp_retries: cfg.recovery.grasp_retries,
             decision_timeout_ns: secs_to_ns(cfg.decision.timeout_s),
+            arm_range: herb_robot::motion::baxter_left_arm_range(),
+            outside: cfg.recovery.outside_limits,
         }
     }
 }
@@ -149,8 +158,11 @@ pub trait Effects {
     fn reply(&mut self, job_id: u64, reason: RejectReason, detail: u32);
     /// Answers the cancel request being handled ([`Job::cancel_request`]).
     fn cancel_reply(&mut self, job_id: u64, reason: RejectReason);
+    /// Answers the pick confirmation being handled ([`Job::confirm_request`]).
+    fn confirm_reply(&mut self, job_id: u64, reason: RejectReason);
     /// Publishes a status. Its header, `cycles`, `deadline_misses` and `max_cycle_ns` are the
-    /// shell's to fill; `rejected_inputs` counts the machine's rejections only.
+    /// shell's to fill; `rejected_inputs` and `rejected_requests` count the machine's
+    /// rejections only.
     fn status(&mut self, status: &Status);
     /// Publishes a joint command (already checked against the limits).
     fn joint(&mut self, command: &Setpoint);
@@ -184,6 +196,11 @@ enum Phase {
         action: GripperAction,
         seg: usize,
         since: u64,
+    },
+    /// A job fed by a person: above the pick station at the end of segment `seg` (the
+    /// pre-grasp), waiting for the confirmation that the object is there before descending.
+    AwaitOperator {
+        seg: usize,
     },
     /// Braking: `cursor` into the brake buffer once it arrived (`None` while it is computed).
     Braking {
@@ -267,6 +284,13 @@ pub struct Job {
     out: Commands,
     /// The daemon is stopping (SIGINT, SIGTERM): brake, refuse jobs, exit.
     stopping: bool,
+    /// The joint outside its limits the last `OutsideLimits` or `BeyondArmLimits` fault named.
+    excess: Option<Excess>,
+    /// The job waits for a confirmation before each grasp
+    /// ([`PackJobRequest::CONFIRM_PICKS`]).
+    confirm_picks: bool,
+    /// The current try of the current object's pick is confirmed.
+    confirmed: bool,
 }
 
 /// The machine's latched inputs: the newest valid sample of each source, the order checks that
@@ -295,8 +319,10 @@ pub struct Inputs {
     pub hm_rx_at: u64,
     /// The newest valid heightmap's capture stamp.
     pub hm_stamp: u64,
-    /// Inputs rejected (invalid, from the future, out of order; bad job and cancel requests).
+    /// Sensor inputs rejected (invalid, from the future, out of order).
     pub rejected: u64,
+    /// Client requests refused (pack jobs, cancels, pick confirmations).
+    pub rejected_requests: u64,
 }
 
 impl Default for Inputs {
@@ -315,6 +341,7 @@ impl Default for Inputs {
             hm_rx_at: 0,
             hm_stamp: 0,
             rejected: 0,
+            rejected_requests: 0,
         }
     }
 }
@@ -337,6 +364,10 @@ pub struct Commands {
     pub last_heartbeat: u64,
     /// Commands outside the joint limits replaced by holding the last one.
     pub limit_holds: u64,
+    /// The configuration measured when the job started or last resumed: a command may lie
+    /// outside the joint limits only between it and them (the way back in from an arm that
+    /// sagged past a limit), never farther out.
+    pub from: [f64; DOF],
 }
 
 impl Default for Commands {
@@ -350,6 +381,7 @@ impl Default for Commands {
             grip_sent_at: 0,
             last_heartbeat: 0,
             limit_holds: 0,
+            from: [0.0; DOF],
         }
     }
 }
@@ -391,16 +423,7 @@ fn release_q(plan: &MotionPlan) -> Option<[f64; DOF]> {
 
 /// Faults that mean the arm's state is not seen (joint states stopped).
 fn arm_unseen(f: Fault) -> bool {
-    matches!(
-        f,
-        Fault::JointStateTimeout
-            | Fault::RobotDisabled
-            | Fault::RobotEStop
-            | Fault::RobotError
-            | Fault::MasterLost
-            | Fault::RobotSilent
-            | Fault::CommandRefused
-    )
+    f.arm_unseen()
 }
 
 /// A state is not from the future when stamped at most [`MAX_FUTURE_STAMP_NS`] past the
@@ -443,6 +466,9 @@ impl Job {
             brake: None,
             out: Commands::default(),
             stopping: false,
+            excess: None,
+            confirm_picks: false,
+            confirmed: false,
         }
     }
 
@@ -527,7 +553,15 @@ impl Job {
         });
         let (reason, detail) = verdict.err().unwrap_or((RejectReason::None, 0));
         if reason != RejectReason::None {
-            self.inputs.rejected += 1;
+            self.inputs.rejected_requests += 1;
+            if matches!(
+                Fault::from_code(detail),
+                Some(Fault::OutsideLimits | Fault::BeyondArmLimits)
+            ) && reason == RejectReason::NotReady
+            {
+                // Named in the statuses that follow (the client reads the next heartbeat).
+                self.excess = self.measured_excess().map(|(_, e)| e);
+            }
         }
         fx.reply(r.job_id, reason, detail);
         if reason == RejectReason::None {
@@ -547,7 +581,7 @@ impl Job {
             Ok(()) => RejectReason::None,
         };
         if reason != RejectReason::None {
-            self.inputs.rejected += 1;
+            self.inputs.rejected_requests += 1;
         }
         fx.cancel_reply(r.job_id, reason);
         if reason != RejectReason::None || self.cancelling {
@@ -561,10 +595,39 @@ impl Job {
             | Phase::Starting
             | Phase::AwaitDecision { .. }
             | Phase::Streaming { .. }
+            | Phase::AwaitOperator { .. }
             | Phase::Gripper { .. } => self.retreat(fx),
             // Planning: when the plan comes back. Braking: when it ends. Faulted: next tick.
             _ => {}
         }
+    }
+
+    /// A pick confirmation: answered through [`Effects::confirm_reply`] (`Malformed`,
+    /// `ShuttingDown`, `NoSuchJob` unless it names the running job, `NotAwaited` unless the job
+    /// asks for confirmations and it names the current object and try; a repeat is accepted
+    /// again). Accepted, the arm descends to the grasp once it stands above the station.
+    pub fn confirm_request(&mut self, r: &ConfirmPickRequest, fx: &mut impl Effects) {
+        let reason = match r.validate() {
+            Err(e) => e,
+            Ok(()) if self.stopping => RejectReason::ShuttingDown,
+            Ok(()) if self.job_id == 0 || r.job_id != self.job_id => RejectReason::NoSuchJob,
+            Ok(())
+                if !self.confirm_picks
+                    || self.cancelling
+                    || self.holding
+                    || r.object_index as usize != self.index
+                    || r.attempt != self.missed =>
+            {
+                RejectReason::NotAwaited
+            }
+            Ok(()) => RejectReason::None,
+        };
+        if reason != RejectReason::None {
+            self.inputs.rejected_requests += 1;
+        } else {
+            self.confirmed = true;
+        }
+        fx.confirm_reply(r.job_id, reason);
     }
 
     /// Asks for the retreat of a cancelled job (when a buffer is home; else on a later tick).
@@ -608,8 +671,12 @@ impl Job {
         self.missed = 0;
         self.announced = false;
         self.release_stamp = 0;
+        self.confirm_picks = r.flags & PackJobRequest::CONFIRM_PICKS != 0;
+        self.confirmed = false;
+        self.excess = None;
         let q = self.inputs.js.map(|j| j.position).unwrap_or_default();
         self.out.cmd = Setpoint::at_rest(q);
+        self.out.from = q;
         // A known gripper state to start from: open, unless it holds something (which the job
         // then deals with as its first object's grasp would: it is never dropped here).
         if !self.holding {
@@ -625,6 +692,30 @@ impl Job {
         });
         self.phase = Phase::Ordering;
         self.emit(fx, StatusEvent::Accepted, NO_OBJECT, [0.0; 4], 0);
+        self.say_outside_limits(fx);
+    }
+
+    /// The measured arm outside the configured joint limits, and what it means: `None` when
+    /// inside (or nothing measured yet); `BeyondArmLimits` past the arm's own limits;
+    /// else `OutsideLimits`.
+    fn measured_excess(&self) -> Option<(Fault, Excess)> {
+        let q = self.inputs.js?.position;
+        let (lo, hi) = &self.p.arm_range;
+        if let Some(e) = excess_of(&q, lo, hi) {
+            return Some((Fault::BeyondArmLimits, e));
+        }
+        excess_of(&q, &self.p.lower, &self.p.upper).map(|e| (Fault::OutsideLimits, e))
+    }
+
+    /// At a job's start or resume with the arm measured outside the joint limits (inside its
+    /// own): reported as a fault naming the joint, while the planner brings it back inside
+    /// before the first motion; the job goes on.
+    fn say_outside_limits(&mut self, fx: &mut impl Effects) {
+        if let Some((fault, e)) = self.measured_excess() {
+            self.fault = fault;
+            self.excess = Some(e);
+            self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+        }
     }
 
     /// One planner response.
@@ -839,6 +930,9 @@ impl Job {
         self.stopping = s.stopping;
         self.announced = false;
         self.missed = 0;
+        self.confirm_picks = r.confirm_picks;
+        self.confirmed = false;
+        self.excess = None;
     }
 
     /// The state reported in statuses.
@@ -870,9 +964,14 @@ impl Job {
         !matches!(self.phase, Phase::Idle) && !self.recovered()
     }
 
-    /// Inputs rejected so far (invalid, from the future, out of order; bad job requests).
+    /// Sensor inputs rejected so far (invalid, from the future, out of order).
     pub fn rejected_inputs(&self) -> u64 {
         self.inputs.rejected
+    }
+
+    /// Client requests refused so far.
+    pub fn rejected_requests(&self) -> u64 {
+        self.inputs.rejected_requests
     }
 
     /// Commands outside the joint limits replaced by holding the last one.
@@ -901,6 +1000,7 @@ impl Job {
             }
             Phase::Streaming { .. }
             | Phase::Gripper { .. }
+            | Phase::AwaitOperator { .. }
             | Phase::Regrasp { .. }
             | Phase::Retreating { .. } => ObjectPhase::Moving,
             Phase::Braking { .. }
@@ -924,6 +1024,7 @@ impl Job {
             flip: self.flip,
             phase,
             placement: self.placement.filter(|p| p.index as usize == self.index),
+            confirm_picks: self.confirm_picks,
         }
     }
 
@@ -968,6 +1069,8 @@ impl Job {
         self.release_stamp = 0;
         self.fault = Fault::Restarted;
         self.cancelling = false;
+        self.confirm_picks = r.confirm_picks;
+        self.confirmed = false;
         self.phase = if resume {
             Phase::Recovering { asked: false }
         } else {
@@ -982,8 +1085,16 @@ impl Job {
             Some(self.joint_fault(now))
         } else if self.inputs.gs.is_none() {
             Some(Fault::GripperStateTimeout)
+        } else if let Some(f) = self.stale_input(now) {
+            Some(f)
         } else {
-            self.stale_input(now)
+            // Outside the arm's own limits: never moved. Outside herbd's only: brought back
+            // in by the job's first motion, unless configured to refuse.
+            match self.measured_excess() {
+                Some((Fault::BeyondArmLimits, _)) => Some(Fault::BeyondArmLimits),
+                Some((f, _)) if self.p.outside == OutsideLimits::Refuse => Some(f),
+                _ => None,
+            }
         }
     }
 
@@ -1093,7 +1204,8 @@ impl Job {
                 self.fault = Fault::Stop;
                 self.begin_brake(fx);
             }
-            Phase::Braking { .. } => {}
+            // Nothing runs: nothing to halt (the shutdown reports the idle state).
+            Phase::Braking { .. } | Phase::Idle => {}
             _ => self.enter_faulted(fx),
         }
     }
@@ -1143,6 +1255,7 @@ impl Job {
     /// Starts the current object: its decision is asked for, and its pick planned meanwhile.
     fn begin_object(&mut self, fx: &mut impl Effects, now: u64) {
         self.decision_failed = None;
+        self.confirmed = false;
         self.decide_since = now;
         self.ask_decision(fx, now);
         self.phase = Phase::Starting;
@@ -1215,7 +1328,13 @@ impl Job {
             buf,
         };
         match fx.plan(req) {
-            Ok(()) => self.phase = Phase::Planning,
+            Ok(()) => {
+                self.phase = Phase::Planning;
+                if self.confirm_picks && !self.confirmed && !matches!(motion, Motion::Place { .. }) {
+                    // A pick: the operator is asked for the object now, while the arm comes.
+                    self.emit(fx, StatusEvent::AwaitingObject, self.current_type(), [0.0; 4], 0);
+                }
+            }
             Err(Request::Plan { buf, .. }) => self.spare = Some(buf),
             Err(_) => {}
         }
@@ -1233,6 +1352,7 @@ impl Job {
                     | Phase::Planning
                     | Phase::Streaming { .. }
                     | Phase::Gripper { .. }
+                    | Phase::AwaitOperator { .. }
                     | Phase::Regrasp { .. }
                     | Phase::AwaitDecision { .. }
             );
@@ -1271,6 +1391,11 @@ impl Job {
             }
             Phase::Streaming { seg, cursor } => self.stream(fx, now, seg, cursor),
             Phase::Gripper { action, seg, since } => self.grip(fx, now, action, seg, since),
+            Phase::AwaitOperator { seg } => {
+                if self.confirmed && !self.stopping && !self.cancelling {
+                    self.next_segment(fx, now, seg + 1);
+                }
+            }
             Phase::Regrasp { since } => self.regrasp(fx, now, since),
             Phase::Braking {
                 cursor,
@@ -1323,9 +1448,16 @@ impl Job {
                     // changes nothing.)
                     let ready_said =
                         self.inputs.arm_blocker == ArmBlocker::None && self.arm_status_fresh(now);
-                    if arm_unseen(why) && arm_unseen(self.fault) && why != self.fault && !ready_said
+                    let limits = matches!(why, Fault::OutsideLimits | Fault::BeyondArmLimits);
+                    if (arm_unseen(why) && arm_unseen(self.fault) && !ready_said || limits)
+                        && why != self.fault
                     {
+                        // A held job that the arm's position keeps from resuming: said once,
+                        // naming the joint.
                         self.fault = why;
+                        if limits {
+                            self.excess = self.measured_excess().map(|(_, e)| e);
+                        }
                         self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
                     }
                     return;
@@ -1427,7 +1559,9 @@ impl Job {
             return;
         }
         if self.missed <= self.p.grasp_retries {
-            // The same object picked again; its decision (made or still coming) stands.
+            // The same object picked again; its decision (made or still coming) stands. A
+            // person feeding the station puts it back and confirms this try.
+            self.confirmed = false;
             self.phase = Phase::Starting;
             self.request_motion(fx, Motion::Pick);
             return;
@@ -1511,9 +1645,20 @@ impl Job {
         // Re-synchronise to where the arm is.
         if let Some(j) = self.inputs.js {
             self.out.cmd = Setpoint::at_rest(j.position);
+            self.out.from = j.position;
         }
         let held = self.inputs.gs.is_some_and(|g| g.holding == 1);
         self.emit(fx, StatusEvent::Resumed, self.current_type(), [0.0; 4], 0);
+        self.resume_from_measured(fx, now, recovered, held);
+        if self.phase != Phase::Idle {
+            // The arm sagged past a limit while halted: named now, brought back in by the
+            // first motion.
+            self.say_outside_limits(fx);
+        }
+    }
+
+    /// The rest of [`Job::resume`]: what the job does next, from the measured state.
+    fn resume_from_measured(&mut self, fx: &mut impl Effects, now: u64, recovered: bool, held: bool) {
         if recovered && !self.take_up_measured_state(fx, held, now) {
             return;
         }
@@ -1653,6 +1798,15 @@ impl Job {
             self.finish(fx, StatusEvent::JobFailed);
             return;
         }
+        let grasp_next = p
+            .segments()
+            .get(seg + 1)
+            .is_some_and(|n| n.then == Some(GripperAction::Close));
+        if sg.then.is_none() && grasp_next && self.confirm_picks && !self.confirmed {
+            // Above the station: no descent before the operator says the object is there.
+            self.phase = Phase::AwaitOperator { seg };
+            return;
+        }
         match sg.then {
             Some(action) => {
                 self.out.grip_cmd = action;
@@ -1678,7 +1832,12 @@ impl Job {
             // is planned from the state measured when the job resumes.
             let halted = matches!(self.phase, Phase::Faulted { .. });
             let q = self.out.cmd.position;
-            let inside = (0..DOF).all(|i| q[i] >= self.p.lower[i] && q[i] <= self.p.upper[i]);
+            // Inside the limits, or between them and where the arm stood when the job started
+            // or resumed (the way back in from a sag past a limit).
+            let from = &self.out.from;
+            let inside = (0..DOF).all(|i| {
+                q[i] >= self.p.lower[i].min(from[i]) && q[i] <= self.p.upper[i].max(from[i])
+            });
             if !halted {
                 if inside {
                     fx.joint(&self.out.cmd);
@@ -1698,6 +1857,9 @@ impl Job {
             // Between jobs, a heartbeat's fault says why a job would be refused now.
             if self.phase == Phase::Idle {
                 self.fault = self.not_ready(now).unwrap_or(Fault::None);
+                if matches!(self.fault, Fault::OutsideLimits | Fault::BeyondArmLimits) {
+                    self.excess = self.measured_excess().map(|(_, e)| e);
+                }
             }
             self.emit(fx, StatusEvent::Heartbeat, self.current_type(), [0.0; 4], 0);
         }
@@ -1710,7 +1872,7 @@ impl Job {
             StatusEvent::JobCancelled => JobState::Cancelled,
             _ => self.state(),
         };
-        Status {
+        let mut s = Status {
             header: Header::at(0, 0),
             job_id: self.job_id,
             event: event as u32,
@@ -1727,7 +1889,21 @@ impl Job {
             deadline_misses: 0,
             rejected_inputs: self.inputs.rejected,
             max_cycle_ns: 0,
+            rejected_requests: self.inputs.rejected_requests,
+            limit_joint: NO_JOINT,
+            limit_position_rad: 0.0,
+            limit_bound_rad: 0.0,
+            attempt: self.missed,
+        };
+        if matches!(self.fault, Fault::OutsideLimits | Fault::BeyondArmLimits)
+            && let Some(e) = self.excess
+            && e.position.is_finite()
+        {
+            s.limit_joint = e.joint as u32;
+            s.limit_position_rad = e.position as f32;
+            s.limit_bound_rad = e.bound as f32;
         }
+        s
     }
 
     fn emit(

@@ -59,6 +59,10 @@ pub struct PlannerCore {
     arm: Arm,
     ik: IkOptions,
     motion: MotionPlanner,
+    /// The arm's own position limits (wider than the configured ones).
+    hard: ([f64; DOF], [f64; DOF]),
+    /// `[recovery] recover_speed` and `recover_margin_rad`.
+    recover: (f64, f64),
 }
 
 impl PlannerCore {
@@ -73,7 +77,30 @@ impl PlannerCore {
             arm: Arm::baxter_left().with_limits(&limits.lower, &limits.upper),
             ik: IkOptions::default(),
             motion: MotionPlanner::new(limits, cfg.period_s()),
+            hard: herb_robot::motion::baxter_left_arm_range(),
+            recover: (cfg.recovery.recover_speed, cfg.recovery.recover_margin_rad),
         })
+    }
+
+    /// A start outside the configured limits (an arm that sagged while disabled): the slow
+    /// move back inside as the plan's first segment ([`MotionPlanner::into_limits`]). Returns
+    /// where the rest of the plan starts. A start beyond the arm's own limits is refused
+    /// ([`Fault::BeyondArmLimits`]).
+    fn into_limits(&mut self, from: [f64; DOF], buf: &mut MotionPlan) -> Result<[f64; DOF], Fault> {
+        let (speed, margin) = self.recover;
+        let hard = (&self.hard.0, &self.hard.1);
+        match self
+            .motion
+            .into_limits(&from, hard, speed, margin, &mut buf.setpoints)
+        {
+            Ok(None) => Ok(from),
+            Ok(Some(_)) => {
+                buf.push_segment(None);
+                Ok(buf.setpoints.as_slice().last().map_or(from, |s| s.position))
+            }
+            Err(herb_robot::motion::MotionError::BadState { .. }) => Err(Fault::BeyondArmLimits),
+            Err(_) => Err(Fault::Motion),
+        }
     }
 
     /// Orders a job's objects (HERB's Beam-3, [`Order::HERB`]; kept as given when `ordered`, a
@@ -102,6 +129,7 @@ impl PlannerCore {
         buf.reset();
         buf.index = index;
         buf.object = object;
+        let from = self.into_limits(from, buf)?;
         let h = self.catalog.shape(TypeIdx(object)).extents().z as f64;
         let place = pose.map(|v| v as f64);
         let clear_top = herb_core::frames::SUCCESS_TOP_Z as f64;
@@ -175,6 +203,7 @@ impl PlannerCore {
         buf: &mut MotionPlan,
     ) -> Result<(), Fault> {
         buf.reset();
+        let from = self.into_limits(from, buf)?;
         let h = held.map_or(0.0, |t| self.catalog.shape(TypeIdx(t)).extents().z as f64);
         let transit = self
             .cell

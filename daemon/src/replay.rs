@@ -129,6 +129,11 @@ impl Effects for ReplayFx {
         self.said
             .push(format!("cancel reply to job {job_id}: {reason:?}"));
     }
+    fn confirm_reply(&mut self, job_id: u64, reason: RejectReason) {
+        self.digest.confirm_reply(job_id, reason);
+        self.said
+            .push(format!("pick confirmation reply to job {job_id}: {reason:?}"));
+    }
     fn status(&mut self, s: &Status) {
         self.digest.status(s);
         self.said.push(format!(
@@ -345,6 +350,7 @@ pub fn replay(log: &Log, opts: &ReplayOptions) -> Result<(Outcome, Replayed), Re
             }
             Entry::Job(r) => job.job_request(&r, now, &mut fx),
             Entry::Cancel(r) => job.cancel_request(&r, &mut fx),
+            Entry::Confirm(r) => job.confirm_request(&r, &mut fx),
             Entry::Tick(stop, digest) => {
                 job.tick(now, stop, &mut fx);
                 for s in fx.statuses.drain(..) {

@@ -80,16 +80,29 @@ impl WatchView {
             ),
             StatusEvent::Fault => {
                 self.faults += 1;
-                format!("FAULT {fault:?} ({})", fault.describe())
+                match s.limit_words() {
+                    Some(w) => format!("FAULT {fault:?}: {w}"),
+                    None => format!("FAULT {fault:?} ({})", fault.describe()),
+                }
             }
             StatusEvent::Skipped => format!(
-                "object {}/{} ({}) skipped: {}",
+                "object {}/{} ({}) skipped: {}; take it away from the pick station",
                 s.object_index + 1,
                 s.objects_total,
                 name(s.object_type),
                 fault.describe()
             ),
-            StatusEvent::Braked => "braked: standing still".into(),
+            StatusEvent::AwaitingObject => format!(
+                "waiting for {} at the pick station (object {}/{}, try {})",
+                name(s.object_type),
+                s.object_index + 1,
+                s.objects_total,
+                s.attempt + 1
+            ),
+            StatusEvent::Braked if fault.arm_unseen() => {
+                "halted: the robot stopped itself; herbd commands nothing until it is back".into()
+            }
+            StatusEvent::Braked => "braked: the arm stands still".into(),
             StatusEvent::Resumed => "resumed".into(),
             StatusEvent::JobDone => format!(
                 "job {} DONE: {}/{} placed",
@@ -189,7 +202,7 @@ impl WatchView {
         });
         let _ = writeln!(
             out,
-            "loop: {} cycles{}, {} deadline misses ({:.4} %), worst cycle {:.1} us, {} inputs rejected",
+            "loop: {} cycles{}, {} deadline misses ({:.4} %), worst cycle {:.1} us, {} sensor inputs and {} requests refused",
             s.cycles,
             rate.map_or(String::new(), |r| format!(" ({r:.0} Hz)")),
             s.deadline_misses,
@@ -199,7 +212,8 @@ impl WatchView {
                 0.0
             },
             s.max_cycle_ns as f64 / 1000.0,
-            s.rejected_inputs
+            s.rejected_inputs,
+            s.rejected_requests
         );
         let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
         // Between jobs the fault is why a job would be refused now; in a job, the last one.
@@ -208,6 +222,10 @@ impl WatchView {
             (Fault::None, _) => "none".to_string(),
             (f, JobState::Idle) => format!("robot not ready: {}", f.describe()),
             (f, _) => format!("{f:?} ({}, the last one)", f.describe()),
+        };
+        let said = match s.limit_words() {
+            Some(w) => format!("{said}: {w}"),
+            None => said,
         };
         let _ = writeln!(
             out,
@@ -286,6 +304,11 @@ mod tests {
             deadline_misses: 2,
             rejected_inputs: 0,
             max_cycle_ns: 85_100,
+            rejected_requests: 0,
+            limit_joint: herb_ipc::NO_JOINT,
+            limit_position_rad: 0.0,
+            limit_bound_rad: 0.0,
+            attempt: 0,
         }
     }
 

@@ -4,7 +4,8 @@
 //! arbitrary bytes (a joint state, gripper state, heightmap, pack-job or cancel request) that
 //! fails validation. Over the next cycles both publish exactly the same joint commands, gripper
 //! commands, planner and decision requests and statuses, except that the rejection is counted
-//! (`rejected_inputs`) and a rejected request gets its reply, with a reason.
+//! (`rejected_inputs` for a sensor input, `rejected_requests` for a request) and a rejected
+//! request gets its reply, with a reason.
 //!
 //! Budget: `PROPTEST_CASES` cases per property (256 by default, what CI runs);
 //! `scripts/fuzz.sh` runs more.
@@ -52,9 +53,13 @@ impl Effects for Fx {
     fn cancel_reply(&mut self, job_id: u64, reason: RejectReason) {
         self.out.push(Out::CancelReply(job_id, reason));
     }
+    fn confirm_reply(&mut self, job_id: u64, reason: RejectReason) {
+        self.out.push(Out::CancelReply(job_id, reason));
+    }
     fn status(&mut self, s: &Status) {
         let mut s = *s;
         s.rejected_inputs = 0;
+        s.rejected_requests = 0;
         self.out.push(Out::Status(s));
     }
     fn joint(&mut self, c: &Setpoint) {
@@ -359,9 +364,13 @@ proptest! {
     fn an_invalid_payload_mid_motion_changes_no_action((kind, bytes) in kind_and_payload()) {
         let mut fed = Cell::moving();
         let mut control = Cell::moving();
-        let before = fed.job.rejected_inputs();
+        let before = fed.job.rejected_inputs() + fed.job.rejected_requests();
         prop_assume!(inject(&mut fed, kind, &bytes));
-        prop_assert_eq!(fed.job.rejected_inputs(), before + 1, "counted");
+        // Counted once, as a sensor input or as a request, whichever it was.
+        let request = matches!(kind, Kind::Job | Kind::Cancel);
+        let (inputs, requests) = (fed.job.rejected_inputs(), fed.job.rejected_requests());
+        prop_assert_eq!(inputs + requests, before + 1, "counted");
+        prop_assert_eq!(requests > 0, request, "counted as a request: {}", request);
         // A rejected request is answered with its reason and nothing else.
         let replies: Vec<Out> = std::mem::take(&mut fed.fx.out);
         prop_assert!(replies.len() <= 1, "{:?}", replies);

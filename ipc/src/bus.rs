@@ -7,7 +7,10 @@
 //! its last sample for late subscribers (history 1), so a restarted daemon sees the current
 //! heightmap at once. Room is left for peers that were killed and not yet cleaned up.
 
-use crate::{CancelJobReply, CancelJobRequest, PackJobReply, PackJobRequest, Payload, Services};
+use crate::{
+    CancelJobReply, CancelJobRequest, ConfirmPickReply, ConfirmPickRequest, PackJobReply,
+    PackJobRequest, Payload, Services,
+};
 use iceoryx2::node::NodeView;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -26,6 +29,10 @@ pub type JobClient = Client<ipc::Service, PackJobRequest, (), PackJobReply, ()>;
 pub type CancelServer = Server<ipc::Service, CancelJobRequest, (), CancelJobReply, ()>;
 /// A cancel-job client.
 pub type CancelClient = Client<ipc::Service, CancelJobRequest, (), CancelJobReply, ()>;
+/// The pick-confirmation server (herbd).
+pub type ConfirmServer = Server<ipc::Service, ConfirmPickRequest, (), ConfirmPickReply, ()>;
+/// A pick-confirmation client.
+pub type ConfirmClient = Client<ipc::Service, ConfirmPickRequest, (), ConfirmPickReply, ()>;
 
 /// A failure to open a node, service or port, with what was being opened.
 #[derive(Debug, thiserror::Error)]
@@ -310,6 +317,24 @@ impl Bus {
     /// A cancel-job client.
     pub fn cancel_client(&self) -> Result<CancelClient, BusError> {
         let name = self.services.cancel_job();
+        self.request_response(&name)?
+            .client_builder()
+            .create()
+            .map_err(|e| err(&name, e))
+    }
+
+    /// The pick-confirmation server.
+    pub fn confirm_server(&self) -> Result<ConfirmServer, BusError> {
+        let name = self.services.confirm_pick();
+        self.request_response(&name)?
+            .server_builder()
+            .create()
+            .map_err(|e| err(&name, e))
+    }
+
+    /// A pick-confirmation client.
+    pub fn confirm_client(&self) -> Result<ConfirmClient, BusError> {
+        let name = self.services.confirm_pick();
         self.request_response(&name)?
             .client_builder()
             .create()

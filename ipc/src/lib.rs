@@ -590,8 +590,15 @@ wire_enum! {
         /// was faulted, stands where it stopped); objects not yet placed stay unpacked.
         JobCancelled = 10,
         /// An object was given up (`fault` says why, e.g. [`Fault::MissedGrasp`] after its
-        /// retries): it stays unpacked and the job goes on with the next one.
+        /// retries): it stays unpacked and the job goes on with the next one. It may still be at
+        /// the pick station: an operator takes it away.
         Skipped = 11,
+        /// A job submitted with [`PackJobRequest::CONFIRM_PICKS`] needs the object
+        /// (`object_type`, `object_index`, try `attempt`) at the pick station: the arm goes to
+        /// its pre-grasp pose and waits there, above the station, until a client confirms with a
+        /// [`ConfirmPickRequest`] for this object and attempt; only then does it descend and
+        /// close the gripper. Sent at each try of each object's pick.
+        AwaitingObject = 12,
     }
 }
 
@@ -641,6 +648,35 @@ wire_enum! {
         /// Joint states stopped: the adapter refused a command too far from the measured position
         /// (its jump guard) and halted the arm; the job resumes from the measured state.
         CommandRefused = 18 => "the adapter refused a command far from the arm",
+        /// A measured joint is outside herbd's configured position limits (but inside the
+        /// arm's own): `limit_joint`, `limit_position_rad` and `limit_bound_rad` say which, where
+        /// and which limit. With `[limits] outside = "recover"` (the default) herbd brings the
+        /// joint back inside slowly before the job's next motion and the job goes on; with
+        /// `"refuse"` a job is refused (`NotReady`) and a running one holds until the arm is
+        /// moved inside by hand.
+        OutsideLimits = 19 => "a joint is outside herbd's limits",
+        /// A measured joint is outside the arm's own position limits (the robot's, wider than
+        /// herbd's): nothing is commanded; move the arm inside by hand.
+        BeyondArmLimits = 20 => "a joint is beyond the arm's own limits",
+    }
+}
+
+impl Fault {
+    /// The arm's joint states stopped (the robot disabled or e-stopped itself, errored, went
+    /// silent, its middleware's master was lost, or its adapter refused a command or went
+    /// silent): the robot halted by itself, not by herbd's brake, and herbd commands nothing
+    /// until it is back.
+    pub fn arm_unseen(self) -> bool {
+        matches!(
+            self,
+            Self::JointStateTimeout
+                | Self::RobotDisabled
+                | Self::RobotEStop
+                | Self::RobotError
+                | Self::MasterLost
+                | Self::RobotSilent
+                | Self::CommandRefused
+        )
     }
 }
 
@@ -680,13 +716,36 @@ pub struct Status {
     pub cycles: u64,
     /// Deadlines missed by the loop (cycles that overran and were skipped).
     pub deadline_misses: u64,
-    /// Invalid payloads received and dropped (by the loop, and heightmap frames with a bad cell
-    /// dropped by the planner before any decision).
+    /// Sensor inputs received and dropped: invalid, from the future or out of order joint
+    /// states, gripper states, arm statuses and heightmap frames (a heightmap frame with a bad
+    /// cell is counted on receipt). Requests are counted apart (`rejected_requests`).
     pub rejected_inputs: u64,
     /// Worst cycle time since start (ns).
     pub max_cycle_ns: u64,
+    /// Client requests refused: pack jobs (malformed, busy, not ready, holding...), cancels
+    /// and pick confirmations answered with a reason other than `None`.
+    pub rejected_requests: u64,
+    /// With `fault` [`Fault::OutsideLimits`] or [`Fault::BeyondArmLimits`]: the joint (0..7,
+    /// `s0 s1 e0 e1 w0 w1 w2`) that was outside when it was found; else [`NO_JOINT`].
+    pub limit_joint: u32,
+    /// Its measured angle then (rad); 0 without `limit_joint`.
+    pub limit_position_rad: f32,
+    /// The limit it was beyond (rad, herbd's or the arm's as `fault` says); 0 without
+    /// `limit_joint`.
+    pub limit_bound_rad: f32,
+    /// The try of the current object's pick this event is about (0: the first; a missed grasp
+    /// adds one).
+    pub attempt: u32,
 }
 payload!(Status);
+
+/// [`Status::limit_joint`] when no joint is named.
+pub const NO_JOINT: u32 = u32::MAX;
+
+/// The names of the left arm's joints, `s0 .. w2`, as ROS and Baxter spell them.
+pub const JOINT_NAMES: [&str; DOF] = [
+    "left_s0", "left_s1", "left_e0", "left_e1", "left_w0", "left_w1", "left_w2",
+];
 
 impl Status {
     /// Header, codes, counts and a finite pose.
@@ -704,7 +763,50 @@ impl Status {
         if self.objects_total as usize > MAX_JOB_OBJECTS || self.objects_done > self.objects_total {
             return Err(Invalid::new("objects_done", Reason::OutOfRange));
         }
+        if self.limit_joint != NO_JOINT && self.limit_joint as usize >= DOF {
+            return Err(Invalid::new("limit_joint", Reason::OutOfRange));
+        }
+        finite_all("limit_position_rad", &[self.limit_position_rad])?;
+        finite_all("limit_bound_rad", &[self.limit_bound_rad])?;
         finite_all("pose", &self.pose)
+    }
+
+    /// The joint outside its limits this status names, in words, with what to do: e.g.
+    /// `left_s1 at 1.0004 rad, 0.0034 rad beyond herbd's limit 0.9970 rad: herbd brings it back
+    /// inside slowly before the arm moves on`. `None` when no joint is named.
+    pub fn limit_words(&self) -> Option<String> {
+        let (j, q, bound) = self.limit_excess()?;
+        let fault = Fault::from_code(self.fault).unwrap_or(Fault::None);
+        let state = JobState::from_code(self.state).unwrap_or(JobState::Idle);
+        let whose = if fault == Fault::BeyondArmLimits {
+            "the arm's own limit"
+        } else {
+            "herbd's limit"
+        };
+        let todo = match (fault, state) {
+            (Fault::BeyondArmLimits, _) => "move the arm inside by hand (herbd never moves it there)",
+            (_, JobState::Running | JobState::Braking) => {
+                "herbd brings it back inside slowly before the arm moves on"
+            }
+            _ => {
+                "move the arm inside by hand, or let herbd bring it back (herbd.toml [recovery] outside_limits = \"recover\")"
+            }
+        };
+        Some(format!(
+            "{} at {q:.4} rad, {:.4} rad beyond {whose} {bound:.4} rad: {todo}",
+            JOINT_NAMES[j],
+            (q - bound).abs()
+        ))
+    }
+
+    /// The joint outside its limits this status names, if any: (joint index, measured angle,
+    /// the limit), rad.
+    pub fn limit_excess(&self) -> Option<(usize, f32, f32)> {
+        (self.limit_joint != NO_JOINT && (self.limit_joint as usize) < DOF).then_some((
+            self.limit_joint as usize,
+            self.limit_position_rad,
+            self.limit_bound_rad,
+        ))
     }
 }
 
@@ -720,8 +822,8 @@ pub struct PackJobRequest {
     pub job_id: u64,
     /// Objects used in `objects`.
     pub count: u32,
-    /// Reserved, zero.
-    pub reserved: u32,
+    /// Options: [`PackJobRequest::CONFIRM_PICKS`]; other bits must be zero.
+    pub flags: u32,
     /// Catalog type indices; the first `count` are used.
     pub objects: [u16; MAX_JOB_OBJECTS],
 }
@@ -753,10 +855,18 @@ wire_enum! {
         /// `detail`: the held object's catalog type if known, else `NO_OBJECT`. Take it out (the
         /// loopback: `herbctl reset`) and submit again.
         Holding = 9,
+        /// A pick confirmation for an object or try the running job does not wait for (another
+        /// object, an earlier try, or a job without [`PackJobRequest::CONFIRM_PICKS`]).
+        NotAwaited = 10,
     }
 }
 
 impl PackJobRequest {
+    /// [`Self::flags`] bit: a person feeds the pick station. Before each try of each pick the
+    /// arm waits above the station ([`StatusEvent::AwaitingObject`]) until a client confirms
+    /// the object is there ([`ConfirmPickRequest`]).
+    pub const CONFIRM_PICKS: u32 = 1;
+
     /// A request for `objects` (at most [`MAX_JOB_OBJECTS`]; more are cut, and then
     /// [`Self::validate`] rejects the count as `TooMany` only if the caller set it so).
     pub fn new(job_id: u64, objects: &[u16]) -> Self {
@@ -767,7 +877,7 @@ impl PackJobRequest {
             header: Header::now(1),
             job_id,
             count: objects.len().min(u32::MAX as usize) as u32,
-            reserved: 0,
+            flags: 0,
             objects: o,
         }
     }
@@ -780,7 +890,10 @@ impl PackJobRequest {
     /// Header, non-zero job id, 1..=[`MAX_JOB_OBJECTS`] objects, each below `catalog_len`.
     /// The error is the [`RejectReason`] with its detail (the offending position).
     pub fn validate(&self, catalog_len: usize) -> Result<(), (RejectReason, u32)> {
-        if self.header.validate().is_err() || self.job_id == 0 {
+        if self.header.validate().is_err()
+            || self.job_id == 0
+            || self.flags & !Self::CONFIRM_PICKS != 0
+        {
             return Err((RejectReason::Malformed, 0));
         }
         if self.count == 0 {
@@ -907,6 +1020,67 @@ pub struct CancelJobReply {
 payload!(CancelJobReply);
 
 impl CancelJobReply {
+    /// Header, flag and reason code.
+    pub fn validate(&self) -> Result<RejectReason, Invalid> {
+        reply_reason(&self.header, self.accepted, self.reason)
+    }
+}
+
+/// A client's word that the object a job waits for ([`StatusEvent::AwaitingObject`]) is at the
+/// pick station: the arm descends and grasps it. Answered by a [`ConfirmPickReply`].
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::ConfirmPickRequest")]
+pub struct ConfirmPickRequest {
+    /// Header.
+    pub header: Header,
+    /// The running job.
+    pub job_id: u64,
+    /// The object's index in the packing order (the status's `object_index`).
+    pub object_index: u32,
+    /// The try of its pick (the status's `attempt`).
+    pub attempt: u32,
+}
+payload!(ConfirmPickRequest);
+
+impl ConfirmPickRequest {
+    /// A confirmation for object `object_index`, try `attempt`, of job `job_id`, stamped now.
+    pub fn new(job_id: u64, object_index: u32, attempt: u32) -> Self {
+        Self {
+            header: Header::now(1),
+            job_id,
+            object_index,
+            attempt,
+        }
+    }
+
+    /// Header and a non-zero job id; the error is `Malformed`.
+    pub fn validate(&self) -> Result<(), RejectReason> {
+        if self.header.validate().is_err() || self.job_id == 0 {
+            return Err(RejectReason::Malformed);
+        }
+        Ok(())
+    }
+}
+
+/// The reply to a [`ConfirmPickRequest`].
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("herb::v1::ConfirmPickReply")]
+pub struct ConfirmPickReply {
+    /// Header.
+    pub header: Header,
+    /// The request's job id.
+    pub job_id: u64,
+    /// 1 when the confirmation was taken (the arm may descend; a repeat is taken again).
+    pub accepted: u32,
+    /// [`RejectReason`] code: `None`, `Malformed`, `ShuttingDown`, `NoSuchJob` or
+    /// `NotAwaited`.
+    pub reason: u32,
+}
+payload!(ConfirmPickReply);
+
+impl ConfirmPickReply {
     /// Header, flag and reason code.
     pub fn validate(&self) -> Result<RejectReason, Invalid> {
         reply_reason(&self.header, self.accepted, self.reason)
@@ -1178,6 +1352,10 @@ impl Services {
     /// request-response [`CancelJobRequest`] / [`CancelJobReply`], clients -> herbd.
     pub fn cancel_job(&self) -> String {
         self.name("cancel_job")
+    }
+    /// request-response [`ConfirmPickRequest`] / [`ConfirmPickReply`], clients -> herbd.
+    pub fn confirm_pick(&self) -> String {
+        self.name("confirm_pick")
     }
     /// pub-sub [`SimOutcome`], loopback -> tests (sim only).
     pub fn sim_outcome(&self) -> String {

@@ -171,6 +171,16 @@ fn layouts() -> Vec<Payload> {
         job_id: "the request's job id",
         accepted: "1 when the job is being cancelled",
         reason: "`RejectReason` code: `None`, `Malformed`, `ShuttingDown`, `NoSuchJob`");
+    layout!(s, ConfirmPickRequest,
+        header: "",
+        job_id: "the running job",
+        object_index: "the object awaited (`Status.object_index` of its `AwaitingObject`)",
+        attempt: "the try awaited (`Status.attempt` of its `AwaitingObject`)");
+    layout!(s, ConfirmPickReply,
+        header: "",
+        job_id: "the request's job id",
+        accepted: "1 when taken (the arm may descend to the grasp)",
+        reason: "`RejectReason` code: `None`, `Malformed`, `ShuttingDown`, `NoSuchJob`, `NotAwaited`");
     layout!(s, Status,
         header: "",
         job_id: "the job (0 when idle)",
@@ -186,13 +196,18 @@ fn layouts() -> Vec<Payload> {
         decision_ns: "ns, the decision's latency (Decided)",
         cycles: "loop cycles run",
         deadline_misses: "loop cycles that overran",
-        rejected_inputs: "invalid or out-of-order inputs dropped",
-        max_cycle_ns: "ns, worst cycle since start");
+        rejected_inputs: "sensor inputs dropped: invalid, from the future or out of order",
+        max_cycle_ns: "ns, worst cycle since start",
+        rejected_requests: "client requests refused (pack, cancel, confirm)",
+        limit_joint: "joint 0..7 outside its limits (`OutsideLimits`, `BeyondArmLimits`), else `NO_JOINT`",
+        limit_position_rad: "rad, its measured angle then (0 without `limit_joint`)",
+        limit_bound_rad: "rad, the limit it was beyond (0 without `limit_joint`)",
+        attempt: "the current object's pick try this event is about, from 0");
     layout!(s, PackJobRequest,
         header: "",
         job_id: "chosen by the client, non-zero",
         count: "objects used",
-        reserved: "zero",
+        flags: "bit 0 `CONFIRM_PICKS`: a person feeds the station, each grasp waits for a `ConfirmPickRequest`; other bits zero",
         objects: "catalog type indices (not ids); first `count` used");
     layout!(s, PackJobReply,
         header: "",
@@ -332,7 +347,7 @@ fn python(payloads: &[Payload]) -> String {
     let mut s = String::from(PY_HEAD);
     writeln!(
         s,
-        "PROTOCOL_VERSION = {PROTOCOL_VERSION}\nDOF = {DOF}\nHEIGHTMAP_MAX_CELLS = {HEIGHTMAP_MAX_CELLS}\nMAX_JOB_OBJECTS = {MAX_JOB_OBJECTS}\nMAX_REPORTED_CANDIDATES = {MAX_REPORTED_CANDIDATES}\nNO_OBJECT = 0x{NO_OBJECT:X}"
+        "PROTOCOL_VERSION = {PROTOCOL_VERSION}\nDOF = {DOF}\nHEIGHTMAP_MAX_CELLS = {HEIGHTMAP_MAX_CELLS}\nMAX_JOB_OBJECTS = {MAX_JOB_OBJECTS}\nMAX_REPORTED_CANDIDATES = {MAX_REPORTED_CANDIDATES}\nNO_OBJECT = 0x{NO_OBJECT:X}\nNO_JOINT = 0x{NO_JOINT:X}"
     )
     .unwrap();
     s.push_str(PY_BASE);
@@ -428,7 +443,7 @@ def code_name(member: enum.IntEnum) -> str:
 
 fn constants() -> String {
     format!(
-        "| constant | value |\n| --- | --- |\n| `PROTOCOL_VERSION` | {PROTOCOL_VERSION} |\n| `DOF` | {DOF} |\n| `HEIGHTMAP_MAX_CELLS` | {HEIGHTMAP_MAX_CELLS} |\n| `MAX_JOB_OBJECTS` | {MAX_JOB_OBJECTS} |\n| `NO_OBJECT` | {NO_OBJECT} (0x{NO_OBJECT:X}) |\n| `HEIGHT_RANGE_M` | {} .. {} m |\n| `MAX_JOINT_ABS_RAD` | {MAX_JOINT_ABS_RAD} rad |\n| `MAX_JOINT_SPEED` | {MAX_JOINT_SPEED} rad/s |\n| `MAX_FUTURE_STAMP_NS` | {MAX_FUTURE_STAMP_NS} ns |\n| `GRIPPER_REPEAT_NS` | {GRIPPER_REPEAT_NS} ns |\n| `HEARTBEAT_PERIOD_NS` | {HEARTBEAT_PERIOD_NS} ns |\n| `ARM_STATUS_PERIOD_NS` | {ARM_STATUS_PERIOD_NS} ns |\n| `CELL_M_RANGE` | {} .. {} m |\n",
+        "| constant | value |\n| --- | --- |\n| `PROTOCOL_VERSION` | {PROTOCOL_VERSION} |\n| `DOF` | {DOF} |\n| `HEIGHTMAP_MAX_CELLS` | {HEIGHTMAP_MAX_CELLS} |\n| `MAX_JOB_OBJECTS` | {MAX_JOB_OBJECTS} |\n| `NO_OBJECT` | {NO_OBJECT} (0x{NO_OBJECT:X}) |\n| `NO_JOINT` | {NO_JOINT} (0x{NO_JOINT:X}) |\n| `HEIGHT_RANGE_M` | {} .. {} m |\n| `MAX_JOINT_ABS_RAD` | {MAX_JOINT_ABS_RAD} rad |\n| `MAX_JOINT_SPEED` | {MAX_JOINT_SPEED} rad/s |\n| `MAX_FUTURE_STAMP_NS` | {MAX_FUTURE_STAMP_NS} ns |\n| `GRIPPER_REPEAT_NS` | {GRIPPER_REPEAT_NS} ns |\n| `HEARTBEAT_PERIOD_NS` | {HEARTBEAT_PERIOD_NS} ns |\n| `ARM_STATUS_PERIOD_NS` | {ARM_STATUS_PERIOD_NS} ns |\n| `CELL_M_RANGE` | {} .. {} m |\n",
         HEIGHT_RANGE_M.0, HEIGHT_RANGE_M.1, CELL_M_RANGE.0, CELL_M_RANGE.1
     )
 }
@@ -504,6 +519,12 @@ fn services() -> String {
         s,
         "| `{}` | request-response | `CancelJobRequest` -> `CancelJobReply` | clients | herbd (the one server) | - | - | - | - | - | - | - |",
         sv.cancel_job()
+    )
+    .unwrap();
+    writeln!(
+        s,
+        "| `{}` | request-response | `ConfirmPickRequest` -> `ConfirmPickReply` | clients | herbd (the one server) | - | - | - | - | - | - | - |",
+        sv.confirm_pick()
     )
     .unwrap();
     let q = REQUEST_QOS;

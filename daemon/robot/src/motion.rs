@@ -97,6 +97,80 @@ impl JointLimits {
     pub fn contains(&self, q: &[f64; DOF]) -> bool {
         (0..DOF).all(|i| q[i] >= self.lower[i] && q[i] <= self.upper[i])
     }
+
+    /// The joint of `q` farthest outside the position limits, if any is outside (a non-finite
+    /// angle counts as outside, by an infinite excess).
+    pub fn excess(&self, q: &[f64; DOF]) -> Option<Excess> {
+        excess_of(q, &self.lower, &self.upper)
+    }
+
+    /// `q` with every joint outside the position limits moved `margin` inside the limit it is
+    /// beyond (at most half its range); the joints inside are unchanged.
+    pub fn pulled_inside(&self, q: &[f64; DOF], margin: f64) -> [f64; DOF] {
+        let mut out = *q;
+        for (j, v) in out.iter_mut().enumerate() {
+            let m = margin.min(0.5 * (self.upper[j] - self.lower[j])).max(0.0);
+            if *v < self.lower[j] {
+                *v = self.lower[j] + m;
+            } else if *v > self.upper[j] {
+                *v = self.upper[j] - m;
+            }
+        }
+        out
+    }
+}
+
+/// The joint of `q` farthest outside `lower ..= upper`, if any.
+pub fn excess_of(q: &[f64; DOF], lower: &[f64; DOF], upper: &[f64; DOF]) -> Option<Excess> {
+    let mut worst: Option<Excess> = None;
+    for j in 0..DOF {
+        let (v, bound) = if !q[j].is_finite() {
+            (f64::INFINITY, upper[j])
+        } else if q[j] < lower[j] {
+            (lower[j] - q[j], lower[j])
+        } else if q[j] > upper[j] {
+            (q[j] - upper[j], upper[j])
+        } else {
+            continue;
+        };
+        if worst.is_none_or(|w| v > w.by()) {
+            worst = Some(Excess {
+                joint: j,
+                position: q[j],
+                bound,
+            });
+        }
+    }
+    worst
+}
+
+/// A joint outside a position range: which, where, and the limit it is beyond.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Excess {
+    /// Joint index (`s0 .. w2`).
+    pub joint: usize,
+    /// Its angle (rad).
+    pub position: f64,
+    /// The limit it is beyond (rad).
+    pub bound: f64,
+}
+
+impl Excess {
+    /// How far beyond the limit (rad, positive; infinite for a non-finite angle).
+    pub fn by(&self) -> f64 {
+        if self.position.is_finite() {
+            (self.position - self.bound).abs()
+        } else {
+            f64::INFINITY
+        }
+    }
+}
+
+/// The position limits of Baxter's left arm itself (its URDF's), wider than herbd's
+/// configured ones ([`JointLimits::baxter_left`] shrinks them by 0.05 rad).
+pub fn baxter_left_arm_range() -> ([f64; DOF], [f64; DOF]) {
+    let j = crate::kinematics::LEFT_ARM;
+    (j.map(|s| s.lower), j.map(|s| s.upper))
 }
 
 /// Joint limits that cannot be used ([`JointLimits::validate`]).
@@ -355,6 +429,76 @@ impl MotionPlanner {
         Ok(duration)
     }
 
+    /// Appends the slow move that brings a start outside the position limits back inside
+    /// (`from` as measured, e.g. an arm that sagged while disabled): every joint outside goes,
+    /// at `speed` times its speed, acceleration and jerk limits (0 < `speed` <= 1), to `margin`
+    /// inside the limit it is beyond, rest to rest; the joints inside stay where they are. No
+    /// sample goes farther out than `from`, nor past the target. `from` must be finite and
+    /// inside `hard` (the arm's own limits). Returns the duration (s), or `None` with nothing
+    /// appended when `from` is inside the limits already.
+    pub fn into_limits(
+        &mut self,
+        from: &[f64; DOF],
+        hard: (&[f64; DOF], &[f64; DOF]),
+        speed: f64,
+        margin: f64,
+        out: &mut Setpoints,
+    ) -> Result<Option<f64>, MotionError> {
+        if let Some(e) = excess_of(from, hard.0, hard.1) {
+            return Err(MotionError::BadState {
+                what: "start (beyond the arm's own limits)",
+                joint: e.joint,
+                value: e.position,
+            });
+        }
+        if self.limits.contains(from) {
+            return Ok(None);
+        }
+        if !(speed.is_finite() && speed > 0.0 && speed <= 1.0) {
+            return Err(MotionError::Ruckig(format!("speed fraction {speed} outside (0, 1]")));
+        }
+        let to = self.limits.pulled_inside(from, margin);
+        let z = vec![0.0; DOF];
+        let scaled = |v: &[f64; DOF]| v.iter().map(|x| x * speed).collect::<Vec<_>>();
+        self.input.max_velocity = scaled(&self.limits.velocity);
+        self.input.max_acceleration = scaled(&self.limits.acceleration);
+        self.input.max_jerk = scaled(&self.limits.jerk);
+        self.input.control_interface = ControlInterface::Position;
+        self.input.synchronization = Synchronization::Time;
+        self.input.current_position = from.to_vec();
+        self.input.current_velocity = z.clone();
+        self.input.current_acceleration = z.clone();
+        self.input.target_position = to.to_vec();
+        self.input.target_velocity = z.clone();
+        self.input.target_acceleration = z;
+        let result = self.calculate();
+        self.input.max_velocity = self.limits.velocity.to_vec();
+        self.input.max_acceleration = self.limits.acceleration.to_vec();
+        self.input.max_jerk = self.limits.jerk.to_vec();
+        let duration = result?;
+        let start = out.len();
+        self.sample(duration, out, |_, _| {})?;
+        if let Some(last) = out.samples.last_mut() {
+            *last = Setpoint::at_rest(to);
+        }
+        // Toward the limit only: every sample between the start and the target.
+        for (k, s) in out.samples[start..].iter_mut().enumerate() {
+            for j in 0..DOF {
+                let (lo, hi) = (from[j].min(to[j]), from[j].max(to[j]));
+                let v = s.position[j];
+                if v < lo - LIMIT_EPS || v > hi + LIMIT_EPS {
+                    return Err(MotionError::LeavesLimits {
+                        sample: k,
+                        joint: j,
+                        value: v,
+                    });
+                }
+                s.position[j] = v.clamp(lo, hi);
+            }
+        }
+        Ok(Some(duration))
+    }
+
     /// Appends a brake from `state` to standstill (every joint stops as fast as its limits
     /// allow, unsynchronised) to `out`. Returns the duration and the number of position
     /// values clamped to a limit.
@@ -398,7 +542,13 @@ impl MotionPlanner {
         self.input.control_interface = ControlInterface::Position;
         self.input.synchronization = Synchronization::Time;
         let duration = result?;
-        let (lower, upper) = (self.limits.lower, self.limits.upper);
+        // A brake that starts outside the limits (on the way back in from a sagged arm) keeps
+        // no farther out than its start: clamped to the limits widened to it, never a jump.
+        let (mut lower, mut upper) = (self.limits.lower, self.limits.upper);
+        for j in 0..DOF {
+            lower[j] = lower[j].min(state.position[j]);
+            upper[j] = upper[j].max(state.position[j]);
+        }
         let mut clamps = 0;
         self.sample(duration, out, |s, _| {
             for j in 0..DOF {

@@ -133,3 +133,80 @@ fn brakes_stop_moving_joints_within_the_limits() {
     bad.velocity[2] = f64::NAN;
     assert!(planner.brake(&bad, &mut brake).is_err());
 }
+
+/// An arm that sagged past herbd's limits (inside the arm's own) is brought back slowly: only
+/// the joints outside move, each from its start toward its limit and never farther out, at the
+/// reduced speed, ending at rest just inside; a start inside needs no move, one beyond the arm's
+/// own limits is refused; a brake that starts outside never jumps to the limit.
+#[test]
+fn a_start_past_a_limit_is_brought_back_inside_slowly_toward_the_limit_only() {
+    let l = JointLimits::baxter_left();
+    let hard = herb_robot::motion::baxter_left_arm_range();
+    let mut planner = MotionPlanner::new(l, DT);
+    let mut from = [0.0; DOF];
+    from[0] = 0.1;
+    from[1] = l.upper[1] + 0.0034; // left_s1 sagged to 1.0004 rad past 0.997
+    from[3] = l.lower[3] - 0.02;
+    let mut out = Setpoints::with_capacity(200_000);
+    let speed = 0.1;
+    let d = planner
+        .into_limits(&from, (&hard.0, &hard.1), speed, 0.005, &mut out)
+        .expect("planned")
+        .expect("a move");
+    assert!(d > 0.0);
+    let s = out.as_slice();
+    let last = s.last().unwrap();
+    assert!(l.contains(&last.position), "{:?}", last.position);
+    assert_eq!(last.velocity, [0.0; DOF]);
+    assert!((last.position[1] - (l.upper[1] - 0.005)).abs() < 1e-12);
+    assert!((last.position[3] - (l.lower[3] + 0.005)).abs() < 1e-12);
+    let mut prev = from;
+    for p in s {
+        for j in 0..DOF {
+            if j == 1 || j == 3 {
+                let (lo, hi) = (from[j].min(last.position[j]), from[j].max(last.position[j]));
+                assert!(p.position[j] >= lo && p.position[j] <= hi, "joint {j}");
+                // Monotone toward the target.
+                assert!((p.position[j] - prev[j]) * (last.position[j] - from[j]) >= -1e-12);
+                assert!(p.velocity[j].abs() <= speed * l.velocity[j] * (1.0 + 1e-6));
+            } else {
+                assert_eq!(p.position[j], from[j], "joint {j} inside stays");
+            }
+        }
+        prev = p.position;
+    }
+    // Inside already: nothing to do.
+    let mut none = Setpoints::with_capacity(10);
+    let inside = last.position;
+    assert_eq!(
+        planner
+            .into_limits(&inside, (&hard.0, &hard.1), speed, 0.005, &mut none)
+            .unwrap(),
+        None
+    );
+    assert!(none.is_empty());
+    // Beyond the arm's own limits: refused.
+    let mut beyond = from;
+    beyond[1] = hard.1[1] + 0.01;
+    assert!(matches!(
+        planner.into_limits(&beyond, (&hard.0, &hard.1), speed, 0.005, &mut none),
+        Err(MotionError::BadState { joint: 1, .. })
+    ));
+    // The planner's own limits are restored: a point-to-point afterwards is full speed.
+    let a = l.pulled_inside(&from, 0.005);
+    let mut b = a;
+    b[0] = 0.5;
+    let mut p2p = Setpoints::with_capacity(200_000);
+    planner.point_to_point(&a, &b, &mut p2p).unwrap();
+    let vmax = p2p.as_slice().iter().map(|p| p.velocity[0].abs()).fold(0.0, f64::max);
+    assert!(vmax > 0.5 * l.velocity[0], "{vmax}");
+    // A brake from a state still outside (moving back in) starts where it is.
+    let mut st = Setpoint::at_rest(from);
+    st.velocity[1] = -0.05;
+    let mut brake = Setpoints::with_capacity(200_000);
+    let (_, clamps) = planner.brake(&st, &mut brake).unwrap();
+    let first = brake.as_slice()[0].position[1];
+    assert!((first - from[1]).abs() < 1e-3, "no jump to the limit: {first}");
+    assert!(first > l.upper[1], "{first}");
+    assert_eq!(clamps, 0);
+}

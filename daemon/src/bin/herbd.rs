@@ -166,13 +166,38 @@ fn describe(s: &Status) -> Option<String> {
             "placed",
             &[("job", job), ("object", &object), ("placed", &placed)],
         ),
-        StatusEvent::Fault => logfmt::line(
-            "fault",
+        StatusEvent::Fault => match s.limit_excess() {
+            // Which joint, where, and the limit it is beyond.
+            Some((j, q, bound)) => logfmt::line(
+                "fault",
+                &[
+                    ("job", job),
+                    ("fault", &fault),
+                    ("state", &state),
+                    ("object", &object),
+                    ("joint", &herb_ipc::JOINT_NAMES[j]),
+                    ("position_rad", &format!("{q:.4}")),
+                    ("limit_rad", &format!("{bound:.4}")),
+                    ("beyond_rad", &format!("{:.4}", (q - bound).abs())),
+                ],
+            ),
+            None => logfmt::line(
+                "fault",
+                &[
+                    ("job", job),
+                    ("fault", &fault),
+                    ("state", &state),
+                    ("object", &object),
+                ],
+            ),
+        },
+        StatusEvent::AwaitingObject => logfmt::line(
+            "awaiting_object",
             &[
                 ("job", job),
-                ("fault", &fault),
-                ("state", &state),
                 ("object", &object),
+                ("type", &s.object_type),
+                ("attempt", &s.attempt),
             ],
         ),
         StatusEvent::Braked => logfmt::line("braked", &[("job", job), ("fault", &fault)]),

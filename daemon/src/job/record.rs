@@ -85,6 +85,9 @@ pub struct JobRecord {
     pub phase: ObjectPhase,
     /// The current object's placement, once decided.
     pub placement: Option<Placement>,
+    /// The job waits for a client's confirmation before each grasp
+    /// ([`herb_ipc::PackJobRequest::CONFIRM_PICKS`]).
+    pub confirm_picks: bool,
 }
 
 /// A record that cannot be decoded, or that does not describe a job that can be taken up.
@@ -167,6 +170,9 @@ struct Encoded {
     flip: bool,
     phase: ObjectPhase,
     placement: Option<Placement>,
+    /// Absent in records written before pick confirmations: false.
+    #[serde(default)]
+    confirm_picks: bool,
 }
 
 /// The tag read first, whatever else the record holds (another version's layout differs).
@@ -190,6 +196,7 @@ impl JobRecord {
         flip: false,
         phase: ObjectPhase::Idle,
         placement: None,
+        confirm_picks: false,
     };
 
     fn len(&self) -> usize {
@@ -240,6 +247,7 @@ impl JobRecord {
             flip: self.flip,
             phase: self.phase,
             placement: self.placement,
+            confirm_picks: self.confirm_picks,
         };
         serde_json::to_vec_pretty(&e).expect("a record is always JSON")
     }
@@ -305,6 +313,7 @@ impl JobRecord {
         r.flip = e.flip;
         r.phase = e.phase;
         r.placement = e.placement;
+        r.confirm_picks = e.confirm_picks;
         Ok(r)
     }
 
@@ -343,6 +352,7 @@ impl JobRecord {
         r.done = 1;
         r.holding = true;
         r.flip = true;
+        r.confirm_picks = true;
         r.phase = ObjectPhase::Carrying;
         r.placement = Some(Placement {
             index: 1,

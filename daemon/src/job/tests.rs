@@ -31,6 +31,10 @@ enum Out {
         job_id: u64,
         reason: RejectReason,
     },
+    ConfirmReply {
+        job_id: u64,
+        reason: RejectReason,
+    },
     Status(Status),
     Joint(Setpoint),
     Gripper {
@@ -75,6 +79,9 @@ impl Effects for Fx {
     }
     fn cancel_reply(&mut self, job_id: u64, reason: RejectReason) {
         self.out.push(Out::CancelReply { job_id, reason });
+    }
+    fn confirm_reply(&mut self, job_id: u64, reason: RejectReason) {
+        self.out.push(Out::ConfirmReply { job_id, reason });
     }
     fn status(&mut self, status: &Status) {
         self.out.push(Out::Status(*status));
@@ -145,6 +152,8 @@ fn params() -> JobParams {
         catalog_len: CATALOG,
         grasp_retries: cfg.recovery.grasp_retries,
         decision_timeout_ns: secs_to_ns(cfg.decision.timeout_s),
+        arm_range: herb_robot::motion::baxter_left_arm_range(),
+        outside: cfg.recovery.outside_limits,
     }
 }
 
@@ -621,7 +630,8 @@ fn bad_requests_are_answered_with_reason_and_detail_and_counted() {
     for (req, want) in &cases {
         assert_eq!(r.request(req), *want, "{req:?}");
     }
-    assert_eq!(r.job.rejected_inputs(), cases.len() as u64);
+    assert_eq!(r.job.rejected_requests(), cases.len() as u64);
+    assert_eq!(r.job.rejected_inputs(), 0, "requests are counted apart");
     assert_eq!(r.phase(), Phase::Idle);
     assert_eq!(r.count(|o| matches!(o, Out::Plan(_))), 0, "nothing ordered");
     assert!(r.events().is_empty(), "no status but heartbeats");
@@ -670,7 +680,7 @@ fn not_ready_without_joint_state_gripper_state_or_a_recent_heightmap() {
     r.ticks(2000);
     let camera = Fault::HeightmapTimeout as u32;
     assert_eq!(r.submit(1, &[1]), (RejectReason::NotReady, camera));
-    assert_eq!(r.job.rejected_inputs(), 1);
+    assert_eq!(r.job.rejected_requests(), 1);
 }
 
 #[test]
@@ -1862,14 +1872,16 @@ fn a_stop_while_streaming_brakes_then_finishes_without_a_fault_event() {
 }
 
 #[test]
-fn a_stop_while_idle_reports_braked_and_finishes() {
+fn a_stop_while_idle_halts_nothing_and_finishes_idle() {
+    // Nothing runs: nothing is halted, and the shutdown reports the idle state.
     let mut r = Rig::new();
     r.stop = true;
     r.tick();
     assert!(r.finished);
-    assert_eq!(r.events(), vec![StatusEvent::Braked]);
+    assert_eq!(r.events(), vec![]);
     let s = r.job.status(StatusEvent::Shutdown);
     assert_eq!((s.job_id, s.object_type), (0, NO_OBJECT));
+    assert_eq!(s.state, JobState::Idle as u32);
 }
 
 #[test]
@@ -1928,7 +1940,7 @@ fn cancel_requests_are_answered_with_their_reason() {
     assert_eq!(r.cancel(7), RejectReason::NoSuchJob, "no job runs");
     r.submit(7, &[1]);
     assert_eq!(r.cancel(8), RejectReason::NoSuchJob, "another job runs");
-    assert_eq!(r.job.rejected_inputs(), 3);
+    assert_eq!(r.job.rejected_requests(), 3);
     assert_eq!(r.cancel(7), RejectReason::None);
     assert_eq!(
         r.cancel(7),
@@ -2777,4 +2789,154 @@ proptest::proptest! {
             proptest::prop_assert_eq!(done.objects_done as usize, placed);
         }
     }
+}
+
+/// The Fault statuses emitted so far.
+fn fault_statuses(r: &Rig) -> Vec<Status> {
+    r.statuses()
+        .into_iter()
+        .filter(|s| event(s) == StatusEvent::Fault)
+        .collect()
+}
+
+/// Disabled mid-motion, the arm sags past herbd's limit on s1 (inside the arm's own): enabled
+/// again, the job resumes, says which joint is outside, where and which limit (a Fault status,
+/// the job still running), streams from where the arm stands (commands between it and the
+/// limit pass the guard) and finishes. Configured to refuse, the job holds, says so once, and
+/// a new job is refused as not ready, naming the joint, until the arm is moved inside.
+#[test]
+fn an_arm_sagged_past_a_limit_is_named_and_the_job_resumes_or_holds() {
+    let (mut r, _) = streaming();
+    r.ticks(5);
+    r.arm = Some(ArmBlocker::Disabled);
+    r.js_up = false;
+    r.until_event(300, StatusEvent::Braked);
+    let upper = r.job.p.upper[1];
+    r.q[1] = upper + 0.0034; // sagged past 0.997 to 1.0004
+    r.ticks(50);
+    r.arm = Some(ArmBlocker::None);
+    r.js_up = true;
+    r.until_event(2_000, StatusEvent::Resumed);
+    r.tick();
+    let f = *fault_statuses(&r).last().unwrap();
+    assert_eq!(f.fault, Fault::OutsideLimits as u32);
+    assert_eq!(f.state, JobState::Running as u32, "not a halt");
+    let (joint, q, bound) = f.limit_excess().expect("the joint named");
+    assert_eq!(joint, 1);
+    assert!((q as f64 - (upper + 0.0034)).abs() < 1e-6 && (bound as f64 - upper).abs() < 1e-6);
+    assert!(f.limit_words().unwrap().starts_with("left_s1 at "), "{:?}", f.limit_words());
+    let holds = r.job.limit_holds();
+    let done = run_to_done(&mut r);
+    assert_eq!(done.objects_done, 1);
+    assert_eq!(r.job.limit_holds(), holds, "no command held back on the way");
+
+    // Refuse: the job holds where it is, says why once, and the next job is refused.
+    let (mut r, _) = streaming();
+    r.job.p.outside = OutsideLimits::Refuse;
+    r.ticks(5);
+    r.arm = Some(ArmBlocker::Disabled);
+    r.js_up = false;
+    r.until_event(300, StatusEvent::Braked);
+    r.q[1] = upper + 0.0034;
+    r.arm = Some(ArmBlocker::None);
+    r.js_up = true;
+    r.ticks(2_000);
+    assert!(!r.events().contains(&StatusEvent::Resumed));
+    let said: Vec<u32> = fault_statuses(&r).iter().map(|s| s.fault).collect();
+    assert_eq!(
+        said,
+        vec![Fault::RobotDisabled as u32, Fault::OutsideLimits as u32],
+        "said once"
+    );
+    assert_eq!(r.job.state(), JobState::Faulted);
+    // Moved inside by hand: it resumes.
+    r.q[1] = upper - 0.01;
+    r.until_event(2_000, StatusEvent::Resumed);
+    run_to_done(&mut r);
+    r.q[1] = upper + 0.0034;
+    r.ticks(200);
+    assert_eq!(
+        r.submit(5, &[1]),
+        (RejectReason::NotReady, Fault::OutsideLimits as u32)
+    );
+    r.ticks(150);
+    let hb =
+        r.fx.out
+            .iter()
+            .rev()
+            .find_map(|o| match o {
+                Out::Status(s) if event(s) == StatusEvent::Heartbeat => Some(*s),
+                _ => None,
+            })
+            .unwrap();
+    assert_eq!(hb.limit_excess().map(|e| e.0), Some(1), "the heartbeat names the joint");
+    assert_eq!(r.job.rejected_requests(), 1);
+    // Beyond the arm's own limit: refused whatever the setting.
+    r.job.p.outside = OutsideLimits::Recover;
+    r.q[1] = r.job.p.arm_range.1[1] + 0.01;
+    r.ticks(150);
+    assert_eq!(
+        r.submit(6, &[1]),
+        (RejectReason::NotReady, Fault::BeyondArmLimits as u32)
+    );
+}
+
+/// A job fed by a person (`CONFIRM_PICKS`): each try of each pick asks for the object
+/// (`AwaitingObject`, with the try), and the arm holds above the station, the gripper not
+/// closed, until the confirmation for that object and try comes; a confirmation for another
+/// try or object, or for a job that does not ask, is refused (`NotAwaited`). After a missed
+/// grasp, the retry asks again.
+#[test]
+fn a_job_fed_by_hand_waits_above_the_station_for_each_confirmation() {
+    let mut r = Rig::new();
+    r.grasps = false; // the first grasp misses
+    let mut req = PackJobRequest::new(1, &[3]);
+    req.flags = PackJobRequest::CONFIRM_PICKS;
+    assert_eq!(r.request(&req).0, RejectReason::None);
+    r.until_event(500, StatusEvent::AwaitingObject);
+    let asked = r.last(StatusEvent::AwaitingObject);
+    assert_eq!((asked.object_index, asked.attempt), (0, 0));
+    // The arm goes above the station and stays there: no close.
+    r.ticks(3 * SEG);
+    assert!(matches!(r.phase(), Phase::AwaitOperator { .. }), "{:?}", r.phase());
+    let closes = |r: &Rig| {
+        r.fx.out
+            .iter()
+            .filter(|o| matches!(o, Out::Gripper { action: GripperAction::Close, .. }))
+            .count()
+    };
+    assert_eq!(closes(&r), 0);
+    let confirm = |r: &mut Rig, index: u32, attempt: u32| {
+        let c = ConfirmPickRequest::new(r.job.job_id, index, attempt);
+        r.job.confirm_request(&c, &mut r.fx);
+        match r.fx.out.last() {
+            Some(Out::ConfirmReply { reason, .. }) => *reason,
+            other => panic!("{other:?}"),
+        }
+    };
+    assert_eq!(confirm(&mut r, 0, 1), RejectReason::NotAwaited);
+    assert_eq!(confirm(&mut r, 1, 0), RejectReason::NotAwaited);
+    r.ticks(50);
+    assert_eq!(closes(&r), 0, "still waiting");
+    assert_eq!(confirm(&mut r, 0, 0), RejectReason::None);
+    r.until_event(10_000, StatusEvent::Fault);
+    assert_eq!(r.last(StatusEvent::Fault).fault, Fault::MissedGrasp as u32);
+    r.grasps = true;
+    // The retry asks again, for try 1, and waits.
+    r.until_event(10_000, StatusEvent::AwaitingObject);
+    assert_eq!(r.last(StatusEvent::AwaitingObject).attempt, 1);
+    let before = closes(&r);
+    r.ticks(3 * SEG);
+    assert_eq!(closes(&r), before);
+    assert_eq!(confirm(&mut r, 0, 0), RejectReason::NotAwaited, "the last try's");
+    assert_eq!(confirm(&mut r, 0, 1), RejectReason::None);
+    let done = run_to_done(&mut r);
+    assert_eq!(done.objects_done, 1);
+    assert_eq!(r.job.rejected_requests(), 3);
+    // A job that does not ask never waits and refuses confirmations.
+    let mut r = Rig::started(&[3]);
+    r.ticks(10);
+    assert_eq!(confirm(&mut r, 0, 0), RejectReason::NotAwaited);
+    run_to_done(&mut r);
+    assert!(!r.events().contains(&StatusEvent::AwaitingObject));
 }

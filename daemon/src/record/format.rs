@@ -12,7 +12,7 @@ use crate::digest::Fnv;
 use crate::job::{Commands, Inputs, JobRecord, JobSnapshot};
 use crate::plan::{DecisionRequest, Motion, Request};
 use herb_ipc::{
-    ArmBlocker, ArmStatus, CancelJobRequest, Fault, GripperAction, GripperState, HeightmapFrame,
+    ArmBlocker, ArmStatus, CancelJobRequest, ConfirmPickRequest, Fault, GripperAction, GripperState, HeightmapFrame,
     InOrder, JointState, PackJobRequest, Payload, RejectReason, Status,
 };
 use herb_robot::motion::Setpoint;
@@ -22,8 +22,9 @@ use std::io::Write;
 pub const MAGIC: &[u8; 8] = b"HERBRUN\0";
 /// The format version after [`MAGIC`] (2: a snapshot holds the job's record in the job
 /// journal's encoding; 3: decisions come from their own worker, recorded apart from the
-/// planner's responses, and the frames are the decisions').
-pub const FORMAT: u32 = 3;
+/// planner's responses, and the frames are the decisions'; 4: pick confirmations, and the
+/// statuses' limit, attempt and request-count fields).
+pub const FORMAT: u32 = 4;
 /// A frame's header and grid: the bytes of a [`HeightmapFrame`] before its cells.
 pub const FRAME_META: usize = std::mem::offset_of!(HeightmapFrame, data);
 
@@ -103,6 +104,8 @@ pub enum LoopRec {
     Job(PackJobRequest),
     /// A cancel request.
     Cancel(CancelJobRequest),
+    /// A pick confirmation.
+    Confirm(ConfirmPickRequest),
     /// The cycle's tick: the stop flag it saw, and the digest of all its outputs.
     Tick {
         /// Stop requested.
@@ -140,6 +143,10 @@ impl OutDigest {
     /// A cancel reply.
     pub fn cancel_reply(&mut self, job_id: u64, reason: RejectReason) {
         self.0.u64(2).u64(job_id).u64(reason as u64);
+    }
+    /// A pick confirmation's reply.
+    pub fn confirm_reply(&mut self, job_id: u64, reason: RejectReason) {
+        self.0.u64(12).u64(job_id).u64(reason as u64);
     }
     /// A status (the machine's fields).
     pub fn status(&mut self, s: &Status) {
@@ -253,6 +260,7 @@ pub(super) mod kind {
     pub const FRAME_CELLS: u8 = 13;
     pub const ARM: u8 = 14;
     pub const DECISION: u8 = 15;
+    pub const CONFIRM: u8 = 16;
 }
 
 /// Little-endian encoding of record payloads.
@@ -411,7 +419,10 @@ pub(super) fn encode_snapshot(before: Sent, s: &JobSnapshot) -> Vec<u8> {
     opt_order(&mut e, i.gs_order);
     e.u32(i.arm_blocker as u32).u64(i.arm_at);
     opt_order(&mut e, i.arm_order);
-    e.u64(i.hm_rx_at).u64(i.hm_stamp).u64(i.rejected);
+    e.u64(i.hm_rx_at)
+        .u64(i.hm_stamp)
+        .u64(i.rejected)
+        .u64(i.rejected_requests);
     e.u32(s.fault as u32).u64(s.release_stamp);
     let c = &s.commands;
     for row in [&c.cmd.position, &c.cmd.velocity, &c.cmd.acceleration] {
@@ -424,8 +435,11 @@ pub(super) fn encode_snapshot(before: Sent, s: &JobSnapshot) -> Vec<u8> {
         .u8(c.grip_due as u8)
         .u64(c.grip_sent_at)
         .u64(c.last_heartbeat)
-        .u64(c.limit_holds)
-        .u8(s.stopping as u8);
+        .u64(c.limit_holds);
+    for v in &c.from {
+        e.f64(*v);
+    }
+    e.u8(s.stopping as u8);
     e.0
 }
 
@@ -479,6 +493,7 @@ fn decode_machine(d: &mut Dec, job: JobRecord) -> Option<JobSnapshot> {
         hm_rx_at: d.u64()?,
         hm_stamp: d.u64()?,
         rejected: d.u64()?,
+        rejected_requests: d.u64()?,
     };
     let (fault, release_stamp) = (Fault::from_code(d.u32()?)?, d.u64()?);
     let mut cmd = Setpoint::default();
@@ -495,7 +510,12 @@ fn decode_machine(d: &mut Dec, job: JobRecord) -> Option<JobSnapshot> {
         grip_sent_at: d.u64()?,
         last_heartbeat: d.u64()?,
         limit_holds: d.u64()?,
+        from: [0.0; herb_robot::kinematics::DOF],
     };
+    let mut commands = commands;
+    for v in commands.from.iter_mut() {
+        *v = d.f64()?;
+    }
     Some(JobSnapshot {
         inputs,
         commands,
@@ -558,6 +578,10 @@ pub(super) fn encode_loop(r: &LoopRec) -> (u8, Vec<u8>) {
             e.bytes(r.as_bytes());
             kind::CANCEL
         }
+        LoopRec::Confirm(r) => {
+            e.bytes(r.as_bytes());
+            kind::CONFIRM
+        }
         LoopRec::Tick { stop, digest } => {
             e.u8(*stop as u8).u64(*digest);
             kind::TICK
@@ -589,6 +613,7 @@ pub(super) fn decode_loop(k: u8, payload: &[u8]) -> Option<Entry> {
         })),
         kind::JOB => d.payload().map(Entry::Job),
         kind::CANCEL => d.payload().map(Entry::Cancel),
+        kind::CONFIRM => d.payload().map(Entry::Confirm),
         kind::TICK => Some(Entry::Tick(d.bool()?, d.u64()?)),
         _ => None,
     }
@@ -689,6 +714,8 @@ pub enum Entry {
     Job(PackJobRequest),
     /// See [`LoopRec`].
     Cancel(CancelJobRequest),
+    /// See [`LoopRec`].
+    Confirm(ConfirmPickRequest),
     /// See [`LoopRec`].
     Tick(bool, u64),
 }

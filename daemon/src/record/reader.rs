@@ -105,7 +105,7 @@ impl Log {
                         .ok_or_else(|| bad(LogProblem::Frame))?;
                     log.frames.insert(digest, f);
                 }
-                kind::CYCLE..=kind::TICK | kind::ARM | kind::DECISION => {
+                kind::CYCLE..=kind::TICK | kind::ARM | kind::DECISION | kind::CONFIRM => {
                     let e = decode_loop(k, payload).ok_or_else(|| bad(LogProblem::Malformed(k)))?;
                     if let Entry::Cycle(_) = e {
                         cycles += 1;

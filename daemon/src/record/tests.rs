@@ -177,6 +177,8 @@ fn segments_rotate_between_jobs_and_the_oldest_are_deleted() {
         catalog_len: 24,
         grasp_retries: 1,
         decision_timeout_ns: 10_000_000_000,
+        arm_range: herb_robot::motion::baxter_left_arm_range(),
+        outside: crate::config::OutsideLimits::Recover,
     };
     let snap = crate::job::Job::new(params, buf(), buf())
         .snapshot()
@@ -263,6 +265,7 @@ fn a_snapshot_reads_back_bit_for_bit() {
             hm_rx_at: 14,
             hm_stamp: 15,
             rejected: 16,
+            rejected_requests: 21,
         },
         commands: Commands {
             cmd: herb_robot::motion::Setpoint::at_rest([0.7; DOF]),
@@ -272,6 +275,7 @@ fn a_snapshot_reads_back_bit_for_bit() {
             grip_sent_at: 17,
             last_heartbeat: 18,
             limit_holds: 19,
+            from: [0.9; DOF],
         },
         job,
         release_stamp: 20,

@@ -13,10 +13,37 @@ use herb_ipc::{
 };
 
 pub mod guard;
+pub mod log;
+
+/// How far past the measured position a command outside herbd's limits may lie (rad): the
+/// measurement's noise between herbd's reading and the adapter's.
+pub const MEASURED_SLACK_RAD: f64 = 0.002;
+
+/// The position range an arm adapter accepts commands in: herbd's `limits` (lower, upper),
+/// widened on each joint to where the arm is `measured` (plus [`MEASURED_SLACK_RAD`]) and never
+/// past the arm's own limits `arm` (lower, upper). An arm that sagged past herbd's limit while
+/// disabled is brought back by commands between where it is and the limit (herbd's way back
+/// in); a command farther out than the arm is refused.
+pub fn command_range(
+    limits: (&[f64; DOF], &[f64; DOF]),
+    measured: Option<&[f64; DOF]>,
+    arm: (&[f64; DOF], &[f64; DOF]),
+) -> ([f64; DOF], [f64; DOF]) {
+    let (mut lo, mut hi) = (*limits.0, *limits.1);
+    if let Some(q) = measured {
+        for j in 0..DOF {
+            if q[j].is_finite() {
+                lo[j] = lo[j].min((q[j] - MEASURED_SLACK_RAD).max(arm.0[j]));
+                hi[j] = hi[j].max((q[j] + MEASURED_SLACK_RAD).min(arm.1[j]));
+            }
+        }
+    }
+    (lo, hi)
+}
 
 /// The end of an adapter process: its final summary (JSON) on stdout and, if asked, in the
-/// `report` file; or its error (any error the process ends with) on stderr. Exit code 0, or 2
-/// on an error or an unwritable report.
+/// `report` file; or its error (any error the process ends with) on stderr, a
+/// [`log!`](crate::log!) line. Exit code 0, or 2 on an error or an unwritable report.
 pub fn finish<E: std::fmt::Display>(
     name: &str,
     result: Result<serde_json::Value, E>,
@@ -29,13 +56,13 @@ pub fn finish<E: std::fmt::Display>(
             if let Some(p) = report
                 && let Err(e) = std::fs::write(p, format!("{v}\n"))
             {
-                eprintln!("{name}: cannot write {}: {e}", p.display());
+                crate::log!("{name}: cannot write {}: {e}", p.display());
                 return ExitCode::from(2);
             }
             ExitCode::SUCCESS
         }
         Err(e) => {
-            eprintln!("{name}: error: {e}");
+            crate::log!("{name}: error: {e}");
             ExitCode::from(2)
         }
     }
@@ -323,6 +350,21 @@ impl CameraPort {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_command_range_widens_to_a_sagged_arm_only_and_never_past_the_arm() {
+        let (lo, hi) = ([-1.0; super::DOF], [1.0; super::DOF]);
+        let (alo, ahi) = ([-1.05; super::DOF], [1.05; super::DOF]);
+        let mut q = [0.0; super::DOF];
+        q[1] = 1.0034;
+        q[3] = 1.06; // beyond the arm's own limit: capped there
+        let (l, h) = super::command_range((&lo, &hi), Some(&q), (&alo, &ahi));
+        assert_eq!(l, lo);
+        assert!((h[1] - (1.0034 + super::MEASURED_SLACK_RAD)).abs() < 1e-12);
+        assert_eq!(h[3], 1.05);
+        assert_eq!(h[0], 1.0, "a joint inside keeps herbd's limit");
+        assert_eq!(super::command_range((&lo, &hi), None, (&alo, &ahi)), (lo, hi));
+    }
+
     use super::*;
 
     #[test]

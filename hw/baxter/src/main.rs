@@ -10,6 +10,7 @@ use herb_ipc::bus::Bus;
 use herb_ipc::{ArmBlocker, GripperState, Header, JointState, NO_OBJECT, Services, monotonic_ns};
 use herb_robot::config_file::ConfigFile;
 use herb_robot::rt::{set_timer_slack, sleep_until};
+use herb_ros1::Advertised;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -59,19 +60,11 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
     if !(cli.rate_hz.is_finite() && (10.0..=10_000.0).contains(&cli.rate_hz)) {
         return Err(format!("--rate-hz {} outside 10..=10000", cli.rate_hz));
     }
-    // The address the robot reaches this node at: roslibrust reads ROS_HOSTNAME, then ROS_IP.
-    for (var, value) in [("ROS_HOSTNAME", &cfg.ros.hostname), ("ROS_IP", &cfg.ros.ip)] {
-        if !value.is_empty() {
-            // SAFETY: no other thread runs yet (the bus, the ROS thread and the signal handler
-            // start below), so nothing reads the environment concurrently.
-            unsafe { std::env::set_var(var, value) };
-        }
-    }
-    let advertised = std::env::var("ROS_HOSTNAME")
-        .or_else(|_| std::env::var("ROS_IP"))
-        .unwrap_or_else(|_| {
-            "this PC's hostname (set ros.ip or ros.hostname on a real cell)".into()
-        });
+    // The address the robot reaches this node at: the file's keys, else ROS_HOSTNAME/ROS_IP.
+    // SAFETY: no other thread runs yet (the bus, the ROS thread and the signal handler start
+    // below), so nothing reads the environment concurrently.
+    let advertised =
+        unsafe { Advertised::set(&cfg.ros.ip, &cfg.ros.hostname) }.map_err(|e| e.to_string())?;
     let services = Services::new(&herbd.ipc_prefix).map_err(|e| e.to_string())?;
     let stop = Arc::new(AtomicBool::new(false));
     {
@@ -95,11 +88,15 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             })
             .map_err(|e| e.to_string())?
     };
-    eprintln!(
+    herb_adapter::log!(
         "herb-baxter: prefix {:?}, master {}, reached at {advertised}, commands at {} Hz ({:?} mode)",
-        herbd.ipc_prefix, cfg.ros.master_uri, cfg.arm.command_rate_hz, cfg.arm.mode
+        herbd.ipc_prefix,
+        cfg.ros.master_uri,
+        cfg.arm.command_rate_hz,
+        cfg.arm.mode
     );
     let (lower, upper) = (herbd.limits.lower, herbd.limits.upper);
+    let arm_range = herb_robot::motion::baxter_left_arm_range();
     let period = (1e9 / cli.rate_hz) as u64;
     set_timer_slack();
     let mut next = monotonic_ns() + period;
@@ -115,7 +112,15 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             next = now + period;
         }
         let mut latest = None;
-        arm.drain_joint_commands(&lower, &upper, |c, valid| {
+        // herbd's limits, widened to an arm that sagged past them while disabled (herbd brings
+        // it back in from where it is, toward the limit), never past the arm's own.
+        let measured = lock(&shared).joint.map(|(_, m)| m.position);
+        let (lo, hi) = herb_adapter::command_range(
+            (&lower, &upper),
+            measured.as_ref(),
+            (&arm_range.0, &arm_range.1),
+        );
+        arm.drain_joint_commands(&lo, &hi, |c, valid| {
             for i in 0..herb_ipc::DOF {
                 let p = c.position[i];
                 if p.is_finite() {

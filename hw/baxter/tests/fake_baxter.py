@@ -12,7 +12,8 @@ Closing grips (an object is always there, unless --miss-grasps), opening release
 The arm can move only while enabled and not e-stopped. SIGUSR2 toggles an e-stop: pressed, the
 robot is stopped and disabled (/robot/state: stopped, estop_button and estop_source 1); released,
 it is enabled again (the operator released the button and re-enabled it). While the arm cannot
-move it sags: left_s1 drifts at +--sag rad/s and left_e1 at half that, within the limits (and
+move it sags: left_s1 drifts at +--sag rad/s and left_e1 at half that (--sag-joints chooses),
+within the limits --lower/--upper, which are the robot's own (and
 their reported velocities say so). Commands received while it cannot move are counted and not
 followed, and when it can move again (SIGUSR1, the e-stop's release, an enable request on
 /robot/set_super_enable) every command received before is forgotten: the arm holds until a new
@@ -82,6 +83,8 @@ def main():
     ap.add_argument("--sag", type=float, default=0.05,
                     help="while disabled or e-stopped the arm sags: left_s1 at +SAG rad/s, "
                          "left_e1 at +SAG/2 rad/s, within the limits (default 0.05)")
+    ap.add_argument("--sag-joints", default="1,3",
+                    help="which joints sag (indices in s0..w2, of 1 (s1) and 3 (e1); default 1,3)")
     ap.add_argument("--far", type=float, default=0.2,
                     help="a command whose largest joint offset from the arm exceeds FAR rad is "
                          "counted in commands_far (default 0.2)")
@@ -94,6 +97,7 @@ def main():
     a = ap.parse_args()
     q = floats(a.start)
     lower, upper, vmax = floats(a.lower), floats(a.upper), floats(a.vmax)
+    sagging = {int(j): SAG[int(j)] for j in a.sag_joints.split(",") if j.strip()}
     rng = random.Random(a.seed)
     lock = threading.Lock()
     st = {
@@ -244,7 +248,7 @@ def main():
                         q[i] += step
                         qd[i] = step / dt
             else:
-                for i, share in SAG.items():
+                for i, share in sagging.items():
                     new = max(lower[i], min(upper[i], q[i] + a.sag * share * dt))
                     qd[i] = (new - q[i]) / dt
                     q[i] = new

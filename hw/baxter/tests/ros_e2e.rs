@@ -194,7 +194,10 @@ fn packs_through_ros_with_a_fake_baxter() {
         &dir,
     );
     let mut out = Follow::new(&mut ctl);
-    out.wait_for(&format!("placed {n}/{n}"), Duration::from_secs(300));
+    out.wait_for(
+        &format!("placed: {n} of {n} object"),
+        Duration::from_secs(300),
+    );
     let st = ctl.wait_for(Duration::from_secs(30));
     let summary = out.last_json().expect("herbctl's JSON summary");
     assert!(st.success(), "{summary}");
@@ -302,7 +305,7 @@ fn interruptions_halt_say_why_and_resume_without_a_jump() {
     std::thread::sleep(Duration::from_secs(1));
     let _master2 = ros.master("2");
     out.wait_for("resumed", Duration::from_secs(20));
-    out.wait_for("placed 3/3", Duration::from_secs(180));
+    out.wait_for("placed: 3 of 3 objects", Duration::from_secs(180));
     let st = ctl.wait_for(Duration::from_secs(30));
     let summary = out.last_json().expect("herbctl's JSON summary");
     assert!(st.success(), "{summary}");
@@ -368,7 +371,10 @@ fn a_restarted_master_and_robot_are_found_again_and_the_next_job_packs() {
     let run = |objects: &str, n: usize| {
         let mut ctl = pack(&prefix, &["pack", "--objects", objects], &dir);
         let mut out = Follow::new(&mut ctl);
-        out.wait_for(&format!("placed {n}/{n}"), Duration::from_secs(180));
+        out.wait_for(
+            &format!("placed: {n} of {n} object"),
+            Duration::from_secs(180),
+        );
         let st = ctl.wait_for(Duration::from_secs(30));
         let summary = out.last_json().expect("herbctl's JSON summary");
         assert!(st.success(), "{summary}");
@@ -401,4 +407,66 @@ fn a_restarted_master_and_robot_are_found_again_and_the_next_job_packs() {
     assert!(a["ros"]["reregistered"].as_u64().unwrap() >= 1, "{a}");
     assert!(f2["commands"].as_u64().unwrap() > 10, "{f2}");
     assert_eq!(f2["commands_far"], 0, "{f2}");
+}
+
+/// A real Baxter's joints droop while it is disabled, past herbd's limits: the fake Baxter
+/// (enforcing the robot's own limits), disabled mid-job, sags its elbow (`left_e1`, 0.5 rad/s)
+/// to the robot's limit, 0.05 rad past herbd's. Enabled again, the job resumes: herbd names the
+/// joint (`OutsideLimits`, `left_e1 at ...`), brings it back inside slowly from where it stands
+/// (the first command after the enable within 0.01 rad of the arm, none outside the robot's
+/// limits, none far), and the job finishes.
+#[test]
+fn a_baxter_sagged_past_a_limit_while_disabled_resumes_and_finishes() {
+    if !ros_available() {
+        return;
+    }
+    let dir = tmp("ros-sag");
+    let prefix = format!("ros{}sag", std::process::id());
+    let cfg = config(&dir, &prefix, "blbf");
+    let ros = RosWorld::new(&dir, Some(&generate_python_messages(&dir)));
+    let _master = ros.master("1");
+    let report = dir.join("fake.json");
+    let (lo, hi) = herb_robot::motion::baxter_left_arm_range();
+    let list = |v: &[f64; 7]| v.map(|x| x.to_string()).join(",");
+    let (lower, upper) = (
+        format!("--lower={}", list(&lo)),
+        format!("--upper={}", list(&hi)),
+    );
+    let fake = fake_baxter(
+        &ros,
+        &report,
+        0,
+        &[&lower, &upper, "--sag=1.0", "--sag-joints=3"],
+    );
+    let adapter = adapter(&ros, &cfg, "1", &[]);
+    let (spec, truth) = empty_box();
+    let _camera = Camera::start(&ros, &cfg, &spec, &truth, 0, 0.0);
+    let _hd = herbd(&cfg, &dir, &[]);
+    let mut ctl = pack(&prefix, &["pack", "--objects", "003,005"], &dir);
+    let mut out = Follow::new(&mut ctl);
+    out.wait_for("object  1/2", Duration::from_secs(60));
+    std::thread::sleep(Duration::from_millis(700));
+    fake.signal(libc::SIGUSR1); // disabled
+    out.wait_for("FAULT RobotDisabled", Duration::from_secs(5));
+    std::thread::sleep(Duration::from_secs(3)); // left_e1 sags to the robot's limit
+    fake.signal(libc::SIGUSR1); // enabled again
+    out.wait_for("left_e1 at 2.6180 rad", Duration::from_secs(10));
+    let st = ctl.wait_for(Duration::from_secs(180));
+    let summary = out.last_json().expect("herbctl's JSON summary");
+    assert!(st.success(), "{summary}");
+    assert_eq!(summary["placed"], 2, "{summary}");
+    let a = adapter_summary(adapter);
+    let f = fake_report(fake, &report);
+    eprintln!("herbctl: {summary}\nherb-baxter: {a}\nfake Baxter: {f}");
+    assert_eq!(f["out_of_limits"], 0, "{f}");
+    assert_eq!(f["commands_far"], 0, "{f}");
+    let firsts: Vec<f64> = serde_json::from_value(f["first_command_offsets"].clone()).unwrap();
+    assert!(firsts.len() >= 2, "{f}");
+    for x in &firsts {
+        assert!(*x <= 0.01, "a first command {x} rad from the arm: {f}");
+    }
+    assert!(
+        a["max_limit_excess_rad"].as_f64().unwrap() > 0.0,
+        "commands came back from past herbd's limit: {a}"
+    );
 }

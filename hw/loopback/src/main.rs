@@ -24,6 +24,7 @@
 //!   adapter's jump guard (`herb_adapter::guard`) first; the summary lists each first
 //!   command's distance from the arm after it could move again (`first_command_offsets_rad`).
 //! - **Missed grasps**: with `--miss-grasps N` the first N grasps close on nothing.
+//! - **Start pose**: `--start Q` (7 angles) starts the arm there, e.g. past herbd's limits.
 //!
 //! SIGINT/SIGTERM: prints a JSON summary on stdout and exits 0.
 
@@ -75,6 +76,11 @@ struct Cli {
     /// How fast the arm sags while disabled or e-stopped (rad/s on s1, half on e1).
     #[arg(long, default_value_t = 0.05)]
     sag: f64,
+    /// Where the arm stands at start: 7 comma-separated angles (rad), s0 .. w2, inside the
+    /// arm's own limits (e.g. past herbd's, as an arm that sagged while the cell was off).
+    /// Default: the top-down nominal configuration.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    start: Vec<f64>,
     /// The first N grasps close on nothing (a missed grasp).
     #[arg(long, default_value_t = 0)]
     miss_grasps: u32,
@@ -204,6 +210,8 @@ struct Sim {
     catalog: Arc<Catalog>,
     lower: [f64; DOF],
     upper: [f64; DOF],
+    /// The arm's own position limits (its URDF's, wider than herbd's): how far it sags.
+    arm_range: ([f64; DOF], [f64; DOF]),
     /// Joint speed limits: the simulated arm never moves faster, whatever the commands did
     /// while this process was stalled or before it started.
     vmax: [f64; DOF],
@@ -391,6 +399,23 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             return Err(format!("signal handler for {sig}"));
         }
     }
+    let start = match cli.start.len() {
+        0 => LEFT_TOP_DOWN_NOMINAL,
+        DOF => {
+            let q: [f64; DOF] = std::array::from_fn(|i| cli.start[i]);
+            let (lo, hi) = herb_robot::motion::baxter_left_arm_range();
+            if let Some(e) = herb_robot::motion::excess_of(&q, &lo, &hi) {
+                return Err(format!(
+                    "--start: joint {} at {} rad is beyond the arm's own limit {} rad",
+                    herb_ipc::JOINT_NAMES[e.joint],
+                    e.position,
+                    e.bound
+                ));
+            }
+            q
+        }
+        n => return Err(format!("--start needs {DOF} angles (rad), got {n}")),
+    };
     if !(cli.sag.is_finite() && (0.0..=1.0).contains(&cli.sag)) {
         return Err(format!("--sag {} outside 0..=1 rad/s", cli.sag));
     }
@@ -430,10 +455,11 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         catalog: catalog.clone(),
         lower: cfg.limits.lower,
         upper: cfg.limits.upper,
+        arm_range: herb_robot::motion::baxter_left_arm_range(),
         vmax: cfg.limits.velocity,
-        q: LEFT_TOP_DOWN_NOMINAL,
+        q: start,
         qd: [0.0; DOF],
-        target: LEFT_TOP_DOWN_NOMINAL,
+        target: start,
         closed: false,
         held: None,
         max_excess: 0.0,
@@ -496,7 +522,12 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             None => ArmBlocker::None,
         };
         arm.report_arm_status(said, sim.guard.refused, now);
-        let (lower, upper) = (sim.lower, sim.upper);
+        // herbd's limits, widened to an arm that sagged past them (herbd brings it back in).
+        let (lower, upper) = herb_adapter::command_range(
+            (&sim.lower, &sim.upper),
+            Some(&sim.q),
+            (&sim.arm_range.0, &sim.arm_range.1),
+        );
         if sim.blocker.is_some() {
             // No power: nothing is followed (commands are still drained and counted).
             arm.drain_joint_commands(&lower, &upper, |_, _| {});
@@ -540,9 +571,11 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             1.0
         };
         if sim.blocker.is_some() {
-            // Unpowered: the arm sags (s1 and e1 under gravity), within its limits.
+            // Unpowered: the arm sags (s1 and e1 under gravity), within its own limits (past
+            // herbd's, as a real Baxter's shoulder does).
             for (i, rate) in [(1, cli.sag), (3, 0.5 * cli.sag)] {
-                let nq = (sim.q[i] + rate * dt).clamp(sim.lower[i], sim.upper[i]);
+                let (lo, hi) = (sim.arm_range.0[i], sim.arm_range.1[i]);
+                let nq = (sim.q[i] + rate * dt).clamp(lo, hi);
                 sim.qd[i] = (nq - sim.q[i]) / dt;
                 sim.q[i] = nq;
             }

@@ -180,6 +180,11 @@ pub fn status(job_id: u64, event: StatusEvent) -> Status {
         deadline_misses: 0,
         rejected_inputs: 0,
         max_cycle_ns: 0,
+        rejected_requests: 0,
+        limit_joint: herb_ipc::NO_JOINT,
+        limit_position_rad: 0.0,
+        limit_bound_rad: 0.0,
+        attempt: 0,
     }
 }
 
