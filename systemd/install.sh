@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Lays out HERB on the robot PC (systemd/README.md): binaries and models under /opt/herb, the
-# configuration under /etc/herb (existing files are kept), the units, sysusers.d and tmpfiles.d
-# under /usr/local/lib, then creates the user and /tmp/iceoryx2 and reloads systemd.
+# Lays out HERB on the robot PC (systemd/README.md): binaries, models and the documentation
+# (README.md, docs/, systemd/README.md) under /opt/herb, the configuration under /etc/herb
+# (existing files are kept; ros.env is a commented template), the units, sysusers.d and
+# tmpfiles.d under /usr/local/lib, then creates the user and /tmp/iceoryx2 and reloads systemd.
 #
 #   cargo build --release --bins && sudo systemd/install.sh
 #   systemd/install.sh --dest /tmp/stage     # stage into a folder (packaging, tests): no
@@ -35,8 +36,15 @@ install -d "$D/opt/herb/bin" "$D/opt/herb/models" "$D/etc/herb" \
 for b in "${BINS[@]}"; do install -m 0755 "$BIN/$b" "$D/opt/herb/bin/$b"; done
 install -m 0644 models/sequence.json models/objects.toml "$D/opt/herb/models/"
 for m in models/policy-*.onnx; do install -m 0644 "$m" "$D/opt/herb/models/"; done
+# The README with what its relative links reach for the owner: docs/ (real-cell.md, adapters.md
+# and the rest, the images) and the install layout, systemd/README.md, which real-cell.md links.
+install -d "$D/opt/herb/docs/img" "$D/opt/herb/systemd"
 install -m 0644 README.md "$D/opt/herb/README.md"
-for c in herbd.toml baxter.toml camera.toml; do
+install -m 0644 docs/*.md "$D/opt/herb/docs/"
+install -m 0644 docs/img/* "$D/opt/herb/docs/img/"
+install -m 0644 systemd/README.md "$D/opt/herb/systemd/README.md"
+# ros.env: a commented template (ROS_IP / ROS_HOSTNAME), read by the adapters' units.
+for c in herbd.toml baxter.toml camera.toml ros.env; do
   if [ -e "$D/etc/herb/$c" ]; then
     echo "install.sh: keeping the existing /etc/herb/$c (the shipped one is systemd/$c)"
   else
@@ -53,6 +61,14 @@ if [ -n "$BOXED" ]; then
     cp -r "$BOXED/$part" "$D/opt/herb/boxed/"
   done
 fi
+real_cell="on a real cell, before enabling herb-baxter and herb-camera:
+  /etc/herb/ros.env     set ROS_IP=<this PC's address on the robot's network> (or ROS_HOSTNAME=);
+                        both adapters' units read it (EnvironmentFile), and each logs the address
+                        it advertises ('reached at ...'); without it the robot must resolve this
+                        PC's hostname
+  /etc/herb/baxter.toml, /etc/herb/camera.toml
+                        [ros] master_uri: the robot's ROS master (not read from ros.env)
+  the steps (network, calibrations): /opt/herb/docs/real-cell.md"
 if [ "$D" = "" ]; then
   systemd-sysusers /usr/local/lib/sysusers.d/herb.conf
   systemd-tmpfiles --create /usr/local/lib/tmpfiles.d/herb.conf
@@ -61,3 +77,4 @@ if [ "$D" = "" ]; then
 else
   echo "staged into $DEST"
 fi
+echo "$real_cell"

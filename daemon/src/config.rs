@@ -528,6 +528,22 @@ mod tests {
             ("[decision]\nk = 0\n", "decision.k"),
             ("[decision]\nk = 65\n", "decision.k"),
             ("[decision]\ntwin = \"exact\"\n", "twin"),
+            (
+                "[recovery]\noutside_limits = \"ignore\"\n",
+                "outside_limits",
+            ),
+            (
+                "[recovery]\nrecover_speed = 0.0\n",
+                "recovery.recover_speed",
+            ),
+            (
+                "[recovery]\nrecover_speed = 1.5\n",
+                "recovery.recover_speed",
+            ),
+            (
+                "[recovery]\nrecover_margin_rad = -0.1\n",
+                "recovery.recover_margin_rad",
+            ),
             ("[decision]\nhorizon = 65\n", "decision.horizon"),
             (
                 "[decision]\nbudget_s = 5.0\ntimeout_s = 2.0\n",

@@ -20,9 +20,9 @@ use crate::record::{DecisionRec, FRAME_META, LoopRec, OutDigest, Recorder, RespR
 use hdrhistogram::Histogram;
 use herb_ipc::bus::{Bus, CancelServer, ConfirmServer, JobServer, Pub, Sub};
 use herb_ipc::{
-    ArmStatus, CancelJobReply, CancelJobRequest, ConfirmPickReply, ConfirmPickRequest, GripperAction, GripperCommand, GripperState,
-    Header, HeightmapFrame, JointCommand, JointState, PackJobReply, PackJobRequest, Payload,
-    RejectReason, Status, StatusEvent, monotonic_ns,
+    ArmStatus, CancelJobReply, CancelJobRequest, ConfirmPickReply, ConfirmPickRequest,
+    GripperAction, GripperCommand, GripperState, Header, HeightmapFrame, JointCommand, JointState,
+    PackJobReply, PackJobRequest, Payload, RejectReason, Status, StatusEvent, monotonic_ns,
 };
 use herb_robot::motion::Setpoint;
 use herb_robot::rt::{set_timer_slack, sleep_until};
@@ -169,8 +169,7 @@ type JobRequest = ActiveRequest<ipc::Service, PackJobRequest, (), PackJobReply, 
 /// A cancel request being answered.
 type CancelRequest = ActiveRequest<ipc::Service, CancelJobRequest, (), CancelJobReply, ()>;
 /// A pick confirmation being answered.
-type ConfirmRequest =
-    ActiveRequest<ipc::Service, ConfirmPickRequest, (), ConfirmPickReply, ()>;
+type ConfirmRequest = ActiveRequest<ipc::Service, ConfirmPickRequest, (), ConfirmPickReply, ()>;
 
 /// The loop's counters reported in every status.
 #[derive(Debug, Clone, Copy, Default)]

@@ -66,9 +66,9 @@
 //! picked; one the journal says was held, now out of the gripper with the arm standing at its
 //! release configuration, was released there before the crash: it is counted placed.
 
+use crate::config::OutsideLimits;
 use crate::config::{Timeouts, secs_to_ns};
 use crate::plan::{DecisionRequest, DecisionResponse, Motion, MotionPlan, Request, Response};
-use crate::config::OutsideLimits;
 use herb_ipc::{
     ARM_STATUS_PERIOD_NS, ArmBlocker, ArmStatus, CancelJobRequest, ConfirmPickRequest, Fault,
     GRIPPER_REPEAT_NS, GripperAction, GripperState, HEARTBEAT_PERIOD_NS, Header, HeightmapFrame,
@@ -1330,9 +1330,16 @@ impl Job {
         match fx.plan(req) {
             Ok(()) => {
                 self.phase = Phase::Planning;
-                if self.confirm_picks && !self.confirmed && !matches!(motion, Motion::Place { .. }) {
+                if self.confirm_picks && !self.confirmed && !matches!(motion, Motion::Place { .. })
+                {
                     // A pick: the operator is asked for the object now, while the arm comes.
-                    self.emit(fx, StatusEvent::AwaitingObject, self.current_type(), [0.0; 4], 0);
+                    self.emit(
+                        fx,
+                        StatusEvent::AwaitingObject,
+                        self.current_type(),
+                        [0.0; 4],
+                        0,
+                    );
                 }
             }
             Err(Request::Plan { buf, .. }) => self.spare = Some(buf),
@@ -1658,7 +1665,13 @@ impl Job {
     }
 
     /// The rest of [`Job::resume`]: what the job does next, from the measured state.
-    fn resume_from_measured(&mut self, fx: &mut impl Effects, now: u64, recovered: bool, held: bool) {
+    fn resume_from_measured(
+        &mut self,
+        fx: &mut impl Effects,
+        now: u64,
+        recovered: bool,
+        held: bool,
+    ) {
         if recovered && !self.take_up_measured_state(fx, held, now) {
             return;
         }

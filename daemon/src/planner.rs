@@ -86,7 +86,11 @@ impl PlannerCore {
     /// move back inside as the plan's first segment ([`MotionPlanner::into_limits`]). Returns
     /// where the rest of the plan starts. A start beyond the arm's own limits is refused
     /// ([`Fault::BeyondArmLimits`]).
-    fn into_limits(&mut self, from: [f64; DOF], buf: &mut MotionPlan) -> Result<[f64; DOF], Fault> {
+    fn back_inside_limits(
+        &mut self,
+        from: [f64; DOF],
+        buf: &mut MotionPlan,
+    ) -> Result<[f64; DOF], Fault> {
         let (speed, margin) = self.recover;
         let hard = (&self.hard.0, &self.hard.1);
         match self
@@ -129,7 +133,7 @@ impl PlannerCore {
         buf.reset();
         buf.index = index;
         buf.object = object;
-        let from = self.into_limits(from, buf)?;
+        let from = self.back_inside_limits(from, buf)?;
         let h = self.catalog.shape(TypeIdx(object)).extents().z as f64;
         let place = pose.map(|v| v as f64);
         let clear_top = herb_core::frames::SUCCESS_TOP_Z as f64;
@@ -203,7 +207,7 @@ impl PlannerCore {
         buf: &mut MotionPlan,
     ) -> Result<(), Fault> {
         buf.reset();
-        let from = self.into_limits(from, buf)?;
+        let from = self.back_inside_limits(from, buf)?;
         let h = held.map_or(0.0, |t| self.catalog.shape(TypeIdx(t)).extents().z as f64);
         let transit = self
             .cell

@@ -131,8 +131,9 @@ impl Effects for ReplayFx {
     }
     fn confirm_reply(&mut self, job_id: u64, reason: RejectReason) {
         self.digest.confirm_reply(job_id, reason);
-        self.said
-            .push(format!("pick confirmation reply to job {job_id}: {reason:?}"));
+        self.said.push(format!(
+            "pick confirmation reply to job {job_id}: {reason:?}"
+        ));
     }
     fn status(&mut self, s: &Status) {
         self.digest.status(s);

@@ -784,7 +784,9 @@ impl Status {
             "herbd's limit"
         };
         let todo = match (fault, state) {
-            (Fault::BeyondArmLimits, _) => "move the arm inside by hand (herbd never moves it there)",
+            (Fault::BeyondArmLimits, _) => {
+                "move the arm inside by hand (herbd never moves it there)"
+            }
             (_, JobState::Running | JobState::Braking) => {
                 "herbd brings it back inside slowly before the arm moves on"
             }

@@ -43,6 +43,16 @@ pub enum SubmitError {
     /// iceoryx2 could not send the request.
     #[error("send: {0}")]
     Send(String),
+    /// The caller's `stop` said to give up before herbd accepted the job
+    /// ([`Client::submit_or_stop`](crate::Client::submit_or_stop)).
+    #[error("stopped before herbd accepted the job")]
+    Stopped {
+        /// The last request reached herbd and got no reply within
+        /// [`REPLY_WAIT`](crate::REPLY_WAIT): herbd may have taken the job after all (cancel it
+        /// by its id to be sure). When `false`, herbd refused the job or none served the
+        /// prefix: no job was started.
+        unanswered: bool,
+    },
     /// iceoryx2 could not open the pack-job client.
     #[error(transparent)]
     Bus(#[from] BusError),

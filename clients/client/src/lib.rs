@@ -9,8 +9,9 @@
 //!   serves the prefix (every [`NO_SERVER_RETRY`]), when no reply came within [`REPLY_WAIT`]
 //!   (sent again), and while herbd answers `NotReady` (every [`NOT_READY_RETRY`], the reason
 //!   handed to the caller each time); every other rejection is returned at once, and the
-//!   deadline ends it all. [`Client::pack`] submits and returns a [`JobWatch`] on the same
-//!   deadline.
+//!   deadline ends it all. [`Client::submit_or_stop`] also gives up between tries when the
+//!   caller says so (Ctrl-C before the job was accepted). [`Client::pack`] submits and returns
+//!   a [`JobWatch`] on the same deadline.
 //! - [`Client::watch`] follows one job's statuses to its end, through a daemon restart: when
 //!   herbd falls silent for [`DAEMON_LOST_AFTER`] it waits up to a `reconnect` time for herbd
 //!   to come back with the job (a restarted herbd takes it up from its journal), and gives up
@@ -36,7 +37,7 @@
 //! for event in &mut job {
 //!     match event? {
 //!         JobEvent::Status(s) if s.event == StatusEvent::Placed as u32 => {
-//!             println!("placed {}/{}", s.objects_done, s.objects_total)
+//!             println!("placed: {} of {} objects", s.objects_done, s.objects_total)
 //!         }
 //!         JobEvent::Lost { silent_for } => println!("herbd silent for {silent_for:?}"),
 //!         _ => {}
@@ -56,8 +57,10 @@ pub use error::{CancelError, ConnectError, StatusError, SubmitError, WatchError}
 pub use herb_ipc::{Fault, JobState, RejectReason, Status, StatusEvent};
 pub use watch::{JobEvent, JobWatch, Statuses};
 
-use herb_ipc::bus::{Bus, BusError, CancelClient, JobClient, Sub};
-use herb_ipc::{CancelJobRequest, PackJobReply, PackJobRequest, Services, monotonic_ns};
+use herb_ipc::bus::{Bus, BusError, CancelClient, ConfirmClient, JobClient, Sub};
+use herb_ipc::{
+    CancelJobRequest, ConfirmPickRequest, PackJobReply, PackJobRequest, Services, monotonic_ns,
+};
 use std::cell::OnceCell;
 use std::time::{Duration, Instant};
 
@@ -85,6 +88,8 @@ pub const END_EVENTS: [StatusEvent; 4] = [
 
 /// How often a reply is looked for.
 const REPLY_POLL: Duration = Duration::from_millis(2);
+/// How often [`Client::submit_or_stop`] asks its `stop` while it waits between tries.
+pub const STOP_POLL: Duration = Duration::from_millis(20);
 /// How often [`Client::status`] looks for a heartbeat.
 const STATUS_POLL: Duration = Duration::from_millis(20);
 /// How often [`Client::current_job`] looks for a heartbeat.
@@ -140,6 +145,7 @@ pub struct Client {
     status: Sub<Status>,
     jobs: OnceCell<JobClient>,
     cancels: OnceCell<CancelClient>,
+    confirms: OnceCell<ConfirmClient>,
 }
 
 impl std::fmt::Debug for Client {
@@ -147,6 +153,14 @@ impl std::fmt::Debug for Client {
         f.debug_struct("Client")
             .field("prefix", &self.bus.services().prefix())
             .finish_non_exhaustive()
+    }
+}
+
+/// Sleeps `d`, or less once `stop` returns `true` (asked every [`STOP_POLL`]).
+fn pause(d: Duration, stop: &mut impl FnMut() -> bool) {
+    let t0 = Instant::now();
+    while t0.elapsed() < d && !stop() {
+        std::thread::sleep(STOP_POLL.min(d.saturating_sub(t0.elapsed())));
     }
 }
 
@@ -179,6 +193,7 @@ impl Client {
             status,
             jobs: OnceCell::new(),
             cancels: OnceCell::new(),
+            confirms: OnceCell::new(),
         })
     }
 
@@ -267,32 +282,62 @@ impl Client {
         job_id: u64,
         objects: &[u16],
         deadline: Instant,
+        on_not_ready: impl FnMut(Fault),
+    ) -> Result<(), SubmitError> {
+        self.submit_or_stop(job_id, objects, 0, deadline, on_not_ready, || false)
+    }
+
+    /// [`Client::submit`], given up once `stop` returns `true` ([`SubmitError::Stopped`]):
+    /// for a caller that stops on a signal (herbctl on Ctrl-C). `stop` is asked before each
+    /// try and every [`STOP_POLL`] while waiting between tries; a try under way (up to
+    /// [`REPLY_WAIT`]) is finished first, so a job herbd accepted is returned as accepted,
+    /// never dropped by the stop (the caller then cancels it). `flags`: the request's
+    /// [`PackJobRequest::flags`] (e.g. [`PackJobRequest::CONFIRM_PICKS`]).
+    pub fn submit_or_stop(
+        &self,
+        job_id: u64,
+        objects: &[u16],
+        flags: u32,
+        deadline: Instant,
         mut on_not_ready: impl FnMut(Fault),
+        mut stop: impl FnMut() -> bool,
     ) -> Result<(), SubmitError> {
         let jobs = self.jobs()?;
         let mut not_ready: Option<Fault> = None;
+        // Whether the last request reached a server and went unanswered.
+        let mut unanswered = false;
         loop {
+            if stop() {
+                return Err(SubmitError::Stopped { unanswered });
+            }
             if Instant::now() > deadline {
                 return Err(match not_ready {
                     Some(f) => SubmitError::NotReady(f),
                     None => SubmitError::NoReply,
                 });
             }
-            let reply = match Self::exchange(jobs, PackJobRequest::new(job_id, objects))? {
+            let mut request = PackJobRequest::new(job_id, objects);
+            request.flags = flags;
+            let reply = match Self::exchange(jobs, request)? {
                 Exchange::NoServer => {
-                    std::thread::sleep(NO_SERVER_RETRY);
+                    unanswered = false;
+                    pause(NO_SERVER_RETRY, &mut stop);
                     continue;
                 }
-                Exchange::Silent => continue,
+                Exchange::Silent => {
+                    unanswered = true;
+                    continue;
+                }
                 Exchange::Reply(r) => r,
             };
+            unanswered = false;
             match reply.validate() {
                 Ok(RejectReason::None) => return Ok(()),
                 Ok(RejectReason::NotReady) => {
                     let why = Fault::from_code(reply.detail).unwrap_or(Fault::JointStateTimeout);
                     not_ready = Some(why);
                     on_not_ready(why);
-                    std::thread::sleep(NOT_READY_RETRY);
+                    pause(NOT_READY_RETRY, &mut stop);
                 }
                 Ok(reason) => {
                     return Err(SubmitError::Rejected {
@@ -373,28 +418,73 @@ impl Client {
     /// no reply within [`REPLY_WAIT`] [`CancelError::NoReply`]. herbd then brakes, lifts the
     /// gripper and ends the job `JobCancelled`: follow it with [`Client::watch`].
     pub fn cancel(&self, job_id: u64) -> Result<(), CancelError> {
-        let cancels = self.cancels()?;
-        let pending = cancels
-            .send_copy(CancelJobRequest::new(job_id))
-            .map_err(|e| CancelError::Send(format!("{e:?}")))?;
-        if pending.number_of_server_connections() == 0 {
-            return Err(CancelError::NoServer);
-        }
-        let t0 = Instant::now();
-        let reply = loop {
-            if let Ok(Some(r)) = pending.receive() {
-                break *r.payload();
+        let reply = ask(self.cancels()?, CancelJobRequest::new(job_id))?;
+        control_verdict(job_id, reply.validate())
+    }
+
+    /// Tells herbd that the object its job `job_id` waits for ([`StatusEvent::AwaitingObject`]:
+    /// `object_index`, try `attempt`) is at the pick station: the arm descends and grasps it.
+    /// Sent once, as [`Client::cancel`]; `NotAwaited` (another object or try, or a job not
+    /// submitted with [`PackJobRequest::CONFIRM_PICKS`]) comes back as
+    /// [`CancelError::Refused`].
+    pub fn confirm_pick(
+        &self,
+        job_id: u64,
+        object_index: u32,
+        attempt: u32,
+    ) -> Result<(), CancelError> {
+        let confirms = match self.confirms.get() {
+            Some(c) => c,
+            None => {
+                let c = self.bus.confirm_client()?;
+                self.confirms.get_or_init(|| c)
             }
-            if t0.elapsed() > REPLY_WAIT {
-                return Err(CancelError::NoReply);
-            }
-            std::thread::sleep(REPLY_POLL);
         };
-        match reply.validate() {
-            Ok(RejectReason::None) => Ok(()),
-            Ok(RejectReason::NoSuchJob) => Err(CancelError::NotRunning { job_id }),
-            Ok(reason) => Err(CancelError::Refused(reason)),
-            Err(e) => Err(CancelError::MalformedReply(e)),
+        let reply = ask(
+            confirms,
+            ConfirmPickRequest::new(job_id, object_index, attempt),
+        )?;
+        control_verdict(job_id, reply.validate())
+    }
+}
+
+/// Sends `request` once on a job-control service (cancel, confirm) and waits up to
+/// [`REPLY_WAIT`] for the reply.
+fn ask<Req, Rep>(
+    client: &iceoryx2::port::client::Client<iceoryx2::prelude::ipc::Service, Req, (), Rep, ()>,
+    request: Req,
+) -> Result<Rep, CancelError>
+where
+    Req: iceoryx2::prelude::ZeroCopySend + std::fmt::Debug + Copy,
+    Rep: iceoryx2::prelude::ZeroCopySend + std::fmt::Debug + Copy,
+{
+    let pending = client
+        .send_copy(request)
+        .map_err(|e| CancelError::Send(format!("{e:?}")))?;
+    if pending.number_of_server_connections() == 0 {
+        return Err(CancelError::NoServer);
+    }
+    let t0 = Instant::now();
+    loop {
+        if let Ok(Some(r)) = pending.receive() {
+            return Ok(*r.payload());
         }
+        if t0.elapsed() > REPLY_WAIT {
+            return Err(CancelError::NoReply);
+        }
+        std::thread::sleep(REPLY_POLL);
+    }
+}
+
+/// A job-control reply's reason as the caller's result.
+fn control_verdict(
+    job_id: u64,
+    reason: Result<RejectReason, herb_ipc::Invalid>,
+) -> Result<(), CancelError> {
+    match reason {
+        Ok(RejectReason::None) => Ok(()),
+        Ok(RejectReason::NoSuchJob) => Err(CancelError::NotRunning { job_id }),
+        Ok(reason) => Err(CancelError::Refused(reason)),
+        Err(e) => Err(CancelError::MalformedReply(e)),
     }
 }

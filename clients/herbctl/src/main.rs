@@ -1,16 +1,21 @@
 //! `herbctl`: submit a pack job to `herbd`, follow it live, print per-object results and a
-//! summary; cancel a running job; empty the simulated box; print the daemon's state.
+//! summary (Ctrl-C cancels the job); cancel a running job; empty the simulated box; print the
+//! daemon's state.
+
+mod interrupt;
+mod operator;
+mod pack;
+mod words;
 
 use clap::{Parser, Subcommand};
-use herb_client::{Client, JobEvent, PackOptions, StatusError, SubmitError, WatchError};
+use herb_client::{Client, JobEvent, StatusError, WatchError};
 use herb_daemon::record::Log;
 use herb_daemon::replay::{Outcome, ReplayOptions, Replayed};
 use herb_ipc::{
-    Fault, Header, HeightmapFrame, JobState, RejectReason, Services, SimOutcome, SimReset, Status,
-    StatusEvent, monotonic_ns,
+    Fault, Header, HeightmapFrame, JobState, Services, SimOutcome, SimReset, Status, StatusEvent,
+    monotonic_ns,
 };
-use herb_picture::{PictureObject, write_pack_picture};
-use herb_sim::{Catalog, GridSpec, Heightmap, TypeIdx, boxed, paths};
+use herb_sim::{Catalog, GridSpec, Heightmap, TypeIdx, paths};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -31,7 +36,9 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Cmd {
-    /// Submit a job and follow it to the end.
+    /// Submit a job and follow it to the end. Ctrl-C (or SIGTERM) cancels the job: the arm
+    /// brakes and retreats, herbctl waits for herbd to confirm it and exits 130 (again: exits
+    /// at once). Exit 0: done; 1: not done (failed, cancelled, timed out); 2: an error.
     Pack {
         /// A BoxED session whose objects to pack (e.g. p1_s1).
         #[arg(long, conflicts_with = "objects")]
@@ -42,20 +49,30 @@ enum Cmd {
         /// Write the final heightmap of the box here (PNG).
         #[arg(long)]
         picture: Option<PathBuf>,
-        /// Give up after this many seconds.
+        /// Give up after this many seconds, submitting included: a running job is cancelled
+        /// (exit 1).
         #[arg(long, default_value_t = 900.0)]
         timeout: f64,
         /// Print the summary as one JSON line.
         #[arg(long)]
         json: bool,
-        /// A real cell fed by hand: say which object to put at the pick station, and when
-        /// (as each object is decided, and again after a missed grasp).
+        /// A real cell fed by hand: at each try of each pick, say which object to put at the
+        /// pick station; the arm waits above the station until you press Enter (or
+        /// `--operator-wait`), then descends and grasps.
         #[arg(long)]
         operator: bool,
+        /// With `--operator`: confirm by itself this many seconds after asking, instead of
+        /// waiting for Enter.
+        #[arg(long, requires = "operator")]
+        operator_wait: Option<f64>,
         /// When herbd goes silent, wait this long (s) for it to come back with the job (a
         /// restarted herbd takes an unfinished job up from its journal); 0 gives up at once.
         #[arg(long, default_value_t = 60.0)]
         reconnect: f64,
+        /// Return once herbd accepted the job, leaving it running: print its id, how to follow
+        /// it (`herbctl watch`) and how to cancel it (`herbctl cancel --job ID`).
+        #[arg(long, conflicts_with_all = ["picture", "operator"])]
+        detach: bool,
     },
     /// Empty the simulated box (the loopback; a real cell's box is emptied by hand). Refused
     /// while herbd runs a job.
@@ -141,440 +158,12 @@ enum Cmd {
     },
 }
 
-fn objects_of(
-    cli: &Cli,
-    session: &Option<String>,
-    ids: &[String],
-    catalog: &Catalog,
-) -> Result<(Vec<u16>, String), String> {
-    if let Some(name) = session {
-        let root = paths::boxed_root(cli.boxed.as_deref())
-            .ok_or("no BoxED folder found (set --boxed or HERB_BOXED)")?;
-        let s = boxed::load_session(&root, name, catalog).map_err(|e| e.to_string())?;
-        let ep = s.episode(catalog);
-        return Ok((
-            ep.objects.iter().map(|t| t.0).collect(),
-            format!("session {name}"),
-        ));
-    }
-    if ids.is_empty() {
-        return Err("give --session NAME or --objects ID,ID,...".into());
-    }
-    let v = ids
-        .iter()
-        .map(|id| {
-            catalog
-                .by_id(id.trim())
-                .map(|t| t.0)
-                .map_err(|e| e.to_string())
-        })
-        .collect::<Result<Vec<_>, _>>()?;
-    Ok((v, format!("{} objects", ids.len())))
-}
-
 fn name(catalog: &Catalog, t: u32) -> String {
     if (t as usize) < catalog.len() {
         let s = catalog.spec(TypeIdx(t as u16));
         format!("{} {}", s.id, s.name)
     } else {
         "-".into()
-    }
-}
-
-fn pct(v: &mut [f64], q: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[((v.len() - 1) as f64 * q).round() as usize]
-}
-
-#[allow(clippy::too_many_arguments)]
-fn pack(
-    cli: &Cli,
-    catalog: &Catalog,
-    session: &Option<String>,
-    ids: &[String],
-    picture: &Option<PathBuf>,
-    timeout: f64,
-    (json, operator, reconnect): (bool, bool, f64),
-) -> Result<bool, String> {
-    if !(reconnect.is_finite() && (0.0..=3600.0).contains(&reconnect)) {
-        return Err(format!("--reconnect {reconnect} outside 0..=3600 s"));
-    }
-    let (objects, what) = objects_of(cli, session, ids, catalog)?;
-    let client = connect(cli)?;
-    let frames = client
-        .bus()
-        .subscriber::<HeightmapFrame>(&client.services().heightmap())
-        .map_err(|e| e.to_string())?;
-    let outcomes = client
-        .bus()
-        .subscriber::<SimOutcome>(&client.services().sim_outcome())
-        .map_err(|e| e.to_string())?;
-    let job_id = herb_client::new_job_id();
-    if what.ends_with(" objects") {
-        eprintln!("herbctl: submitting job {job_id}: {what}");
-    } else {
-        eprintln!(
-            "herbctl: submitting job {job_id}: {what}, {} objects",
-            objects.len()
-        );
-    }
-
-    // Submit, waiting for the daemon to come up and the robot to be ready (said at once, and
-    // again when the reason changes).
-    let options = PackOptions {
-        job_id: Some(job_id),
-        timeout: Duration::from_secs_f64(timeout),
-        reconnect: Duration::from_secs_f64(reconnect),
-    };
-    let mut not_ready: Option<Fault> = None;
-    let submitted = client.pack(&objects, &options, |why| {
-        if not_ready != Some(why) {
-            println!("robot not ready: {}; waiting", why.describe());
-            not_ready = Some(why);
-        }
-    });
-    let mut watch = match submitted {
-        Ok(watch) => {
-            eprintln!("herbctl: accepted");
-            watch
-        }
-        Err(SubmitError::NotReady(f)) => {
-            return Err(format!(
-                "robot not ready: {} (gave up after {timeout} s)",
-                f.describe()
-            ));
-        }
-        Err(SubmitError::Rejected {
-            reason: RejectReason::Holding,
-            detail,
-        }) => {
-            let what = if detail == herb_ipc::NO_OBJECT {
-                "an object".to_string()
-            } else {
-                name(catalog, detail)
-            };
-            return Err(format!(
-                "rejected: the gripper holds {what}; take it out (the loopback: herbctl reset) and submit again"
-            ));
-        }
-        Err(e) => return Err(e.to_string()),
-    };
-
-    let job_t0 = std::time::Instant::now();
-    let mut decision_ms = Vec::new();
-    let mut faults = Vec::new();
-    let mut last: Option<Status> = None;
-    let mut placed = 0u32;
-    let mut skipped = 0u32;
-    let mut total = objects.len() as u32;
-    let mut ok = None;
-    let mut latest_frame: Option<Heightmap> = None;
-    let mut last_outcome: Option<SimOutcome> = None;
-    let keep_frame = |f: &HeightmapFrame, into: &mut Option<Heightmap>| {
-        if f.validate().is_ok()
-            && let Ok(spec) = GridSpec::for_box(f.cell_m)
-            && (spec.nx, spec.ny) == (f.nx as usize, f.ny as usize)
-        {
-            *into = Heightmap::from_data(spec, f.cells().to_vec()).ok();
-        }
-    };
-    loop {
-        let s = match watch.poll() {
-            Ok(Some(JobEvent::Status(s))) => s,
-            Ok(Some(JobEvent::Lost { silent_for })) => {
-                println!(
-                    "herbd lost (no status for {:.1} s): waiting up to {reconnect} s for it to come back with job {job_id} (its journal resumes the job)",
-                    silent_for.as_secs_f64()
-                );
-                continue;
-            }
-            Ok(Some(JobEvent::Back)) => {
-                println!("herbd back: job {job_id} goes on");
-                continue;
-            }
-            Ok(None) => {
-                while let Ok(Some(o)) = outcomes.receive() {
-                    if o.payload().validate().is_ok() && o.payload().job_id == job_id {
-                        last_outcome = Some(*o.payload());
-                    }
-                }
-                while let Ok(Some(f)) = frames.receive() {
-                    keep_frame(f.payload(), &mut latest_frame);
-                }
-                if watch.is_finished() {
-                    break;
-                }
-                std::thread::sleep(Duration::from_millis(5));
-                continue;
-            }
-            Err(WatchError::TimedOut { .. }) => {
-                return Err(format!(
-                    "timed out after {timeout} s; {placed}/{total} placed"
-                ));
-            }
-            Err(WatchError::CameBackWithoutJob { .. }) => {
-                return Err(format!(
-                    "herbd came back without job {job_id} (no job journal, or the job was abandoned); {placed}/{total} placed"
-                ));
-            }
-            Err(WatchError::DaemonLost { silent_for, .. }) => {
-                let at = last.map_or(String::from("no status yet"), |s| {
-                    format!(
-                        "object {}/{total} ({}), state {:?}",
-                        s.object_index + 1,
-                        name(catalog, s.object_type),
-                        JobState::from_code(s.state).unwrap_or(JobState::Idle)
-                    )
-                });
-                return Err(format!(
-                    "daemon lost: no status from herbd for {:.1} s (it heartbeats at 10 Hz); job {job_id}: {placed}/{total} placed, last known {at}",
-                    silent_for.as_secs_f64()
-                ));
-            }
-        };
-        last = Some(s);
-        total = s.objects_total;
-        let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
-        match StatusEvent::from_code(s.event) {
-            Some(StatusEvent::Decided) => {
-                if operator {
-                    println!(
-                        "operator: put {} at the pick station",
-                        name(catalog, s.object_type)
-                    );
-                }
-                decision_ms.push(s.decision_ns as f64 / 1e6);
-                println!(
-                    "object {:>2}/{total}: {:<28} x {:+.3} y {:+.3} z {:.3} m yaw {:+.2} rad  decision {:.3} ms",
-                    s.object_index + 1,
-                    name(catalog, s.object_type),
-                    s.pose[0],
-                    s.pose[1],
-                    s.pose[2],
-                    s.pose[3],
-                    s.decision_ns as f64 / 1e6
-                );
-            }
-            Some(StatusEvent::Placed) => {
-                placed = s.objects_done;
-                println!("placed {placed}/{total}");
-            }
-            Some(StatusEvent::Fault) => {
-                faults.push(format!("{fault:?}"));
-                println!("FAULT {fault:?} ({}): halting", fault.describe());
-                if operator && fault == Fault::MissedGrasp {
-                    println!(
-                        "operator: put {} at the pick station (the pick is tried again)",
-                        name(catalog, s.object_type)
-                    );
-                }
-            }
-            Some(StatusEvent::Skipped) => {
-                skipped += 1;
-                println!(
-                    "skipped object {}/{total} ({}): {}",
-                    s.object_index + 1,
-                    name(catalog, s.object_type),
-                    fault.describe()
-                );
-            }
-            Some(StatusEvent::Braked) => println!("braked: standing still"),
-            Some(StatusEvent::Resumed) => println!("resumed"),
-            Some(StatusEvent::JobDone) => ok = Some(true),
-            Some(StatusEvent::JobFailed) => {
-                println!("job failed: {fault:?}");
-                ok = Some(false)
-            }
-            Some(StatusEvent::JobCancelled) => {
-                println!("job cancelled");
-                ok = Some(false)
-            }
-            Some(StatusEvent::Shutdown) => {
-                println!("herbd shut down");
-                ok = Some(false)
-            }
-            _ => {}
-        }
-    }
-    // The last release's settle: wait briefly for its heightmap and outcome.
-    let t0 = Instant::now();
-    while t0.elapsed() < Duration::from_millis(1500) {
-        while let Ok(Some(f)) = frames.receive() {
-            keep_frame(f.payload(), &mut latest_frame);
-        }
-        while let Ok(Some(o)) = outcomes.receive() {
-            if o.payload().validate().is_ok() && o.payload().job_id == job_id {
-                last_outcome = Some(*o.payload());
-            }
-        }
-        if last_outcome.is_some_and(|o| o.objects >= placed) {
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let s = last.unwrap_or_else(|| unreachable!("a final status was received"));
-    let state = JobState::from_code(s.state).unwrap_or(JobState::Idle);
-    let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
-    let verdict = verdict(
-        ok == Some(true),
-        state,
-        fault,
-        placed,
-        total,
-        last_outcome.as_ref(),
-        catalog,
-    );
-    // Per object: inside or where it left the success volume (simulated cells only).
-    let listed: Vec<(String, herb_ipc::SimObject)> = last_outcome
-        .as_ref()
-        .map(|o| {
-            let earlier = o.objects.saturating_sub(placed) as usize;
-            o.objects_listed()
-                .iter()
-                .enumerate()
-                .map(|(i, so)| {
-                    let who = if i < earlier {
-                        format!("earlier {}", i + 1)
-                    } else {
-                        format!("{}", i - earlier + 1)
-                    };
-                    (who, *so)
-                })
-                .collect()
-        })
-        .unwrap_or_default();
-    if !json {
-        for (who, o) in &listed {
-            let where_ = match herb_daemon::watch::crossing(o) {
-                None => "inside".to_string(),
-                Some(c) => format!(
-                    "OUTSIDE: {c} (x {:+.3}..{:+.3}, y {:+.3}..{:+.3}, z {:.3}..{:.3} m)",
-                    o.lo[0], o.hi[0], o.lo[1], o.hi[1], o.lo[2], o.hi[2]
-                ),
-            };
-            println!(
-                "  object {who:<3} {:<28} {where_}",
-                name(catalog, o.object_type)
-            );
-        }
-    }
-    if let (Some(p), Some(hm)) = (picture, &latest_frame) {
-        let objects: Vec<PictureObject> = listed
-            .iter()
-            .map(|(who, o)| PictureObject {
-                label: format!("{who} {}", id_of(catalog, o.object_type)),
-                lo: o.lo,
-                hi: o.hi,
-                outside: (o.bound != 0).then(|| (o.bound_name().to_string(), o.over_m)),
-            })
-            .collect();
-        // The job's result stands whether or not the picture can be drawn.
-        match write_pack_picture(p, &verdict, hm, &objects) {
-            Ok(()) => println!("picture of the final pack: {}", p.display()),
-            Err(e) => eprintln!("herbctl: the picture was not written: {e}"),
-        }
-    }
-    let mut d = decision_ms.clone();
-    let job_s = job_t0.elapsed().as_secs_f64();
-    let wait_s = s.decision_wait_ms as f64 / 1e3;
-    let summary = serde_json::json!({
-        "job_id": job_id,
-        "ok": ok == Some(true),
-        "state": format!("{:?}", JobState::from_code(s.state).unwrap_or(JobState::Idle)),
-        "placed": placed,
-        "skipped": skipped,
-        "objects": total,
-        "decisions": decision_ms.len(),
-        "decision_ms_p50": pct(&mut d, 0.5),
-        "decision_ms_max": pct(&mut d, 1.0),
-        "job_s": job_s,
-        "decision_wait_s": wait_s,
-        "decision_wait_pct": 100.0 * wait_s / job_s.max(1e-9),
-        "faults": faults,
-        "verdict": verdict,
-        "loop_cycles": s.cycles,
-        "deadline_misses": s.deadline_misses,
-        "rejected_inputs": s.rejected_inputs,
-        "max_cycle_us": s.max_cycle_ns as f64 / 1000.0,
-        "sim": last_outcome.map(|o| serde_json::json!({
-            "objects_in_box": o.objects,
-            "all_inside": o.all_inside == 1,
-            "compactness": o.compactness,
-            "joint_commands": o.commands.received,
-            "joint_commands_rejected": o.commands.rejected,
-            "max_limit_excess_rad": o.commands.max_limit_excess_rad,
-            "objects": listed.iter().map(|(who, so)| serde_json::json!({
-                "n": who,
-                "id": id_of(catalog, so.object_type),
-                "inside": so.bound == 0,
-                "bound": so.bound_name(),
-                "over_m": so.over_m,
-            })).collect::<Vec<_>>(),
-        })),
-    });
-    if json {
-        println!("{summary}");
-    } else {
-        println!(
-            "statistics: decision p50 {:.3} ms (max {:.3}), held waiting for decisions {:.2} s of {:.1} s ({:.1} %), loop {} cycles, {} deadline misses, worst cycle {:.1} us, faults {:?}",
-            pct(&mut d, 0.5),
-            pct(&mut d, 1.0),
-            wait_s,
-            job_s,
-            100.0 * wait_s / job_s.max(1e-9),
-            s.cycles,
-            s.deadline_misses,
-            s.max_cycle_ns as f64 / 1000.0,
-            faults
-        );
-        if let Some(o) = last_outcome {
-            println!(
-                "simulation: {} objects in the box, compactness {:.3}",
-                o.objects, o.compactness
-            );
-        }
-        println!("verdict: {verdict}");
-    }
-    Ok(ok == Some(true))
-}
-
-/// The job's outcome in one line: SUCCESS only when the job is done and every object ended
-/// inside the success volume; else what went wrong first.
-fn verdict(
-    done: bool,
-    state: JobState,
-    fault: Fault,
-    placed: u32,
-    total: u32,
-    outcome: Option<&SimOutcome>,
-    catalog: &Catalog,
-) -> String {
-    let outside = outcome.map_or_else(Vec::new, |o| {
-        herb_daemon::watch::outside_objects(o, &|t| id_of(catalog, t))
-    });
-    let outside_text = if outside.is_empty() {
-        String::new()
-    } else {
-        format!(
-            "; {} outside the success volume: {}",
-            outside.len(),
-            outside.join(", ")
-        )
-    };
-    match (done, outcome) {
-        (true, Some(_)) if outside.is_empty() => {
-            format!("SUCCESS: {placed}/{total} placed, every object inside the success volume")
-        }
-        (true, Some(_)) => format!("FAILED: {placed}/{total} placed{outside_text}"),
-        (true, None) => format!(
-            "DONE: {placed}/{total} placed (no simulated outcome: inside the box not checked)"
-        ),
-        (false, _) => {
-            format!("FAILED: job {state:?} ({fault:?}) with {placed}/{total} placed{outside_text}")
-        }
     }
 }
 
@@ -598,6 +187,10 @@ fn status(cli: &Cli, timeout: f64) -> Result<bool, String> {
         (_, Fault::None) => String::new(),
         (JobState::Idle, f) => format!(" (robot not ready: {})", f.describe()),
         (_, f) => format!(" ({})", f.describe()),
+    };
+    let why = match s.limit_words() {
+        Some(w) => format!("{why}: {w}"),
+        None => why,
     };
     println!(
         "herbd: {state:?}, job {}, {}/{} placed, {} cycles, {} deadline misses, fault {fault:?}{why}",
@@ -710,23 +303,32 @@ fn reset(cli: &Cli, timeout: f64) -> Result<bool, String> {
 
 /// `herbctl cancel`: cancels job `job` (or the running one) and follows it to its end.
 fn cancel(cli: &Cli, job: Option<u64>, timeout: f64) -> Result<bool, String> {
+    let deadline = Duration::try_from_secs_f64(timeout)
+        .ok()
+        .and_then(|d| Instant::now().checked_add(d))
+        .ok_or_else(|| format!("--timeout {timeout}: give a number of seconds"))?;
     let client = connect(cli)?;
-    let deadline = Instant::now() + Duration::from_secs_f64(timeout);
-    let job_id = match job {
-        Some(j) => j,
-        // The running job, from the next heartbeat (10 Hz).
-        None => match client.current_job(Duration::from_secs(1)) {
-            Err(StatusError::NoHeartbeat) => {
-                return Err("no heartbeat from herbd (is it running?)".into());
-            }
-            Ok(None) => return Err("no job is running".into()),
-            Ok(Some(j)) => j,
-        },
+    // The running job and what it does, from the next heartbeat (10 Hz).
+    let heartbeat = client.status(Duration::from_secs(1));
+    let job_id = match (job, &heartbeat) {
+        (Some(j), _) => j,
+        (None, Err(StatusError::NoHeartbeat)) => {
+            return Err("no heartbeat from herbd (is it running?)".into());
+        }
+        (None, Ok(s)) if s.job_id == 0 => return Err("no job is running".into()),
+        (None, Ok(s)) => s.job_id,
     };
+    let before = heartbeat.ok().filter(|s| s.job_id == job_id).map(|s| {
+        (
+            JobState::from_code(s.state).unwrap_or(JobState::Idle),
+            Fault::from_code(s.fault).unwrap_or(Fault::None),
+        )
+    });
     client.cancel(job_id).map_err(|e| e.to_string())?;
     println!("cancelling job {job_id}");
     // Followed without waiting for a lost herbd to come back.
     let mut watch = client.watch(job_id, deadline, Duration::ZERO);
+    let (mut braked, mut stopped_by) = (false, None);
     loop {
         let s = match watch.next_event() {
             Ok(Some(JobEvent::Status(s))) => s,
@@ -740,16 +342,16 @@ fn cancel(cli: &Cli, job: Option<u64>, timeout: f64) -> Result<bool, String> {
         };
         let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
         match StatusEvent::from_code(s.event) {
-            Some(StatusEvent::Braked) => println!("braked: standing still"),
+            Some(StatusEvent::Fault) => stopped_by = Some(fault),
+            Some(StatusEvent::Braked) => {
+                braked = true;
+                println!("{}", words::stopped(stopped_by));
+            }
             Some(StatusEvent::JobCancelled) => {
-                let how = if fault == Fault::None {
-                    String::new()
-                } else {
-                    format!(" (last fault {fault:?})")
-                };
                 println!(
-                    "job {job_id} cancelled{how}: {}/{} placed",
-                    s.objects_done, s.objects_total
+                    "job {job_id} cancelled: {}; {}",
+                    words::cancel_outcome(before, braked, fault),
+                    words::placed_count(s.objects_done, s.objects_total, 0)
                 );
                 return Ok(true);
             }
@@ -1065,16 +667,29 @@ fn main() -> ExitCode {
             timeout,
             json,
             operator,
+            operator_wait,
             reconnect,
-        } => pack(
-            &cli,
-            &catalog,
-            session,
-            objects,
-            picture,
-            *timeout,
-            (*json, *operator, *reconnect),
-        ),
+            detach,
+        } => {
+            let args = pack::PackArgs {
+                session,
+                ids: objects,
+                picture,
+                timeout: *timeout,
+                json: *json,
+                operator: *operator,
+                operator_wait: *operator_wait,
+                reconnect: *reconnect,
+                detach: *detach,
+            };
+            return match pack::pack(&cli, &catalog, &args) {
+                Ok(code) => ExitCode::from(code),
+                Err(e) => {
+                    eprintln!("herbctl: error: {e}");
+                    ExitCode::from(2)
+                }
+            };
+        }
         Cmd::Status { timeout } => status(&cli, *timeout),
         Cmd::Catalog => catalog_json(&cli),
         Cmd::CalibrateCell {

@@ -19,6 +19,7 @@ HEIGHTMAP_MAX_CELLS = 50176
 MAX_JOB_OBJECTS = 64
 MAX_REPORTED_CANDIDATES = 64
 NO_OBJECT = 0xFFFFFFFF
+NO_JOINT = 0xFFFFFFFF
 
 _u16, _u32, _u64 = ctypes.c_uint16, ctypes.c_uint32, ctypes.c_uint64
 _f32, _f64 = ctypes.c_float, ctypes.c_double
@@ -72,16 +73,26 @@ class CancelJobReply(_Struct):
     _fields_ = [("header", Header), ("job_id", _u64), ("accepted", _u32), ("reason", _u32)]
 
 
+class ConfirmPickRequest(_Struct):
+    _fields_ = [("header", Header), ("job_id", _u64), ("object_index", _u32), ("attempt", _u32)]
+
+
+class ConfirmPickReply(_Struct):
+    _fields_ = [("header", Header), ("job_id", _u64), ("accepted", _u32), ("reason", _u32)]
+
+
 class Status(_Struct):
     _fields_ = [("header", Header), ("job_id", _u64), ("event", _u32), ("state", _u32),
         ("fault", _u32), ("objects_total", _u32), ("objects_done", _u32), ("object_index", _u32),
         ("object_type", _u32), ("decision_wait_ms", _u32), ("pose", _f32 * 4),
         ("decision_ns", _u64), ("cycles", _u64), ("deadline_misses", _u64),
-        ("rejected_inputs", _u64), ("max_cycle_ns", _u64)]
+        ("rejected_inputs", _u64), ("max_cycle_ns", _u64), ("rejected_requests", _u64),
+        ("limit_joint", _u32), ("limit_position_rad", _f32), ("limit_bound_rad", _f32),
+        ("attempt", _u32)]
 
 
 class PackJobRequest(_Struct):
-    _fields_ = [("header", Header), ("job_id", _u64), ("count", _u32), ("reserved", _u32),
+    _fields_ = [("header", Header), ("job_id", _u64), ("count", _u32), ("flags", _u32),
         ("objects", _u16 * 64)]
 
 
@@ -123,8 +134,9 @@ class DecisionReport(_Struct):
 
 #: Every structure of the contract, by name.
 PAYLOADS = {c.__name__: c for c in (Header, JointState, JointCommand, GripperCommand, GripperState,
-    ArmStatus, HeightmapFrame, CancelJobRequest, CancelJobReply, Status, PackJobRequest,
-    PackJobReply, SimReset, SimObject, CommandChecks, SimOutcome, CandidateReport, DecisionReport)}
+    ArmStatus, HeightmapFrame, CancelJobRequest, CancelJobReply, ConfirmPickRequest,
+    ConfirmPickReply, Status, PackJobRequest, PackJobReply, SimReset, SimObject, CommandChecks,
+    SimOutcome, CandidateReport, DecisionReport)}
 
 
 class GripperAction(enum.IntEnum):
@@ -155,6 +167,7 @@ class StatusEvent(enum.IntEnum):
     Shutdown = 9
     JobCancelled = 10
     Skipped = 11
+    AwaitingObject = 12
 
 
 class Fault(enum.IntEnum):
@@ -177,6 +190,8 @@ class Fault(enum.IntEnum):
     RobotSilent = 16
     MissedGrasp = 17
     CommandRefused = 18
+    OutsideLimits = 19
+    BeyondArmLimits = 20
 
 
 class ArmBlocker(enum.IntEnum):
@@ -204,6 +219,7 @@ class RejectReason(enum.IntEnum):
     NotReady = 7
     NoSuchJob = 8
     Holding = 9
+    NotAwaited = 10
 
 
 #: Every code table of the contract (but `SimBound`), by enum name.

@@ -455,7 +455,9 @@ impl MotionPlanner {
             return Ok(None);
         }
         if !(speed.is_finite() && speed > 0.0 && speed <= 1.0) {
-            return Err(MotionError::Ruckig(format!("speed fraction {speed} outside (0, 1]")));
+            return Err(MotionError::Ruckig(format!(
+                "speed fraction {speed} outside (0, 1]"
+            )));
         }
         let to = self.limits.pulled_inside(from, margin);
         let z = vec![0.0; DOF];

@@ -198,7 +198,11 @@ fn a_start_past_a_limit_is_brought_back_inside_slowly_toward_the_limit_only() {
     b[0] = 0.5;
     let mut p2p = Setpoints::with_capacity(200_000);
     planner.point_to_point(&a, &b, &mut p2p).unwrap();
-    let vmax = p2p.as_slice().iter().map(|p| p.velocity[0].abs()).fold(0.0, f64::max);
+    let vmax = p2p
+        .as_slice()
+        .iter()
+        .map(|p| p.velocity[0].abs())
+        .fold(0.0, f64::max);
     assert!(vmax > 0.5 * l.velocity[0], "{vmax}");
     // A brake from a state still outside (moving back in) starts where it is.
     let mut st = Setpoint::at_rest(from);
@@ -206,7 +210,10 @@ fn a_start_past_a_limit_is_brought_back_inside_slowly_toward_the_limit_only() {
     let mut brake = Setpoints::with_capacity(200_000);
     let (_, clamps) = planner.brake(&st, &mut brake).unwrap();
     let first = brake.as_slice()[0].position[1];
-    assert!((first - from[1]).abs() < 1e-3, "no jump to the limit: {first}");
+    assert!(
+        (first - from[1]).abs() < 1e-3,
+        "no jump to the limit: {first}"
+    );
     assert!(first > l.upper[1], "{first}");
     assert_eq!(clamps, 0);
 }

@@ -2824,11 +2824,19 @@ fn an_arm_sagged_past_a_limit_is_named_and_the_job_resumes_or_holds() {
     let (joint, q, bound) = f.limit_excess().expect("the joint named");
     assert_eq!(joint, 1);
     assert!((q as f64 - (upper + 0.0034)).abs() < 1e-6 && (bound as f64 - upper).abs() < 1e-6);
-    assert!(f.limit_words().unwrap().starts_with("left_s1 at "), "{:?}", f.limit_words());
+    assert!(
+        f.limit_words().unwrap().starts_with("left_s1 at "),
+        "{:?}",
+        f.limit_words()
+    );
     let holds = r.job.limit_holds();
     let done = run_to_done(&mut r);
     assert_eq!(done.objects_done, 1);
-    assert_eq!(r.job.limit_holds(), holds, "no command held back on the way");
+    assert_eq!(
+        r.job.limit_holds(),
+        holds,
+        "no command held back on the way"
+    );
 
     // Refuse: the job holds where it is, says why once, and the next job is refused.
     let (mut r, _) = streaming();
@@ -2869,7 +2877,11 @@ fn an_arm_sagged_past_a_limit_is_named_and_the_job_resumes_or_holds() {
                 _ => None,
             })
             .unwrap();
-    assert_eq!(hb.limit_excess().map(|e| e.0), Some(1), "the heartbeat names the joint");
+    assert_eq!(
+        hb.limit_excess().map(|e| e.0),
+        Some(1),
+        "the heartbeat names the joint"
+    );
     assert_eq!(r.job.rejected_requests(), 1);
     // Beyond the arm's own limit: refused whatever the setting.
     r.job.p.outside = OutsideLimits::Recover;
@@ -2898,11 +2910,23 @@ fn a_job_fed_by_hand_waits_above_the_station_for_each_confirmation() {
     assert_eq!((asked.object_index, asked.attempt), (0, 0));
     // The arm goes above the station and stays there: no close.
     r.ticks(3 * SEG);
-    assert!(matches!(r.phase(), Phase::AwaitOperator { .. }), "{:?}", r.phase());
+    assert!(
+        matches!(r.phase(), Phase::AwaitOperator { .. }),
+        "{:?}",
+        r.phase()
+    );
     let closes = |r: &Rig| {
         r.fx.out
             .iter()
-            .filter(|o| matches!(o, Out::Gripper { action: GripperAction::Close, .. }))
+            .filter(|o| {
+                matches!(
+                    o,
+                    Out::Gripper {
+                        action: GripperAction::Close,
+                        ..
+                    }
+                )
+            })
             .count()
     };
     assert_eq!(closes(&r), 0);
@@ -2928,7 +2952,11 @@ fn a_job_fed_by_hand_waits_above_the_station_for_each_confirmation() {
     let before = closes(&r);
     r.ticks(3 * SEG);
     assert_eq!(closes(&r), before);
-    assert_eq!(confirm(&mut r, 0, 0), RejectReason::NotAwaited, "the last try's");
+    assert_eq!(
+        confirm(&mut r, 0, 0),
+        RejectReason::NotAwaited,
+        "the last try's"
+    );
     assert_eq!(confirm(&mut r, 0, 1), RejectReason::None);
     let done = run_to_done(&mut r);
     assert_eq!(done.objects_done, 1);

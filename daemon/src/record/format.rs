@@ -12,8 +12,9 @@ use crate::digest::Fnv;
 use crate::job::{Commands, Inputs, JobRecord, JobSnapshot};
 use crate::plan::{DecisionRequest, Motion, Request};
 use herb_ipc::{
-    ArmBlocker, ArmStatus, CancelJobRequest, ConfirmPickRequest, Fault, GripperAction, GripperState, HeightmapFrame,
-    InOrder, JointState, PackJobRequest, Payload, RejectReason, Status,
+    ArmBlocker, ArmStatus, CancelJobRequest, ConfirmPickRequest, Fault, GripperAction,
+    GripperState, HeightmapFrame, InOrder, JointState, PackJobRequest, Payload, RejectReason,
+    Status,
 };
 use herb_robot::motion::Setpoint;
 use std::io::Write;

@@ -362,7 +362,10 @@ mod tests {
         assert!((h[1] - (1.0034 + super::MEASURED_SLACK_RAD)).abs() < 1e-12);
         assert_eq!(h[3], 1.05);
         assert_eq!(h[0], 1.0, "a joint inside keeps herbd's limit");
-        assert_eq!(super::command_range((&lo, &hi), None, (&alo, &ahi)), (lo, hi));
+        assert_eq!(
+            super::command_range((&lo, &hi), None, (&alo, &ahi)),
+            (lo, hi)
+        );
     }
 
     use super::*;

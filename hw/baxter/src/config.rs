@@ -217,12 +217,8 @@ impl ConfigFile for BaxterConfig {
         herb_ros1::check_master_uri("ros.master_uri", &r.master_uri).map_err(|e| e.to_string())?;
         herb_ros1::check_name("ros.node_name", &r.node_name).map_err(|e| e.to_string())?;
         in_range("ros.master_check_s", r.master_check_s, 0.01, 10.0)?;
-        if !r.ip.is_empty() && r.ip.parse::<std::net::Ipv4Addr>().is_err() {
-            return Err(format!("ros.ip {:?} is not an IPv4 address", r.ip).into());
-        }
-        if r.hostname.chars().any(|c| c.is_whitespace() || c == '/') {
-            return Err(format!("ros.hostname {:?} is not a host name", r.hostname).into());
-        }
+        herb_ros1::check_ip("ros.ip", &r.ip).map_err(|e| e.to_string())?;
+        herb_ros1::check_hostname("ros.hostname", &r.hostname).map_err(|e| e.to_string())?;
         let a = &self.arm;
         for (i, j) in a.joints.iter().enumerate() {
             if j.is_empty() || a.joints[..i].contains(j) {

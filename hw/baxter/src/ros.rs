@@ -168,7 +168,7 @@ pub fn run(
         loop {
             match session(&cfg, enable, &shared, &stop, &mut carry).await? {
                 End::Stop => return Ok(()),
-                End::Reregister => eprintln!(
+                End::Reregister => herb_adapter::log!(
                     "herb-baxter: no robot state since registering again: connecting anew"
                 ),
             }
@@ -229,7 +229,13 @@ async fn session(
 ) -> Result<End, RosError> {
     let guard = &mut carry.guard;
     let refused_until = &mut carry.refused_until;
-    let Some(nh) = connect(&cfg.ros.master_uri, &cfg.ros.node_name, "herb-baxter", stop).await
+    let Some(nh) = connect(
+        &cfg.ros.master_uri,
+        &cfg.ros.node_name,
+        |m| herb_adapter::log!("herb-baxter: {m}"),
+        stop,
+    )
+    .await
     else {
         return Ok(End::Stop);
     };
@@ -358,7 +364,7 @@ async fn session(
                                 s.counters.joint_states_rejected += 1;
                                 let e = e.to_string();
                                 if last_reject.as_deref() != Some(e.as_str()) {
-                                    eprintln!("herb-baxter: joint state refused: {e}");
+                                    herb_adapter::log!("herb-baxter: joint state refused: {e}");
                                     last_reject = Some(e);
                                 }
                             }
@@ -368,7 +374,7 @@ async fn session(
                     Next::Bad(e) => {
                         s.counters.joint_states += 1;
                         s.counters.joint_states_rejected += 1;
-                        eprintln!("herb-baxter: joint state undecodable: {e}");
+                        herb_adapter::log!("herb-baxter: joint state undecodable: {e}");
                     }
                     Next::Closed => return Err(RosError::Closed(t.joint_states.clone())),
                 }
@@ -376,7 +382,7 @@ async fn session(
             m = next(&mut robot) => match m {
                 Next::Msg(m) => assembly = Some((m, monotonic_ns())),
                 Next::Lagged(n) => lock(shared).counters.lagged += n,
-                Next::Bad(e) => eprintln!("herb-baxter: robot state undecodable: {e}"),
+                Next::Bad(e) => herb_adapter::log!("herb-baxter: robot state undecodable: {e}"),
                 Next::Closed => return Err(RosError::Closed(t.robot_state.clone())),
             },
             m = next(&mut gripper) => match m {
@@ -386,7 +392,7 @@ async fn session(
                     lock(shared).grip = Some((grip_seq, monotonic_ns(), g));
                 }
                 Next::Lagged(n) => lock(shared).counters.lagged += n,
-                Next::Bad(e) => eprintln!("herb-baxter: gripper state undecodable: {e}"),
+                Next::Bad(e) => herb_adapter::log!("herb-baxter: gripper state undecodable: {e}"),
                 Next::Closed => return Err(RosError::Closed(t.gripper_state.clone())),
             },
             _ = check.tick() => {
@@ -395,14 +401,14 @@ async fn session(
                 if ok != master_ok {
                     master_ok = ok;
                     if ok {
-                        eprintln!("herb-baxter: ROS master back");
+                        herb_adapter::log!("herb-baxter: ROS master back");
                     } else {
                         lock(shared).counters.master_lost += 1;
-                        eprintln!("herb-baxter: ROS master lost: joint state withheld, nothing commanded");
+                        herb_adapter::log!("herb-baxter: ROS master lost: joint state withheld, nothing commanded");
                     }
                 }
                 if view == MasterView::Forgotten {
-                    eprintln!("herb-baxter: the ROS master restarted and forgot this node: registering again");
+                    herb_adapter::log!("herb-baxter: the ROS master restarted and forgot this node: registering again");
                     let known = announce_again(&master, &subscribed, &published).await?;
                     lock(shared).counters.reregistered += 1;
                     announced_at = known.then(monotonic_ns);
@@ -436,8 +442,8 @@ async fn session(
                 };
                 if Some(blocker) != blocker_said {
                     match blocker {
-                        Some(b) => eprintln!("herb-baxter: {}: joint state withheld, nothing commanded", b.fault().describe()),
-                        None => eprintln!("herb-baxter: robot ready"),
+                        Some(b) => herb_adapter::log!("herb-baxter: {}: joint state withheld, nothing commanded", b.fault().describe()),
+                        None => herb_adapter::log!("herb-baxter: robot ready"),
                     }
                     blocker_said = Some(blocker);
                 }
@@ -483,7 +489,7 @@ async fn session(
                             }
                             lock(shared).counters.commands_refused = guard.refused;
                             if !refusing {
-                                eprintln!("herb-baxter: joint command refused: {r}");
+                                herb_adapter::log!("herb-baxter: joint command refused: {r}");
                                 refusing = true;
                             }
                         }

@@ -31,6 +31,13 @@ pub struct Ros {
     pub master_uri: String,
     /// This node's name.
     pub node_name: String,
+    /// The address other ROS nodes (the camera's driver) reach this one at (`ROS_IP`), an
+    /// IPv4 address. Empty: the environment's `ROS_HOSTNAME`/`ROS_IP`, else this PC's hostname
+    /// (which they must then resolve).
+    pub ip: String,
+    /// The host name other ROS nodes reach this one at (`ROS_HOSTNAME`); takes precedence over
+    /// `ip`, as in ROS. Empty: see `ip`.
+    pub hostname: String,
 }
 
 /// `[topics]` (the realsense2_camera driver's defaults).
@@ -87,6 +94,8 @@ impl Default for Ros {
         Self {
             master_uri: "http://127.0.0.1:11311".into(),
             node_name: "/herb_camera".into(),
+            ip: String::new(),
+            hostname: String::new(),
         }
     }
 }
@@ -158,6 +167,8 @@ impl ConfigFile for CameraConfig {
     fn validate(&self) -> Result<(), Invalid> {
         herb_ros1::check_master_uri("ros.master_uri", &self.ros.master_uri)
             .map_err(|e| e.to_string())?;
+        herb_ros1::check_ip("ros.ip", &self.ros.ip).map_err(|e| e.to_string())?;
+        herb_ros1::check_hostname("ros.hostname", &self.ros.hostname).map_err(|e| e.to_string())?;
         for (name, topic) in [
             ("ros.node_name", &self.ros.node_name),
             ("topics.image", &self.topics.image),
@@ -227,9 +238,22 @@ mod tests {
             ),
             ("[topics]\nimage = \"depth\"\n", "topics.image"),
             ("[pose]\nbogus = 1\n", "bogus"),
+            ("[ros]\nip = \"herb-pc\"\n", "ros.ip"),
+            ("[ros]\nip = \"10.0.0\"\n", "ros.ip"),
+            ("[ros]\nhostname = \"herb pc\"\n", "ros.hostname"),
+            ("[ros]\nhostname = \"herb-pc:11311\"\n", "ros.hostname"),
         ] {
             let e = CameraConfig::from_toml(text, "c.toml").unwrap_err();
             assert!(e.to_string().contains(key), "{text}: {e}");
         }
+        let c = CameraConfig::from_toml(
+            "[ros]\nip = \"10.0.0.5\"\nhostname = \"herb-pc.local\"\n",
+            "c.toml",
+        )
+        .unwrap();
+        assert_eq!(
+            (c.ros.ip.as_str(), c.ros.hostname.as_str()),
+            ("10.0.0.5", "herb-pc.local")
+        );
     }
 }

@@ -11,6 +11,7 @@ use herb_core::heightmap::GridSpec;
 use herb_ipc::bus::Bus;
 use herb_ipc::{Services, monotonic_ns};
 use herb_robot::config_file::ConfigFile;
+use herb_ros1::Advertised;
 use herb_ros1::node::{MasterView, Next, announce_again, connect, master_view, next, topic_of};
 use herb_ros1::sensor_msgs::{CameraInfo, Image};
 use std::path::PathBuf;
@@ -87,9 +88,14 @@ fn calibrate(
     let (intr, depths) = rt.block_on(async {
         // Its own node name: a running adapter keeps its registration.
         let name = format!("{}_calibrate", cfg.ros.node_name);
-        let nh = connect(&cfg.ros.master_uri, &name, "herb-camera", &stop)
-            .await
-            .ok_or("stopped")?;
+        let nh = connect(
+            &cfg.ros.master_uri,
+            &name,
+            |m| herb_adapter::log!("herb-camera: {m}"),
+            &stop,
+        )
+        .await
+        .ok_or("stopped")?;
         let t = &cfg.topics;
         let mut images = nh.subscribe::<Image>(&t.image, 4).await.map_err(|e| format!("subscribe {}: {e}", t.image))?;
         let mut infos = nh.subscribe::<CameraInfo>(&t.camera_info, 4).await.map_err(|e| format!("subscribe {}: {e}", t.camera_info))?;
@@ -193,7 +199,7 @@ fn lock(c: &Mutex<Counters>) -> std::sync::MutexGuard<'_, Counters> {
 /// Logs `what` when it differs from the last thing logged this way.
 fn say_once(last: &mut String, what: String) {
     if *last != what {
-        eprintln!("herb-camera: {what}");
+        herb_adapter::log!("herb-camera: {what}");
         *last = what;
     }
 }
@@ -212,7 +218,7 @@ async fn ros_side(
     stop: Arc<AtomicBool>,
 ) -> Result<(), String> {
     while session(&cfg, spec, &frames, &spare, &counters, &stop).await? {
-        eprintln!("herb-camera: no image since registering again: connecting anew");
+        herb_adapter::log!("herb-camera: no image since registering again: connecting anew");
     }
     Ok(())
 }
@@ -231,7 +237,13 @@ async fn session(
     counters: &Mutex<Counters>,
     stop: &AtomicBool,
 ) -> Result<bool, String> {
-    let Some(nh) = connect(&cfg.ros.master_uri, &cfg.ros.node_name, "herb-camera", stop).await
+    let Some(nh) = connect(
+        &cfg.ros.master_uri,
+        &cfg.ros.node_name,
+        |m| herb_adapter::log!("herb-camera: {m}"),
+        stop,
+    )
+    .await
     else {
         return Ok(false);
     };
@@ -307,7 +319,7 @@ async fn session(
                 last_image = Some(tokio::time::Instant::now());
                 if img.encoding == "mono16" && !mono16_said {
                     // Some drivers label 16-bit depth mono16: read as 16UC1 (millimetres).
-                    eprintln!("herb-camera: image encoding mono16 read as 16UC1 (depth in millimetres)");
+                    herb_adapter::log!("herb-camera: image encoding mono16 read as 16UC1 (depth in millimetres)");
                     mono16_said = true;
                 }
                 lock(counters).images += 1;
@@ -340,7 +352,7 @@ async fn session(
             _ = poll.tick() => {}
             _ = check.tick() => {
                 if master_view(&master, &t.image, &cfg.ros.node_name, MASTER_CHECK).await == MasterView::Forgotten {
-                    eprintln!("herb-camera: the ROS master restarted and forgot this node: registering again");
+                    herb_adapter::log!("herb-camera: the ROS master restarted and forgot this node: registering again");
                     let known = announce_again(&master, &subscribed, &[]).await.map_err(|e| e.to_string())?;
                     announced_at = known.then(tokio::time::Instant::now);
                 }
@@ -370,6 +382,10 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         cfg.ros.master_uri = u.clone();
     }
     cfg.validate().map_err(|e| e.to_string())?;
+    // SAFETY: no other thread runs yet (the bus, the ROS thread and the signal handler start
+    // below), so nothing reads the environment concurrently.
+    let advertised =
+        unsafe { Advertised::set(&cfg.ros.ip, &cfg.ros.hostname) }.map_err(|e| e.to_string())?;
     let spec = GridSpec::for_box(cfg.heightmap.cell_m).map_err(|e| e.to_string())?;
     let services = Services::new(&herbd.ipc_prefix).map_err(|e| e.to_string())?;
     let stop = Arc::new(AtomicBool::new(false));
@@ -399,9 +415,13 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             })
             .map_err(|e| e.to_string())?
     };
-    eprintln!(
-        "herb-camera: prefix {:?}, master {}, {} x {} cells of {} m",
-        herbd.ipc_prefix, cfg.ros.master_uri, spec.nx, spec.ny, spec.cell
+    herb_adapter::log!(
+        "herb-camera: prefix {:?}, master {}, reached at {advertised}, {} x {} cells of {} m",
+        herbd.ipc_prefix,
+        cfg.ros.master_uri,
+        spec.nx,
+        spec.ny,
+        spec.cell
     );
     let mut seq = 0u64;
     // Image arrival to heightmap published (projection, median, hand-over, shared-memory write).
@@ -422,14 +442,14 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         match camera.publish(seq, &hm) {
             Ok(()) => {
                 if seq == 1 {
-                    eprintln!("herb-camera: first heightmap published");
+                    herb_adapter::log!("herb-camera: first heightmap published");
                 }
                 let _ = latency.record(monotonic_ns().saturating_sub(f.received_ns).max(1));
                 let mut c = lock(&counters);
                 c.published += 1;
                 c.cells_filled += u64::from(f.stats.filled_near + f.stats.filled_far);
             }
-            Err(e) => eprintln!("herb-camera: heightmap not published: {e}"),
+            Err(e) => herb_adapter::log!("herb-camera: heightmap not published: {e}"),
         }
         let _ = spare_tx.send(f.cells);
     }
@@ -463,13 +483,24 @@ fn main() -> ExitCode {
             })
             .and_then(|c| c.validate().map(|()| c).map_err(Into::into))
             .map_err(|e| e.to_string());
-        return match cfg.and_then(|c| calibrate(&c, frames, &x_hint, timeout_s)) {
+        let cfg = cfg.and_then(|c| {
+            // SAFETY: only this thread runs (calibrate's runtime, on this thread, comes after).
+            let a = unsafe { Advertised::set(&c.ros.ip, &c.ros.hostname) };
+            a.map(|a| (c, a)).map_err(|e| e.to_string())
+        });
+        return match cfg.and_then(|(c, a)| {
+            herb_adapter::log!(
+                "herb-camera calibrate: master {}, reached at {a}",
+                c.ros.master_uri
+            );
+            calibrate(&c, frames, &x_hint, timeout_s)
+        }) {
             Ok(toml) => {
                 print!("{toml}");
                 ExitCode::SUCCESS
             }
             Err(e) => {
-                eprintln!("herb-camera calibrate: error: {e}");
+                herb_adapter::log!("herb-camera calibrate: error: {e}");
                 ExitCode::from(2)
             }
         };

@@ -367,7 +367,7 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
     lb.0.kill().unwrap();
     lb.0.wait().unwrap();
     ctl_out.wait_for("FAULT JointStateTimeout", Duration::from_secs(5));
-    ctl_out.wait_for("braked", Duration::from_secs(5));
+    ctl_out.wait_for("halted", Duration::from_secs(5));
     // Holding while the arm is away.
     std::thread::sleep(Duration::from_secs(1));
     let _lb2 = spawn(
@@ -376,7 +376,7 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
         &dir.join("loopback2.log"),
     );
     ctl_out.wait_for("resumed", Duration::from_secs(10));
-    ctl_out.wait_for("placed 3/3", Duration::from_secs(120));
+    ctl_out.wait_for("placed: 3 of 3 objects", Duration::from_secs(120));
     let st = ctl.wait_for(Duration::from_secs(30));
     let mut summary = None;
     while let Ok(l) = ctl_out.rx.recv_timeout(Duration::from_millis(200)) {
@@ -1289,7 +1289,7 @@ fn re_enabling_a_sagged_arm_never_jumps() {
         lb.signal(signal);
         out.wait_for("resumed", Duration::from_secs(10));
     }
-    out.wait_for("placed 3/3", Duration::from_secs(180));
+    out.wait_for("placed: 3 of 3 objects", Duration::from_secs(180));
     let st = ctl.wait_for(Duration::from_secs(30));
     let summary = out.last_json().expect("herbctl's JSON summary");
     assert!(st.success(), "{summary}");
@@ -1326,7 +1326,10 @@ fn a_missed_grasp_is_retried_and_the_cell_goes_on() {
     for (objects, n) in [("003,005", 2), ("011", 1)] {
         let mut ctl = pack_objects(&dir, &prefix, objects, 300, true);
         let mut out = Follow::new(&mut ctl);
-        out.wait_for(&format!("placed {n}/{n}"), Duration::from_secs(180));
+        out.wait_for(
+            &format!("placed: {n} of {n} object"),
+            Duration::from_secs(180),
+        );
         let st = ctl.wait_for(Duration::from_secs(30));
         let summary = out.last_json().expect("herbctl's JSON summary");
         assert!(st.success(), "{summary}");
@@ -1400,7 +1403,7 @@ fn a_job_for_a_disabled_robot_says_why_and_waits() {
     out.wait_for("robot not ready: robot disabled", Duration::from_secs(5));
     eprintln!("said after {:?}", asked.elapsed());
     lb.signal(libc::SIGUSR1);
-    out.wait_for("placed 1/1", Duration::from_secs(120));
+    out.wait_for("placed: 1 of 1 object", Duration::from_secs(120));
     assert!(ctl.wait_for(Duration::from_secs(30)).success());
     claims.check();
 }
@@ -1421,6 +1424,7 @@ fn log_name(ev: herb_ipc::StatusEvent) -> &'static str {
         Shutdown => "shutdown",
         JobCancelled => "job_cancelled",
         Skipped => "skipped",
+        AwaitingObject => "awaiting_object",
     }
 }
 
@@ -1668,10 +1672,306 @@ fn herbctl_follows_a_job_across_a_daemon_crash_and_restart() {
     std::thread::sleep(Duration::from_secs(1));
     let _hd2 = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd2.log"));
     out.wait_for("herbd back", Duration::from_secs(30));
-    out.wait_for("placed 2/2", Duration::from_secs(120));
+    out.wait_for("placed: 2 of 2 objects", Duration::from_secs(120));
     let st = ctl.wait_for(Duration::from_secs(30));
     let summary = out.last_json().expect("herbctl's JSON summary");
     assert!(st.success(), "{summary}");
     assert_eq!(summary["placed"], 2, "{summary}");
+    claims.check();
+}
+
+/// An arm that stands past herbd's joint limit (inside its own) when a job comes, as a real
+/// Baxter's elbow after it sagged while disabled (the loopback started there with `--start`):
+/// with `[recovery] outside_limits = "refuse"` the job is refused as "robot not ready" naming the
+/// joint, where and the limit (`herbctl pack` and `herbctl status`); with the default
+/// ("recover") the job names it, herbd brings the joint back inside slowly from where it stands
+/// (the first command at the arm) and the job packs.
+#[test]
+fn a_job_for_an_arm_past_a_limit_is_refused_or_brought_back_inside() {
+    let (dir, prefix, cfg) = setup("pastlimit");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
+    let limits = herb_testkit::fast_limits();
+    let mut start = herb_robot::kinematics::LEFT_TOP_DOWN_NOMINAL;
+    start[3] = limits.upper[3] + 0.03; // left_e1, inside the arm's own limit (0.05 past)
+    let start_s = start.map(|v| v.to_string()).join(",");
+    let cfg_s = cfg.to_str().unwrap();
+    let lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s, &format!("--start={start_s}")],
+        &dir.join("loopback.log"),
+    );
+    // Refused, naming the joint.
+    let refuse = dir.join("refuse.toml");
+    let text = std::fs::read_to_string(&cfg).unwrap();
+    std::fs::write(
+        &refuse,
+        format!("{text}\n[recovery]\noutside_limits = \"refuse\"\n"),
+    )
+    .unwrap();
+    let mut hd = spawn(
+        &exe("herbd"),
+        &["--config", refuse.to_str().unwrap()],
+        &dir.join("herbd-refuse.log"),
+    );
+    let mut ctl = spawn(
+        &exe("herbctl"),
+        &[
+            "--prefix",
+            &prefix,
+            "pack",
+            "--objects",
+            "003",
+            "--timeout",
+            "60",
+        ],
+        &dir.join("herbctl-refused.log"),
+    );
+    let mut out = Follow::new(&mut ctl);
+    out.wait_for("robot not ready", Duration::from_secs(30));
+    out.wait_for("left_e1 at 2.5980 rad", Duration::from_secs(5));
+    let (_, text) = herbctl_output(&prefix, &["status"]);
+    assert!(
+        text.contains("OutsideLimits") && text.contains("left_e1"),
+        "{text}"
+    );
+    ctl.signal(libc::SIGKILL);
+    let _ = ctl.wait_for(Duration::from_secs(10));
+    hd.signal(libc::SIGTERM);
+    assert!(hd.wait_for(Duration::from_secs(10)).success());
+    // Brought back inside by the job's first motion, which packs.
+    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let mut ctl = pack_objects(&dir, &prefix, "003", 120, true);
+    let mut out = Follow::new(&mut ctl);
+    out.wait_for("left_e1 at 2.5980 rad", Duration::from_secs(30));
+    let st = ctl.wait_for(Duration::from_secs(120));
+    let summary = out.last_json().expect("herbctl's JSON summary");
+    assert!(st.success(), "{summary}");
+    assert_eq!(summary["placed"], 1, "{summary}");
+    assert_eq!(
+        summary["faults"],
+        serde_json::json!(["OutsideLimits"]),
+        "{summary}"
+    );
+    let sim = loopback_summary(lb);
+    eprintln!("herbctl: {summary}\nloopback: {sim}");
+    let firsts: Vec<f64> =
+        serde_json::from_value(sim["first_command_offsets_rad"].clone()).unwrap();
+    assert!(firsts[0] <= 0.001, "the first command at the arm: {sim}");
+    // Past herbd's limit only on the way back in: never farther out than the arm stood.
+    let excess = sim["max_limit_excess_rad"].as_f64().unwrap();
+    assert!(excess > 0.0 && excess <= 0.03 + 1e-9, "{sim}");
+    assert_eq!(sim["commands_refused"], 0, "{sim}");
+    claims.check();
+}
+
+/// Ctrl-C on `herbctl pack`. Before herbd accepted the job (no herbd yet), it exits 130 saying
+/// no job was started. Mid-motion, it cancels its job: herbd brakes, retreats and ends the job
+/// `JobCancelled`, herbctl says so and exits 130, nothing more is released and the arm stands
+/// still. `pack --detach` returns at acceptance with the command that cancels the job, which
+/// does.
+#[test]
+fn an_interrupted_pack_cancels_its_job_and_brakes_the_arm() {
+    use herb_ipc::{JobState, JointState, Services, Status, StatusEvent};
+    let (dir, prefix, cfg) = setup("interrupt");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
+    let released = || -> usize { claims.jobs().values().map(|r| r.released.len()).sum() };
+    // Waiting for a herbd: nothing to cancel. Signals are caught once it says it submits.
+    let mut early = pack_objects(&dir, &prefix, "003", 60, false);
+    let mut early_out = Follow::new(&mut early);
+    herb_testkit::wait_for_log(
+        &dir.join("herbctl.log"),
+        "submitting job",
+        Duration::from_secs(10),
+    );
+    early.signal(libc::SIGINT);
+    early_out.wait_for("no job was started", Duration::from_secs(5));
+    assert_eq!(early.wait_for(Duration::from_secs(5)).code(), Some(130));
+
+    let (_lb, _hd) = start_cell(&dir, &cfg);
+    let watcher = client(&prefix);
+    let services = Services::new(&prefix).unwrap();
+    let bus = herb_ipc::bus::Bus::open("e2e-interrupt", &services).unwrap();
+    let js = bus
+        .subscriber::<JointState>(&services.joint_state())
+        .unwrap();
+    // The fastest joint's measured speed now (rad/s).
+    let speed = || {
+        let mut v = None;
+        while let Ok(Some(m)) = js.receive() {
+            v = Some(
+                m.payload()
+                    .velocity
+                    .iter()
+                    .fold(0.0f64, |a, x| a.max(x.abs())),
+            );
+        }
+        v
+    };
+    let mut ctl = pack_objects(&dir, &prefix, "003,005,011", 120, true);
+    let mut out = Follow::new(&mut ctl);
+    out.wait_for("object  1/3", Duration::from_secs(60));
+    // Interrupted while the arm moves (on its way to the pick station).
+    let t0 = Instant::now();
+    while speed().is_none_or(|v| v < 0.3) {
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "the arm never moved"
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let at_interrupt = released();
+    ctl.signal(libc::SIGINT);
+    out.wait_for("interrupted: cancelling job", Duration::from_secs(5));
+    out.wait_for(
+        "cancelled: the arm braked and retreated",
+        Duration::from_secs(20),
+    );
+    let st = ctl.wait_for(Duration::from_secs(10));
+    let summary = out.last_json().expect("herbctl's JSON summary");
+    assert_eq!(st.code(), Some(130), "{summary}");
+    assert_eq!(summary["state"], "Cancelled", "{summary}");
+    assert_eq!(summary["interrupted"], "signal", "{summary}");
+    let job = summary["job_id"].as_u64().unwrap();
+    let seen: Vec<Status> = watcher.statuses().collect();
+    let ev = |e: StatusEvent| seen.iter().any(|s| s.job_id == job && s.event == e as u32);
+    assert!(ev(StatusEvent::Braked) && ev(StatusEvent::JobCancelled));
+    // Nothing released after the interrupt; herbd idle; the arm still (its measured speeds).
+    assert_eq!(summary["placed"], at_interrupt as u64, "{summary}");
+    std::thread::sleep(Duration::from_secs(1));
+    assert_eq!(released(), at_interrupt, "{:?}", claims.jobs());
+    let s = watcher.status(Duration::from_secs(2)).unwrap();
+    assert_eq!((s.job_id, s.state), (0, JobState::Idle as u32), "{s:?}");
+    let still = speed().expect("joint states");
+    assert!(still < 1e-3, "the arm moves at {still} rad/s");
+
+    // Detached: it returns once the job runs; the command it prints cancels the job.
+    let (st, text) = herbctl_output(
+        &prefix,
+        &["pack", "--objects", "011", "--detach", "--timeout", "60"],
+    );
+    assert!(st.success(), "{text}");
+    let cancel: Vec<&str> = text
+        .lines()
+        .find_map(|l| l.strip_prefix("cancel it: "))
+        .unwrap_or_else(|| panic!("a cancel command: {text}"))
+        .split_whitespace()
+        .collect();
+    assert_eq!(
+        cancel[..5],
+        ["herbctl", "--prefix", &prefix, "cancel", "--job"]
+    );
+    let detached = cancel[5];
+    assert!(text.contains(&format!("job {detached} accepted")), "{text}");
+    assert!(
+        text.contains(&format!("herbctl --prefix {prefix} watch")),
+        "{text}"
+    );
+    let o = Command::new(exe("herbctl"))
+        .args(&cancel[1..])
+        .output()
+        .expect("herbctl runs");
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{said}");
+    assert!(
+        said.contains(&format!("job {detached} cancelled")),
+        "{said}"
+    );
+    claims.check();
+}
+
+/// A job fed by hand (`herbctl pack --operator`): at each try of each pick herbctl asks for the
+/// object, and the arm waits above the station, the gripper open, until the operator presses
+/// Enter; only then does it close (the first grasp misses: the retry asks again, for the same
+/// object). `--operator-wait` confirms by itself.
+#[test]
+fn an_operator_job_confirms_each_object_before_the_close() {
+    use herb_ipc::{GripperAction, GripperCommand};
+    use std::io::Write;
+    let (dir, prefix, cfg) = setup("operator");
+    let claims = herb_testkit::claims::Claims::watch(&prefix);
+    let cfg_s = cfg.to_str().unwrap();
+    let _lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s, "--miss-grasps", "1"],
+        &dir.join("loopback.log"),
+    );
+    let _hd = spawn(&exe("herbd"), &["--config", cfg_s], &dir.join("herbd.log"));
+    let client = client(&prefix);
+    let grips = client
+        .bus()
+        .subscriber::<GripperCommand>(&client.services().gripper_command())
+        .unwrap();
+    // Whether herbd commanded a close since the last call.
+    let closed = || {
+        let mut any = false;
+        while let Ok(Some(g)) = grips.receive() {
+            any |= g.payload().action == GripperAction::Close as u32;
+        }
+        any
+    };
+    let mut ctl = Proc(
+        Command::new(exe("herbctl"))
+            .args(["--prefix", &prefix, "pack", "--objects", "003,005"])
+            .args(["--operator", "--json", "--timeout", "200"])
+            .current_dir(repo())
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::fs::File::create(dir.join("herbctl.log")).unwrap())
+            .spawn()
+            .unwrap(),
+    );
+    let mut stdin = ctl.0.stdin.take().unwrap();
+    let mut out = Follow::new(&mut ctl);
+    // Two objects, the first asked for twice (its first grasp misses).
+    for (what, k) in [("003", 0), ("003", 1), ("005", 2)] {
+        out.wait_for(&format!("operator: put {what}"), Duration::from_secs(120));
+        if k == 1 {
+            assert!(
+                out.seen.iter().any(|l| l.contains("again")),
+                "{:?}",
+                out.seen
+            );
+        }
+        let _ = closed();
+        // The arm comes above the station and waits there: no close, however long.
+        std::thread::sleep(Duration::from_secs(4));
+        assert!(
+            !closed(),
+            "closed before the confirmation ({what}, ask {k})"
+        );
+        writeln!(stdin).unwrap();
+        out.wait_for("confirmed", Duration::from_secs(10));
+        let t0 = Instant::now();
+        while !closed() {
+            assert!(
+                t0.elapsed() < Duration::from_secs(30),
+                "no close after Enter"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+    let st = ctl.wait_for(Duration::from_secs(120));
+    let summary = out.last_json().expect("herbctl's JSON summary");
+    assert!(st.success(), "{summary}");
+    assert_eq!(summary["placed"], 2, "{summary}");
+    // --operator-wait: confirmed by itself.
+    let (st, text) = herbctl_output(
+        &prefix,
+        &[
+            "pack",
+            "--objects",
+            "011",
+            "--operator",
+            "--operator-wait",
+            "0.5",
+            "--timeout",
+            "120",
+        ],
+    );
+    assert!(st.success(), "{text}");
+    assert!(
+        text.contains("the arm descends in 0.5 s") && text.contains("confirmed"),
+        "{text}"
+    );
     claims.check();
 }

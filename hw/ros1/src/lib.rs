@@ -39,6 +39,22 @@ pub enum ConfigError {
         /// The value given.
         name: String,
     },
+    /// Not an IPv4 address (what ROS 1 and roslibrust take as `ROS_IP`).
+    #[error("{key} = {ip:?}: expected an IPv4 address such as 10.0.0.5")]
+    Ip {
+        /// The configuration key (or environment variable).
+        key: String,
+        /// The value given.
+        ip: String,
+    },
+    /// Not a host name a URI can carry.
+    #[error("{key} = {host:?}: expected a host name (no spaces, '/' or ':')")]
+    Hostname {
+        /// The configuration key (or environment variable).
+        key: String,
+        /// The value given.
+        host: String,
+    },
 }
 
 /// Checks a master URI from a configuration (`key` names it in the error): `http://host:port`.
@@ -74,6 +90,121 @@ pub fn check_name(key: &str, name: &str) -> Result<(), ConfigError> {
     }
 }
 
+/// Checks the address this node is reached at (`ROS_IP`; `key` names it in the error): empty
+/// (not set) or an IPv4 address.
+pub fn check_ip(key: &str, ip: &str) -> Result<(), ConfigError> {
+    if ip.is_empty() || ip.parse::<std::net::Ipv4Addr>().is_ok() {
+        Ok(())
+    } else {
+        Err(ConfigError::Ip {
+            key: key.to_owned(),
+            ip: ip.to_owned(),
+        })
+    }
+}
+
+/// Checks the host name this node is reached at (`ROS_HOSTNAME`; `key` names it in the error):
+/// empty (not set) or a name with no whitespace, `/` or `:` (it goes into `http://host:port`).
+pub fn check_hostname(key: &str, host: &str) -> Result<(), ConfigError> {
+    if host
+        .chars()
+        .any(|c| c.is_whitespace() || c == '/' || c == ':')
+    {
+        Err(ConfigError::Hostname {
+            key: key.to_owned(),
+            host: host.to_owned(),
+        })
+    } else {
+        Ok(())
+    }
+}
+
+/// What other ROS nodes (the robot, the camera's driver) are told to reach this node at; roslibrust
+/// reads `ROS_HOSTNAME`, else `ROS_IP`, else takes the PC's hostname.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Advertised {
+    /// `ROS_HOSTNAME`.
+    Hostname(String),
+    /// `ROS_IP`.
+    Ip(String),
+    /// Neither: the PC's hostname, which the others must resolve.
+    PcHostname,
+}
+
+impl std::fmt::Display for Advertised {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Hostname(a) | Self::Ip(a) => f.write_str(a),
+            Self::PcHostname => {
+                f.write_str("this PC's hostname (set ros.ip or ros.hostname on a real cell)")
+            }
+        }
+    }
+}
+
+impl Advertised {
+    /// The address from an adapter's `[ros]` keys `ip` and `hostname` (validated: empty is not
+    /// set), else from the environment (`env`: a variable's value; `/etc/herb/ros.env` under
+    /// systemd). The keys override the environment; a hostname takes precedence over an IP,
+    /// as in ROS; an empty variable counts as unset. An environment's value is checked as the
+    /// keys are, the error naming the variable.
+    pub fn choose(
+        ip: &str,
+        hostname: &str,
+        env: impl Fn(&str) -> Option<String>,
+    ) -> Result<Self, ConfigError> {
+        if !hostname.is_empty() {
+            return Ok(Self::Hostname(hostname.to_owned()));
+        }
+        if !ip.is_empty() {
+            return Ok(Self::Ip(ip.to_owned()));
+        }
+        let set = |var: &str| env(var).filter(|v| !v.is_empty());
+        if let Some(h) = set("ROS_HOSTNAME") {
+            check_hostname("ROS_HOSTNAME (environment)", &h)?;
+            return Ok(Self::Hostname(h));
+        }
+        if let Some(i) = set("ROS_IP") {
+            check_ip("ROS_IP (environment)", &i)?;
+            return Ok(Self::Ip(i));
+        }
+        Ok(Self::PcHostname)
+    }
+
+    /// [`Advertised::choose`] from the process's environment, then [`Advertised::apply`]: what
+    /// an adapter calls at start, before its ROS side runs.
+    ///
+    /// # Safety
+    ///
+    /// As [`Advertised::apply`].
+    pub unsafe fn set(ip: &str, hostname: &str) -> Result<Self, ConfigError> {
+        let a = Self::choose(ip, hostname, |v| std::env::var(v).ok())?;
+        // SAFETY: the caller's guarantee.
+        unsafe { a.apply() };
+        Ok(a)
+    }
+
+    /// Sets the process's `ROS_HOSTNAME` and `ROS_IP` so that roslibrust advertises `self` and
+    /// nothing else: the chosen variable set, the other removed.
+    ///
+    /// # Safety
+    ///
+    /// Changes the environment ([`std::env::set_var`]): call it before the process starts any
+    /// other thread (or while none reads or writes the environment).
+    pub unsafe fn apply(&self) {
+        // SAFETY: the caller's guarantee.
+        unsafe {
+            std::env::remove_var("ROS_HOSTNAME");
+            std::env::remove_var("ROS_IP");
+            match self {
+                Self::Hostname(h) => std::env::set_var("ROS_HOSTNAME", h),
+                Self::Ip(i) => std::env::set_var("ROS_IP", i),
+                Self::PcHostname => {}
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -95,6 +226,16 @@ mod tests {
             assert!(e.contains("ros.master_uri"), "{bad}: {e}");
         }
         assert!(check_name("k", "/robot/joint_states").is_ok());
+        assert!(check_ip("k", "").is_ok() && check_ip("k", "10.0.0.5").is_ok());
+        assert!(check_hostname("k", "").is_ok() && check_hostname("k", "herb-pc.local").is_ok());
+        for bad in ["herb-pc", "10.0.0", "::1"] {
+            let e = check_ip("ros.ip", bad).unwrap_err().to_string();
+            assert!(e.contains("ros.ip") && e.contains(bad), "{e}");
+        }
+        for bad in ["herb pc", "http://herb-pc", "herb-pc:11311"] {
+            let e = check_hostname("ros.hostname", bad).unwrap_err().to_string();
+            assert!(e.contains("ros.hostname") && e.contains(bad), "{e}");
+        }
         for bad in ["robot/state", "/", "/a b", "/9lives", ""] {
             assert!(
                 check_name("topics.x", bad)
@@ -104,5 +245,27 @@ mod tests {
                 "{bad}"
             );
         }
+    }
+
+    #[test]
+    fn the_keys_override_the_environment_and_a_hostname_comes_first() {
+        let env = |h: &'static str, i: &'static str| {
+            move |var: &str| Some(if var == "ROS_HOSTNAME" { h } else { i }.to_owned())
+        };
+        let ip = |a: &str| Advertised::Ip(a.into());
+        let host = |a: &str| Advertised::Hostname(a.into());
+        for (keys, (env_host, env_ip), want) in [
+            (("10.0.0.5", "pc"), ("", ""), host("pc")),
+            (("10.0.0.5", ""), ("robot-pc", "10.0.0.9"), ip("10.0.0.5")),
+            (("", ""), ("robot-pc", "10.0.0.9"), host("robot-pc")),
+            (("", ""), ("", "10.0.0.9"), ip("10.0.0.9")),
+            (("", ""), ("", ""), Advertised::PcHostname),
+        ] {
+            let got = Advertised::choose(keys.0, keys.1, env(env_host, env_ip)).unwrap();
+            assert_eq!(got, want, "{keys:?} {env_host:?} {env_ip:?}");
+        }
+        let e = Advertised::choose("", "", env("", "robot-pc")).unwrap_err();
+        assert!(e.to_string().contains("ROS_IP (environment)"), "{e}");
+        assert!(Advertised::PcHostname.to_string().contains("ros.ip"));
     }
 }

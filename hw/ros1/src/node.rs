@@ -8,11 +8,12 @@ use std::time::Duration;
 pub const CONNECT_RETRY: Duration = Duration::from_millis(500);
 
 /// Registers node `name` with the master at `master_uri`, retrying every [`CONNECT_RETRY`]
-/// until it answers (said once on stderr, prefixed with `who`); `None` if `stop` is set first.
+/// until it answers (said once through `say`, the adapter's log, e.g.
+/// `|m| herb_adapter::log!("herb-camera: {m}")`); `None` if `stop` is set first.
 pub async fn connect(
     master_uri: &str,
     name: &str,
-    who: &str,
+    say: impl Fn(std::fmt::Arguments<'_>),
     stop: &AtomicBool,
 ) -> Option<NodeHandle> {
     let mut told = false;
@@ -22,11 +23,15 @@ pub async fn connect(
         }
         match NodeHandle::new(master_uri, name).await {
             Ok(nh) => {
-                eprintln!("{who}: connected to the ROS master at {master_uri} as {name}");
+                say(format_args!(
+                    "connected to the ROS master at {master_uri} as {name}"
+                ));
                 return Some(nh);
             }
             Err(e) if !told => {
-                eprintln!("{who}: ROS master {master_uri} not reachable ({e}); retrying");
+                say(format_args!(
+                    "ROS master {master_uri} not reachable ({e}); retrying"
+                ));
                 told = true;
             }
             Err(_) => {}
