@@ -56,15 +56,24 @@ fn client(prefix: &str) -> Client {
     Client::connect_as(prefix, "e2e-test").unwrap()
 }
 
-/// herbd's count of rejected inputs from the heartbeats `client` receives: the newest one once
-/// `done` holds for it, or after 5 s (panics if no heartbeat came at all).
+/// herbd's count of rejected sensor inputs from the heartbeats `client` receives: the newest
+/// one once `done` holds for it, or after 5 s (panics if no heartbeat came at all).
 fn rejected_inputs(client: &Client, done: impl Fn(u64) -> bool) -> u64 {
+    heartbeat_count(client, |s| s.rejected_inputs, done)
+}
+
+/// [`rejected_inputs`] for `count` of the heartbeat (e.g. the refused requests).
+fn heartbeat_count(
+    client: &Client,
+    count: impl Fn(&herb_ipc::Status) -> u64,
+    done: impl Fn(u64) -> bool,
+) -> u64 {
     let heartbeat = herb_ipc::StatusEvent::Heartbeat as u32;
     let mut counted = None;
     let t0 = Instant::now();
     while t0.elapsed() < Duration::from_secs(5) && !counted.is_some_and(&done) {
         for s in client.statuses().filter(|s| s.event == heartbeat) {
-            counted = Some(s.rejected_inputs);
+            counted = Some(count(&s));
         }
         std::thread::sleep(Duration::from_millis(20));
     }
@@ -543,10 +552,12 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
         (RejectReason::UnknownObject, 1)
     );
 
-    // The daemon counts what it rejected: 8 jobs and the NotReady ones.
+    // The daemon counts what it refused: 8 jobs and the NotReady ones, as requests; no sensor
+    // input was bad.
     let want = 8 + not_ready;
-    let counted = rejected_inputs(&client, |n| n >= want);
-    assert_eq!(counted, want, "rejections counted");
+    let counted = heartbeat_count(&client, |s| s.rejected_requests, |n| n >= want);
+    assert_eq!(counted, want, "refused requests counted");
+    assert_eq!(rejected_inputs(&client, |_| true), 0, "no sensor input refused");
     claims.check();
 }
 
@@ -741,7 +752,7 @@ fn a_killed_daemon_is_reported_lost_by_the_client() {
     let err = std::fs::read_to_string(dir.join("herbctl.log")).unwrap();
     assert!(err.contains("daemon lost"), "{err}");
     assert!(
-        err.contains("0/2 placed") && err.contains("object 1/2"),
+        err.contains("placed: 0 of 2 objects") && err.contains("object 1/2"),
         "{err}"
     );
 }
