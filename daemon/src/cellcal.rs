@@ -1,4 +1,4 @@
-//! `herbctl calibrate-cell`: the box and pick-station poses of herbd's `[cell]` table, measured
+//! `herbd calibrate-cell`: the box and pick-station poses of herbd's `[cell]` table, measured
 //! by touching them with the gripper.
 //!
 //! The operator moves the arm by hand (Baxter's cuff puts it in zero-g) until the gripper's tip

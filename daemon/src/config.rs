@@ -134,7 +134,7 @@ pub struct Config {
     pub cell: CellConfig,
     /// Joint limits.
     pub limits: JointLimits,
-    /// Run logs (`herbctl replay`, `herbctl explain`).
+    /// Run logs (`herbd replay`, `herbd explain`).
     pub record: RecordConfig,
     /// The job journal (a job survives a daemon crash).
     pub journal: JournalConfig,

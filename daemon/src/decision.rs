@@ -58,10 +58,11 @@ pub struct SearchPolicy {
 }
 
 impl SearchPolicy {
-    /// A search over `catalog` with `settings`, its twins built with the world's defaults.
-    pub fn new(catalog: SharedCatalog, settings: SearchSettings) -> Self {
+    /// A search over `catalog` with `settings`, its twins built with `world` (whose clearance
+    /// must be the decision core's: the job's twin replays the arm's releases).
+    pub fn new(catalog: SharedCatalog, world: WorldConfig, settings: SearchSettings) -> Self {
         Self {
-            search: Search::new(catalog, WorldConfig::default(), settings),
+            search: Search::new(catalog, world, settings),
         }
     }
 
@@ -142,7 +143,12 @@ impl DecisionCore {
                     },
                     ..SearchSettings::default()
                 };
-                let policy = Box::new(SearchPolicy::new(catalog.clone(), settings));
+                // The twins release where the arm does: the same clearance.
+                let world = WorldConfig {
+                    clearance_m: clearance,
+                    ..WorldConfig::default()
+                };
+                let policy = Box::new(SearchPolicy::new(catalog.clone(), world, settings));
                 Method::Search(Decider::new(policy, catalog, clearance))
             }
         };

@@ -1,6 +1,7 @@
 //! `herbd`, HERB's controller: its configuration, the fixed-rate control loop with the job
-//! state machine, and the planner thread that runs the decision core (`herb-decide`) and the
-//! motion planning (`herb-robot`) off the loop.
+//! state machine, the planner thread (Beam-3 order and motion planning with `herb-robot`) and
+//! the decision thread (a policy through `herb-decide`, or the search through `herb-sim`), both
+//! off the loop; the job journal, run logs and their replay.
 
 #![warn(missing_docs)]
 
@@ -17,4 +18,3 @@ pub mod plan;
 pub mod planner;
 pub mod record;
 pub mod replay;
-pub mod watch;

@@ -51,7 +51,7 @@ impl PlannerLink {
 }
 
 /// The planner's work without its thread and ports: ordering a job (Beam-3) and planning the
-/// motion. herbd's planner thread and `herbctl replay` run this same code.
+/// motion. herbd's planner thread and `herbd replay` run this same code.
 pub struct PlannerCore {
     catalog: SharedCatalog,
     sequence: SequenceModel,

@@ -5,7 +5,7 @@
 //! every cycle's outputs, planner response and decision are compared with the recorded
 //! digests. On an unmodified build
 //! on the same kind of CPU a run is reproduced bit for bit; otherwise the first divergence is
-//! reported. `herbctl replay` and `herbctl explain` are thin front ends.
+//! reported. `herbd replay` and `herbd explain` are thin front ends.
 
 use crate::config::{Config, ConfigFile};
 use crate::decision::DecisionCore;

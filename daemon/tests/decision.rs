@@ -235,3 +235,34 @@ fn core_after_first(cfg: &Config, c: &Arc<Catalog>, objects: &[u16]) -> Decision
     core.decide(&request(objects), &frame(0.0), None);
     core
 }
+
+/// One release pose: the job's twin replays each release where the arm releases it, at the
+/// configured clearance. With `[models] clearance_m` changed, the decided z (the arm's) and the
+/// twin's replayed release both move by the change, and stay equal.
+#[test]
+fn the_jobs_twin_replays_the_release_at_the_configured_clearance() {
+    let c = catalog();
+    let mut zs = Vec::new();
+    for clearance in [0.01, 0.03] {
+        let mut cfg = config(DecisionMethod::Search, 0.0);
+        cfg.decision.twin = herb_daemon::config::DecisionTwin::Job;
+        cfg.models.clearance_m = clearance;
+        let mut core = DecisionCore::new(&cfg, c.clone()).unwrap();
+        let pose = core
+            .decide(&request(&[5, 9, 11]), &frame(0.0), None)
+            .outcome
+            .expect("a placement");
+        let replayed = core
+            .search_report()
+            .unwrap()
+            .replayed_release
+            .expect("the twin keeps the release");
+        assert_eq!(replayed.translation.z, pose[2], "clearance {clearance}");
+        assert_eq!(
+            (replayed.translation.x, replayed.translation.y),
+            (pose[0], pose[1])
+        );
+        zs.push(pose[2]);
+    }
+    assert!((zs[1] - zs[0] - 0.02).abs() < 1e-5, "{zs:?}");
+}

@@ -99,6 +99,22 @@ const RULES: &[(&str, &[&str])] = &[
             "herb-daemon",
         ],
     ),
+    // herbctl, a thin client: the client library, the wire, the core and the pictures; never
+    // herbd (its replay, explain and cell calibration are `herbd` tools), the physics engine,
+    // the policies' runtime or real-time motion.
+    (
+        "herbctl",
+        &[
+            "rapier3d",
+            "tract-onnx",
+            "ruckig",
+            "herb-daemon",
+            "herb-sim",
+            "herb-decide",
+            "herb-methods",
+            "herb-robot",
+        ],
+    ),
     ("herb-robot", ROBOT_SIDE_NEVER),
     (
         "herb-adapter",

@@ -1,6 +1,7 @@
 //! HERB's IPC contract (`ipc/CONTRACT.md`; processes: `ARCHITECTURE.md`): every payload exchanged
-//! between `herbd`, the hardware adapters and the clients, the service names, and one
-//! validation function per payload. Nothing else lives here.
+//! between `herbd`, the hardware adapters and the clients, the service names, one validation
+//! function per payload, the codes' operator words, and the iceoryx2 ports with the contract's
+//! QoS ([`bus`]).
 //!
 //! Every payload is `#[repr(C)]`, fixed size, without heap or pointers, derives iceoryx2's
 //! `ZeroCopySend` with an explicit, versioned type name, and starts with a [`Header`]

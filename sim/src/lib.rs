@@ -14,7 +14,6 @@
 //! paths.
 #![warn(missing_docs)]
 
-pub mod boxed;
 pub mod env;
 pub mod eval;
 pub mod reserve;
@@ -24,8 +23,8 @@ pub mod world;
 
 // The domain core (no physics engine), re-exported under its old paths.
 pub use herb_core::{
-    catalog, error, features, frames, heightmap, hull, image, lattice, mesh, observation, paths,
-    zestimate,
+    boxed, catalog, error, features, frames, heightmap, hull, image, lattice, mesh, observation,
+    paths, zestimate,
 };
 
 pub use catalog::{Catalog, ObjectShape, ObjectSpec, SharedCatalog, TypeIdx};

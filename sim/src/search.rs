@@ -17,8 +17,9 @@ use crate::error::{Result, SimError};
 use crate::heightmap::Heightmap;
 use crate::lattice::{Lattice, Placement};
 use crate::teacher::{CandidateOutcome, rollout_until};
-use crate::world::{PackingWorld, ReleaseNoise, WorldConfig, offset_pose, release_pose_on};
+use crate::world::{PackingWorld, ReleaseNoise, WorldConfig, offset_pose};
 use crate::zestimate::ZScratch;
+use crate::zestimate::release_pose_on;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rapier3d::math::{Pose, Rotation};
@@ -122,7 +123,8 @@ impl Default for SearchSettings {
             budget: Budget::Rollouts(8),
             horizon: None,
             reward: RewardMode::CompactnessStability { alpha: 0.6 },
-            twin: TwinKind::Heightmap,
+            // herbd's default, and the CLI's and the bindings': one default everywhere.
+            twin: TwinKind::Job,
             robust: None,
         }
     }
@@ -159,6 +161,10 @@ pub struct SearchReport {
     pub elapsed: Duration,
     /// With [`TwinKind::Job`]: how the job's twin compared with the heightmap.
     pub job: Option<JobAgreement>,
+    /// With [`TwinKind::Job`]: where the job's twin will replay the chosen placement's release
+    /// at the next decision (the one release pose, [`release_pose_on`]: the z estimate on this
+    /// heightmap plus the world's clearance, herbd's `[models] clearance_m`).
+    pub replayed_release: Option<Pose>,
 }
 
 /// How the job's twin compared with the decision's heightmap ([`TwinKind::Job`]).
@@ -330,6 +336,7 @@ impl Search {
                 &mut self.zscratch,
             );
             job.release = Some((next, pose));
+            self.report.replayed_release = Some(pose);
         }
         self.report.elapsed = t0.elapsed();
         Ok(Some(chosen))

@@ -24,7 +24,7 @@ use crate::frames::{
 };
 use crate::heightmap::{GridSpec, Heightmap};
 use crate::observation::ObsLayout;
-use crate::zestimate::{ZScratch, estimate_z_rotated};
+use crate::zestimate::{ZScratch, estimate_z_rotated, release_pose_on};
 use rapier3d::math::{Pose, Rotation, Vector};
 use rapier3d::prelude::*;
 
@@ -799,22 +799,6 @@ impl SuccessVolume {
         ];
         over.into_iter().max_by(|a, b| a.1.total_cmp(&b.1))
     }
-}
-
-/// The release pose of `shape` at `(x, y, rot)` over `heightmap`: orientation `rot`
-/// (normalised), origin at `(x, y)` and at the estimated height plus `clearance_m`. What
-/// [`PackingWorld::release_pose`] does on the world's own heightmap, and the search on a
-/// camera's.
-pub fn release_pose_on(
-    heightmap: &Heightmap,
-    shape: &crate::catalog::ObjectShape,
-    (x, y, rot): (f32, f32, Rotation),
-    clearance_m: f32,
-    scratch: &mut ZScratch,
-) -> Pose {
-    let rot = rot.normalize();
-    let z = estimate_z_rotated(heightmap, shape, x, y, rot, scratch) + clearance_m;
-    Pose::from_parts(Vector::new(x, y, z), rot)
 }
 
 /// `pose` moved by `dx`, `dy` (m) in B and turned by `dyaw` (rad) about B z: a release off

@@ -51,6 +51,7 @@
 #![warn(missing_docs)]
 
 mod error;
+pub mod view;
 mod watch;
 
 pub use error::{CancelError, ConnectError, StatusError, SubmitError, WatchError};

@@ -9,13 +9,11 @@ mod words;
 
 use clap::{Parser, Subcommand};
 use herb_client::{Client, JobEvent, StatusError, WatchError};
-use herb_daemon::record::Log;
-use herb_daemon::replay::{Outcome, ReplayOptions, Replayed};
+use herb_core::{Catalog, TypeIdx, paths};
 use herb_ipc::{
-    Fault, Header, HeightmapFrame, JobState, Services, SimOutcome, SimReset, Status, StatusEvent,
+    Fault, Header, HeightmapFrame, JobState, Services, SimOutcome, SimReset, StatusEvent,
     monotonic_ns,
 };
-use herb_sim::{Catalog, GridSpec, Heightmap, TypeIdx, paths};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -91,37 +89,6 @@ enum Cmd {
         #[arg(long, default_value_t = 30.0)]
         timeout: f64,
     },
-    /// Re-run a run log (`herbd --record DIR`) offline: the job state machine on the recorded
-    /// inputs, the decisions and motion plans on the recorded heightmaps; report the first
-    /// divergence. Exit 0: reproduced bit for bit; 1: diverged; 3: the log is incomplete.
-    Replay {
-        /// A segment file (RUN-<start>-<n>.log).
-        log: PathBuf,
-        /// Replay even if the catalog or a model differs from the run's.
-        #[arg(long)]
-        force: bool,
-        /// Also write what the replay saw as JSON lines for a recording
-        /// (`python -m herb_client.view --events FILE --save job.rrd`): each status but the
-        /// heartbeats, and each heightmap a decision was made on.
-        #[arg(long)]
-        events: Option<PathBuf>,
-    },
-    /// Why object N (1-based, as `herbctl pack` numbers them) went where it did: the
-    /// heightmap it was decided on and the next one (PNGs), the policy's action, the z
-    /// estimate, the placement, the outcome.
-    Explain {
-        /// A segment file.
-        log: PathBuf,
-        /// The object (1-based, in the packing order).
-        #[arg(long)]
-        object: u32,
-        /// Where to write object-N-before.png and object-N-after.png.
-        #[arg(long, default_value = ".")]
-        out: PathBuf,
-        /// Explain even if the catalog or a model differs from the run's.
-        #[arg(long)]
-        force: bool,
-    },
     /// A live view of herbd: job progress, the last decision, loop statistics, faults, the
     /// simulated box, recent events. Ctrl-C quits.
     Watch {
@@ -134,16 +101,6 @@ enum Cmd {
         /// Print each view below the previous one instead of redrawing the screen.
         #[arg(long)]
         plain: bool,
-    },
-    /// Measure the box and pick-station poses for herbd's `[cell]` table by touching them with
-    /// the gripper (the arm moved by hand; the arm adapter must run): prints the lines to paste.
-    CalibrateCell {
-        /// Box corners to touch: 3 or 4.
-        #[arg(long, default_value_t = 4)]
-        corners: usize,
-        /// From the gripper's endpoint to the touching tip, along its approach axis (m).
-        #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-        tip_offset: f64,
     },
     /// Print the object catalog as JSON for viewers (`python -m herb_client.view`): the box
     /// (half lengths, height, wall thickness; m) and each object type's id, name and convex
@@ -199,7 +156,7 @@ fn status(cli: &Cli, timeout: f64) -> Result<bool, String> {
     Ok(true)
 }
 
-/// `herbctl watch`: redraws [`herb_daemon::watch::WatchView`] every `period` seconds.
+/// `herbctl watch`: redraws [`herb_client::view::WatchView`] every `period` seconds.
 fn watch(
     cli: &Cli,
     catalog: &Catalog,
@@ -207,7 +164,7 @@ fn watch(
     duration: Option<f64>,
     plain: bool,
 ) -> Result<bool, String> {
-    use herb_daemon::watch::{WatchView, wall_label};
+    use herb_client::view::{WatchView, wall_label};
     if !(period.is_finite() && (0.02..=60.0).contains(&period)) {
         return Err(format!("--period {period} outside 0.02..=60 s"));
     }
@@ -365,123 +322,9 @@ fn cancel(cli: &Cli, job: Option<u64>, timeout: f64) -> Result<bool, String> {
     }
 }
 
-/// `herbctl replay`.
-fn replay(
-    cli: &Cli,
-    path: &std::path::Path,
-    force: bool,
-    events: Option<&std::path::Path>,
-) -> ExitCode {
-    let run = || -> Result<(Outcome, Replayed, Log), String> {
-        let log = Log::read(path).map_err(|e| e.to_string())?;
-        let opts = ReplayOptions {
-            boxed: cli.boxed.clone(),
-            force,
-            explain: None,
-        };
-        let (o, r) = herb_daemon::replay::replay(&log, &opts).map_err(|e| e.to_string())?;
-        Ok((o, r, log))
-    };
-    match run() {
-        Err(e) => {
-            eprintln!("herbctl: error: {e}");
-            ExitCode::from(2)
-        }
-        Ok((outcome, r, log)) => {
-            println!(
-                "{} (segment {}), recorded on {}",
-                log.header.herbd, log.header.segment, log.header.cpu
-            );
-            if let Some(p) = events {
-                match write_events(p, &r) {
-                    Ok(n) => println!("{n} events written to {}", p.display()),
-                    Err(e) => {
-                        eprintln!("herbctl: error: {}: {e}", p.display());
-                        return ExitCode::from(2);
-                    }
-                }
-            }
-            let done = format!(
-                "{} cycles, {} joint commands, {} planner responses, {} decisions",
-                r.cycles, r.joint_commands, r.responses, r.decisions
-            );
-            match outcome {
-                Outcome::Reproduced => {
-                    println!("reproduced bit for bit: {done}");
-                    ExitCode::SUCCESS
-                }
-                Outcome::Incomplete(why) => {
-                    println!("log incomplete ({why}); reproduced before that: {done}");
-                    ExitCode::from(3)
-                }
-                Outcome::Diverged { cycle, at_s, what } => {
-                    println!("DIVERGED at cycle {cycle} ({at_s:.3} s into the segment): {what}");
-                    println!("reproduced before that: {done}");
-                    ExitCode::from(1)
-                }
-            }
-        }
-    }
-}
-
-/// The replay's statuses (heartbeats left out) and decision heightmaps as JSON lines, in time
-/// order; the number of lines.
-fn write_events(path: &std::path::Path, r: &Replayed) -> std::io::Result<usize> {
-    use std::io::Write;
-    let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
-    let mut n = 0;
-    for (_, s) in &r.statuses {
-        let line = serde_json::json!({
-            "status": {
-                "stamp_ns": s.header.stamp_ns,
-                "job_id": s.job_id,
-                "event": s.event,
-                "state": s.state,
-                "fault": s.fault,
-                "objects_total": s.objects_total,
-                "objects_done": s.objects_done,
-                "object_index": s.object_index,
-                "object_type": s.object_type,
-                "decision_wait_ms": s.decision_wait_ms,
-                "pose": s.pose,
-                "decision_ns": s.decision_ns,
-            }
-        });
-        writeln!(w, "{line}")?;
-        n += 1;
-        // The heightmap the object was decided on, at the time of its decision.
-        if s.event == StatusEvent::Decided as u32
-            && let Some((_, f)) = r.decision_frames.iter().find(|(i, _)| *i == s.object_index)
-        {
-            let line = serde_json::json!({
-                "heightmap": {
-                    "stamp_ns": s.header.stamp_ns,
-                    "nx": f.nx,
-                    "ny": f.ny,
-                    "cell_m": f.cell_m,
-                    "cells": f.cells(),
-                }
-            });
-            writeln!(w, "{line}")?;
-            n += 1;
-        }
-    }
-    w.flush()?;
-    Ok(n)
-}
-
-fn write_png(f: &HeightmapFrame, path: &std::path::Path) -> Result<(), String> {
-    let spec = GridSpec::for_box(f.cell_m).map_err(|e| e.to_string())?;
-    let hm = Heightmap::from_data(spec, f.cells().to_vec()).map_err(|e| e.to_string())?;
-    if let Some(d) = path.parent() {
-        let _ = std::fs::create_dir_all(d);
-    }
-    herb_sim::image::write_heightmap_png(path, &hm, 0.3, 4).map_err(|e| e.to_string())
-}
-
 /// `herbctl catalog`: the catalog (meshes from BoxED when present) as one JSON document.
 fn catalog_json(cli: &Cli) -> Result<bool, String> {
-    use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, BOX_WALL_THICKNESS};
+    use herb_core::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, BOX_WALL_THICKNESS};
     let root = paths::boxed_root(cli.boxed.as_deref());
     let meshes = paths::mesh_source(None, root.as_deref());
     let catalog = Catalog::builtin(&meshes).map_err(|e| format!("catalog: {e}"))?;
@@ -510,142 +353,6 @@ fn catalog_json(cli: &Cli) -> Result<bool, String> {
     });
     use std::io::Write;
     writeln!(std::io::stdout(), "{doc}").map_err(|e| format!("stdout: {e}"))?;
-    Ok(true)
-}
-
-/// `herbctl explain`.
-fn explain(
-    cli: &Cli,
-    catalog: &Catalog,
-    path: &std::path::Path,
-    object: u32,
-    out: &std::path::Path,
-    force: bool,
-) -> Result<bool, String> {
-    if object == 0 {
-        return Err("--object counts from 1".into());
-    }
-    let index = object - 1;
-    let log = Log::read(path).map_err(|e| e.to_string())?;
-    let opts = ReplayOptions {
-        boxed: cli.boxed.clone(),
-        force,
-        explain: Some(index),
-    };
-    let (outcome, r) = herb_daemon::replay::replay(&log, &opts).map_err(|e| e.to_string())?;
-    let cfg: herb_daemon::config::Config =
-        toml::from_str(&log.header.config_toml).map_err(|e| e.to_string())?;
-    let e = r.explained.ok_or_else(|| {
-        format!(
-            "object {object} was never decided in this log (it holds {} decisions)",
-            r.decisions
-        )
-    })?;
-    let f = &e.frame;
-    println!(
-        "object {object}: {} (decision request {})",
-        name(catalog, e.object as u32),
-        e.request
-    );
-    println!(
-        "heightmap: stamp {} ns, {}x{} cells of {:.4} m, {} objects in the box{}",
-        f.header.stamp_ns,
-        f.nx,
-        f.ny,
-        f.cell_m,
-        f.objects,
-        if f.objects == 0 { " (or unknown)" } else { "" }
-    );
-    println!("method: {}", e.method);
-    if let Some(rep) = &e.search {
-        let allowed = e.response.allowed;
-        println!(
-            "search: {} feasible candidates on the lattice; the budget allowed {allowed} rollout{} (replayed as that count){}",
-            rep.candidates,
-            if allowed == 1 { "" } else { "s" },
-            if allowed == 0 {
-                ": none finished, so the prior's first (lattice BLBF's) was taken"
-            } else {
-                ""
-            }
-        );
-        for (c, o) in &rep.finished {
-            let p = &o.placement;
-            println!(
-                "  candidate {:>2} (x {:+.3} y {:+.3} yaw {:+.2}): return {:+.4}, {} objects placed inside{}{}",
-                c + 1,
-                p.x,
-                p.y,
-                p.theta(),
-                o.ret,
-                o.packed,
-                if o.success {
-                    ", all"
-                } else {
-                    ", then a failure"
-                },
-                if Some(*c) == rep.chosen {
-                    "  <- chosen"
-                } else {
-                    ""
-                }
-            );
-        }
-    }
-    match e.response.outcome {
-        Ok(p) => println!(
-            "placement: x {:+.4} m, y {:+.4} m, yaw {:+.3} rad; z {:.4} m (resting height from the heightmap + {:.3} m clearance)",
-            p[0], p[1], p[3], p[2], cfg.models.clearance_m
-        ),
-        Err(why) => println!("no placement: {why:?}"),
-    }
-    let mine: Vec<&Status> = r
-        .statuses
-        .iter()
-        .map(|(_, s)| s)
-        .filter(|s| s.object_index == index || s.event == StatusEvent::JobDone as u32)
-        .collect();
-    for s in &mine {
-        let ev = StatusEvent::from_code(s.event);
-        let fault = Fault::from_code(s.fault).unwrap_or(Fault::None);
-        match ev {
-            Some(StatusEvent::Decided) => println!(
-                "decided in {:.3} ms (as measured in the run)",
-                s.decision_ns as f64 / 1e6
-            ),
-            Some(StatusEvent::Placed) => println!(
-                "outcome: released at x {:+.4} y {:+.4} z {:.4} m, yaw {:+.3} rad; {} of {} placed",
-                s.pose[0], s.pose[1], s.pose[2], s.pose[3], s.objects_done, s.objects_total
-            ),
-            Some(StatusEvent::Fault) if s.object_index == index => {
-                println!("fault while handling it: {fault:?}")
-            }
-            Some(StatusEvent::JobFailed) if s.object_index == index => {
-                println!("outcome: the job failed on it ({fault:?})")
-            }
-            Some(StatusEvent::JobCancelled) if s.object_index == index => {
-                println!("outcome: the job was cancelled while handling it")
-            }
-            _ => {}
-        }
-    }
-    let before = out.join(format!("object-{object}-before.png"));
-    write_png(f, &before)?;
-    println!("heightmap it was decided on: {}", before.display());
-    match r.decision_frames.iter().find(|(i, _)| *i > index) {
-        Some((_, next)) => {
-            let after = out.join(format!("object-{object}-after.png"));
-            write_png(next, &after)?;
-            println!(
-                "the next decision's heightmap (after it settled): {}",
-                after.display()
-            );
-        }
-        None => println!("no later heightmap in this log (it was the last decision)"),
-    }
-    if let Outcome::Diverged { cycle, what, .. } = outcome {
-        println!("warning: the replay diverged at cycle {cycle}: {what}");
-    }
     Ok(true)
 }
 
@@ -692,24 +399,6 @@ fn main() -> ExitCode {
         }
         Cmd::Status { timeout } => status(&cli, *timeout),
         Cmd::Catalog => catalog_json(&cli),
-        Cmd::CalibrateCell {
-            corners,
-            tip_offset,
-        } => {
-            let stdin = std::io::stdin();
-            herb_daemon::cellcal::run(
-                &cli.prefix,
-                *corners,
-                *tip_offset,
-                &mut stdin.lock(),
-                &mut std::io::stderr(),
-            )
-            .map_err(|e| e.to_string())
-            .map(|cell| {
-                println!("[cell]\n{cell}");
-                true
-            })
-        }
         Cmd::Watch {
             period,
             duration,
@@ -717,15 +406,6 @@ fn main() -> ExitCode {
         } => watch(&cli, &catalog, *period, *duration, *plain),
         Cmd::Reset { timeout } => reset(&cli, *timeout),
         Cmd::Cancel { job, timeout } => cancel(&cli, *job, *timeout),
-        Cmd::Replay { log, force, events } => {
-            return replay(&cli, log, *force, events.as_deref());
-        }
-        Cmd::Explain {
-            log,
-            object,
-            out,
-            force,
-        } => explain(&cli, &catalog, log, *object, out, *force),
     };
     match r {
         Ok(true) => ExitCode::SUCCESS,

@@ -5,9 +5,9 @@
 use crate::words::{self, placed_count};
 use crate::{Cli, connect, id_of, interrupt, name};
 use herb_client::{CancelError, Client, JobEvent, SubmitError, WatchError};
+use herb_core::{Catalog, GridSpec, Heightmap, boxed, paths};
 use herb_ipc::{Fault, HeightmapFrame, JobState, RejectReason, SimOutcome, Status, StatusEvent};
 use herb_picture::{PictureObject, write_pack_picture};
-use herb_sim::{Catalog, GridSpec, Heightmap, boxed, paths};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -669,7 +669,7 @@ pub(crate) fn pack(cli: &Cli, catalog: &Catalog, a: &PackArgs<'_>) -> Result<u8,
         .unwrap_or_default();
     if !json {
         for (who, o) in &listed {
-            let where_ = match herb_daemon::watch::crossing(o) {
+            let where_ = match herb_client::view::crossing(o) {
                 None => "inside".to_string(),
                 Some(c) => format!(
                     "OUTSIDE: {c} (x {:+.3}..{:+.3}, y {:+.3}..{:+.3}, z {:.3}..{:.3} m)",
@@ -784,7 +784,7 @@ fn verdict(
     catalog: &Catalog,
 ) -> String {
     let outside = outcome.map_or_else(Vec::new, |o| {
-        herb_daemon::watch::outside_objects(o, &|t| id_of(catalog, t))
+        herb_client::view::outside_objects(o, &|t| id_of(catalog, t))
     });
     let outside_text = if outside.is_empty() {
         String::new()

@@ -2,7 +2,7 @@
 
     python -m herb_client.view --prefix herb              # serve the web viewer, open a browser
     python -m herb_client.view --prefix herb --save job.rrd --until-job-end   # record a job
-    herbctl replay RUN.log --events job.jsonl             # a finished job, from herbd's run log,
+    herbd replay RUN.log --events job.jsonl             # a finished job, from herbd's run log,
     python -m herb_client.view --events job.jsonl --save job.rrd   # recorded afterwards
 
 It subscribes like any client (one subscriber on each of ``status``, ``decision``,
@@ -317,7 +317,7 @@ class View:
 
 
 def replay_events(view: View, path: str) -> int:
-    """Feeds ``herbctl replay --events`` JSON lines (statuses and decision heightmaps of a run
+    """Feeds ``herbd replay --events`` JSON lines (statuses and decision heightmaps of a run
     log) to ``view``; the number of events."""
     n = 0
     with open(path) as f:
@@ -383,7 +383,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-browser", action="store_true", help="serve without opening a browser")
     ap.add_argument("--save", help="write a recording (.rrd) instead of serving the viewer")
     ap.add_argument(
-        "--events", help="record a finished job from `herbctl replay RUN.log --events FILE` (with --save)"
+        "--events", help="record a finished job from `herbd replay RUN.log --events FILE` (with --save)"
     )
     ap.add_argument("--catalog", help="a `herbctl catalog` JSON file (default: run herbctl)")
     ap.add_argument("--boxed", help="the BoxED folder for the meshes (passed to herbctl)")

@@ -1,7 +1,7 @@
 """The live view as a person uses it, against a real herbd and herb-loopback: the web viewer is
 opened in headless Chromium (Debian's package) while a job runs, and its screenshot must show
 the packed objects in the 3D panel; a recording (``--save``) of a job, live or made afterwards
-from herbd's run log (``herbctl replay --events``), is read back and must hold every placed
+from herbd's run log (``herbd replay --events``), is read back and must hold every placed
 object.
 
 Needs ``rerun-sdk`` (the test command installs it) and, for the browser test, ``chromium``
@@ -180,7 +180,7 @@ def test_a_finished_job_is_recorded_from_herbds_run_log(cell, tmp_path):
     events = tmp_path / "job.jsonl"
     # herbd still writes the segment: its replay may end "incomplete" (exit 3) at the tail.
     r = subprocess.run(
-        [str(BIN / "herbctl"), "--prefix", prefix, "replay", str(log), "--events", str(events)],
+        [str(BIN / "herbd"), "replay", str(log), "--events", str(events)],
         cwd=REPO,
         capture_output=True,
         text=True,

@@ -1,6 +1,5 @@
 //! The run log's errors: writing one ([`RecordError`]) and reading one back ([`LogError`]).
 
-use super::format::FORMAT;
 use crate::job::JobRecordError;
 use std::path::PathBuf;
 
@@ -61,10 +60,15 @@ pub enum LogProblem {
     NotALog,
     /// A run log of another format version.
     #[error(
-        "run log format {0}, this herbd reads format {FORMAT} (replay it with the herbd that \
-         wrote it)"
+        "run log format {found}, this herbd reads format {reads} (replay it with the herbd \
+         that wrote it)"
     )]
-    Format(u32),
+    Format {
+        /// The file's format version.
+        found: u32,
+        /// The version this herbd reads ([`FORMAT`](super::FORMAT)).
+        reads: u32,
+    },
     /// No header record.
     #[error("no header")]
     NoHeader,

@@ -1,5 +1,5 @@
 //! Run logs: everything that reaches the job state machine and the decision core, written off
-//! the loop, so that `herbctl replay` can re-run a run bit for bit and `herbctl explain` can
+//! the loop, so that `herbd replay` can re-run a run bit for bit and `herbd explain` can
 //! say why an object went where it did.
 //!
 //! # What is recorded

@@ -44,7 +44,10 @@ impl Log {
         }
         let format = u32::from_le_bytes(data[8..12].try_into().unwrap());
         if format != FORMAT {
-            return Err(bad(LogProblem::Format(format)));
+            return Err(bad(LogProblem::Format {
+                found: format,
+                reads: FORMAT,
+            }));
         }
         let mut at = 12usize;
         let mut header = None;

@@ -51,6 +51,18 @@ fn herbctl_output(prefix: &str, args: &[&str]) -> (ExitStatus, String) {
     (o.status, text)
 }
 
+/// Runs one of herbd's offline tools (`replay`, `explain`) to its end: exit status, stdout and
+/// stderr.
+fn herbd_output(args: &[&str]) -> (ExitStatus, String) {
+    let o = Command::new(exe("herbd"))
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .expect("herbd runs");
+    let text = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
+    (o.status, text)
+}
+
 /// A client of the herbd under `prefix` (its status subscribed now).
 fn client(prefix: &str) -> Client {
     Client::connect_as(prefix, "e2e-test").unwrap()
@@ -261,7 +273,7 @@ fn pack_shortest_episode_with(tag: &str, policy: &Path) {
 /// With the search deciding in the job's twin (herbd's default method and twin, a short
 /// budget): the episode is packed with every decision made while the arm picks, the run log
 /// replays bit for bit (each search re-run with the rollouts its budget allowed, the job's
-/// twin rebuilt from the recorded decisions and heightmaps), and `herbctl explain` lists the
+/// twin rebuilt from the recorded decisions and heightmaps), and `herbd explain` lists the
 /// candidates the search tried.
 #[test]
 fn packs_an_episode_with_the_search_and_replays_it_bit_for_bit() {
@@ -326,24 +338,21 @@ fn packs_an_episode_with_the_search_and_replays_it_bit_for_bit() {
         .collect();
     logs.sort();
     let log = logs[0].to_str().unwrap();
-    let (st, out) = herbctl_output(&prefix, &["--boxed", boxed, "replay", log]);
+    let (st, out) = herbd_output(&["--boxed", boxed, "replay", log]);
     assert!(st.success(), "{out}");
     assert!(out.contains("reproduced bit for bit"), "{out}");
     assert!(out.contains(&format!("{n} decisions")), "{out}");
     let pictures = dir.join("explain");
-    let (st, out) = herbctl_output(
-        &prefix,
-        &[
-            "--boxed",
-            boxed,
-            "explain",
-            log,
-            "--object",
-            "1",
-            "--out",
-            pictures.to_str().unwrap(),
-        ],
-    );
+    let (st, out) = herbd_output(&[
+        "--boxed",
+        boxed,
+        "explain",
+        log,
+        "--object",
+        "1",
+        "--out",
+        pictures.to_str().unwrap(),
+    ]);
     assert!(st.success(), "{out}");
     for want in [
         "method: search",
@@ -414,7 +423,7 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
     // The job is in the first segment (the test configuration's 1 MB segments close between
     // jobs: after it, a second one may have started).
     let log = logs[0].to_str().unwrap();
-    let (st, out) = herbctl_output(&prefix, &["replay", log]);
+    let (st, out) = herbd_output(&["replay", log]);
     assert!(st.success(), "{out}");
     assert!(out.contains("reproduced bit for bit"), "{out}");
     // Three objects, and a new decision when one was started over after the resume.
@@ -429,10 +438,10 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
     // refused, and with --force it diverges at the first plan and says so.
     if herb_sim::paths::boxed_root_for_tests().is_some_and(|b| b.join("meshes").is_dir()) {
         let elsewhere = ["--boxed", "/nonexistent", "replay", log];
-        let (st, out) = herbctl_output(&prefix, &elsewhere);
+        let (st, out) = herbd_output(&elsewhere);
         assert_eq!(st.code(), Some(2), "{out}");
         assert!(out.contains("catalog"), "{out}");
-        let (st, out) = herbctl_output(&prefix, &[&elsewhere[..], &["--force"]].concat());
+        let (st, out) = herbd_output(&[&elsewhere[..], &["--force"]].concat());
         assert_eq!(st.code(), Some(1), "{out}");
         assert!(
             out.contains("DIVERGED") && out.contains("planner response"),
@@ -440,17 +449,14 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
         );
     }
     let pictures = dir.join("explain");
-    let (st, out) = herbctl_output(
-        &prefix,
-        &[
-            "explain",
-            log,
-            "--object",
-            "1",
-            "--out",
-            pictures.to_str().unwrap(),
-        ],
-    );
+    let (st, out) = herbd_output(&[
+        "explain",
+        log,
+        "--object",
+        "1",
+        "--out",
+        pictures.to_str().unwrap(),
+    ]);
     assert!(st.success(), "{out}");
     for want in [
         "method: search",
@@ -467,7 +473,7 @@ fn killing_the_loopback_mid_motion_brakes_reports_and_resumes() {
     let cut = dir.join("cut.log");
     let data = std::fs::read(log).unwrap();
     std::fs::write(&cut, &data[..data.len() * 2 / 3]).unwrap();
-    let (st, out) = herbctl_output(&prefix, &["replay", cut.to_str().unwrap()]);
+    let (st, out) = herbd_output(&["replay", cut.to_str().unwrap()]);
     assert_eq!(st.code(), Some(3), "{out}");
     assert!(out.contains("incomplete"), "{out}");
     claims.check();
@@ -557,7 +563,11 @@ fn bad_jobs_and_payloads_are_rejected_with_a_reason_and_counted() {
     let want = 8 + not_ready;
     let counted = heartbeat_count(&client, |s| s.rejected_requests, |n| n >= want);
     assert_eq!(counted, want, "refused requests counted");
-    assert_eq!(rejected_inputs(&client, |_| true), 0, "no sensor input refused");
+    assert_eq!(
+        rejected_inputs(&client, |_| true),
+        0,
+        "no sensor input refused"
+    );
     claims.check();
 }
 
@@ -972,7 +982,7 @@ fn the_box_is_reset_between_jobs_and_not_during_one() {
     assert!(logs.len() >= 2, "{logs:?}");
     let mut decisions = 0;
     for log in &logs {
-        let (st, out) = herbctl_output(&prefix, &["replay", log.to_str().unwrap()]);
+        let (st, out) = herbd_output(&["replay", log.to_str().unwrap()]);
         assert!(st.success(), "{}: {out}", log.display());
         assert!(out.contains("reproduced bit for bit"), "{out}");
         decisions += out

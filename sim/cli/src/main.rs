@@ -154,8 +154,8 @@ struct EvalArgs {
     /// The world the search's rollouts run in: `heightmap` (the twin built from the heightmap;
     /// `twin` is its old name), `job` (the job's own twin: the search's decisions replayed and
     /// fitted to the heightmaps, the heightmap twin where they disagree) or `exact` (a clone of
-    /// the evaluation's world: the twins' fidelity bound).
-    #[arg(long, default_value = "heightmap", value_parser = TwinKind::parse)]
+    /// the evaluation's world: the twins' fidelity bound). Default `job`, herbd's.
+    #[arg(long, default_value = "job", value_parser = TwinKind::parse)]
     search_world: TwinKind,
     /// Release noise of the evaluation's world, `MM,DEG`: each object is released off the pose
     /// its method decided by normal noise of these standard deviations in x and y (mm) and in

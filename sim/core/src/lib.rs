@@ -11,6 +11,7 @@
 //! Frames and units: SI, right-handed, z up; the box frame B is used everywhere.
 #![warn(missing_docs)]
 
+pub mod boxed;
 pub mod catalog;
 pub mod error;
 pub mod features;

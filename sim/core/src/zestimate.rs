@@ -9,7 +9,7 @@
 
 use crate::catalog::ObjectShape;
 use crate::heightmap::{DepthTest, GridSpec, Heightmap, Window, raster_hull};
-use parry3d::math::{Rotation, Vector};
+use parry3d::math::{Pose, Rotation, Vector};
 
 /// Reusable buffers, so repeated estimates do not allocate once warmed up. After
 /// [`bottom_footprint`] it holds the object's bottom surface under its footprint.
@@ -307,4 +307,21 @@ pub fn pool_footprint(
         }
     }
     dst.win = Some(out);
+}
+
+/// Where an object is released: `shape` at `(x, y, rot)` over `heightmap`, orientation `rot`
+/// (normalised), its canonical origin at `(x, y)` and at the estimated resting height
+/// ([`estimate_z_rotated`]) plus `clearance_m`. The one release pose: the decision core's
+/// (what the arm releases at, herbd's `[models] clearance_m`), the packing world's on its own
+/// heightmap, and the search's job twin replaying herbd's releases on the camera's.
+pub fn release_pose_on(
+    heightmap: &Heightmap,
+    shape: &ObjectShape,
+    (x, y, rot): (f32, f32, Rotation),
+    clearance_m: f32,
+    scratch: &mut ZScratch,
+) -> Pose {
+    let rot = rot.normalize();
+    let z = estimate_z_rotated(heightmap, shape, x, y, rot, scratch) + clearance_m;
+    Pose::from_parts(Vector::new(x, y, z), rot)
 }

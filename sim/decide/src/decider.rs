@@ -10,7 +10,7 @@
 use crate::error::{DecideError, Result};
 use crate::policy::{DecisionInput, Policy, check_action};
 use herb_core::observation::{Projections, action_to_placement};
-use herb_core::zestimate::{ZScratch, estimate_z_rotated};
+use herb_core::zestimate::{ZScratch, release_pose_on};
 use herb_core::{GridSpec, Heightmap, ObsLayout, SharedCatalog, TypeIdx};
 use parry3d::math::{Pose, Rotation, Vector};
 
@@ -197,8 +197,13 @@ impl<P: Policy + ?Sized> Decider<P> {
             })
             .and_then(|a| check_action(self.policy.name(), a))?;
         let (x, y, theta) = action_to_placement(action)?;
-        let rot = Rotation::from_rotation_z(theta).normalize();
-        let z = estimate_z_rotated(hm, shape, x, y, rot, &mut self.zs) + self.clearance_m;
+        // Normalised once, by the release pose (as before it was moved there).
+        let rot = Rotation::from_rotation_z(theta);
+        // The one release pose (z estimate plus the clearance), as the search's job twin
+        // replays it.
+        let z = release_pose_on(hm, shape, (x, y, rot), self.clearance_m, &mut self.zs)
+            .translation
+            .z;
         Ok(Decision {
             action,
             position: [x, y, z],

@@ -8,8 +8,8 @@ use herb_sim::lattice::Lattice;
 use herb_sim::reserve::Reserve;
 use herb_sim::teacher::{GeoLookahead, LatticeRule, Lookahead};
 
-/// A placement method: a decision-core policy, a replay of the humans, random actions, or one
-/// of the lattice rules (the teachers and their baselines).
+/// A placement method: a decision-core policy, a replay of the humans, random actions, one of
+/// the lattice rules (the teachers and their baselines), or the search.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Method {
     /// HERB: HERB's Beam-3 order ([`Order::HERB`], default) and an ONNX placement policy.

@@ -670,11 +670,12 @@ impl VecEnv {
     /// 0, not terminated, and keep their state). `horizon` limits the `lookahead` teacher's
     /// rollouts to that many objects (see [`VecEnv::teacher`]). `search` is the decision-time
     /// search (`herb_sim::search`): the first `k` lattice candidates in lattice BLBF's order,
-    /// each rolled out (`rollouts`, default `k`), in a twin built from the heightmap
-    /// (`twin="heightmap"`) or in a clone of the environment's world (`twin="exact"`).
+    /// each rolled out (`rollouts`, default `k`), in the job's own twin (`twin="job"`, herbd's
+    /// and the default), a twin built from the heightmap (`twin="heightmap"`) or a clone of the
+    /// environment's world (`twin="exact"`).
     /// Returns as [`VecEnv::step`].
     #[allow(clippy::type_complexity, clippy::too_many_arguments)]
-    #[pyo3(signature = (rule, k=8, active=None, horizon=None, rollouts=None, twin="heightmap"))]
+    #[pyo3(signature = (rule, k=8, active=None, horizon=None, rollouts=None, twin="job"))]
     fn step_rule<'py>(
         &mut self,
         py: Python<'py>,

@@ -110,13 +110,14 @@ class HerbVectorEnv(gym.vector.VectorEnv):
         ``candidates()`` or ``teacher()``): ``(rewards, terminated, info)``."""
         return self._env.step_candidates(np.ascontiguousarray(index, dtype=np.int64))
 
-    def step_rule(self, rule, k=8, active=None, horizon=None, rollouts=None, twin="heightmap"):
+    def step_rule(self, rule, k=8, active=None, horizon=None, rollouts=None, twin="job"):
         """Steps every environment (or those where ``active`` is true) with a rule decided in
         Rust (``lattice-blbf``, ``lattice-reserve``, or ``lookahead`` or ``geo-lookahead`` with
         ``k`` candidates; ``horizon`` limits the rollouts to that many objects) or with the
         decision-time ``search`` (``k`` candidates, ``rollouts`` rollouts, default ``k``, in a
-        ``twin`` built from the heightmap, ``"heightmap"``, the job's own twin (its decisions
-        replayed, fitted to the heightmaps), ``"job"``, or a clone of the world, ``"exact"``);
+        ``twin``: the job's own twin (its decisions replayed, fitted to the heightmaps), ``"job"``,
+        herbd's and the default, one built from the heightmap, ``"heightmap"``, or a clone of
+        the world, ``"exact"``);
         returns as ``step``. See ``VecEnv.step_rule``."""
         if active is not None:
             active = np.ascontiguousarray(active, dtype=bool)

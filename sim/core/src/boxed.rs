@@ -22,7 +22,7 @@
 use crate::catalog::{Catalog, TypeIdx};
 use crate::error::{Result, SimError};
 use crate::frames::{MeshPoseB, tilt_of, unity_place_to_box, yaw_of};
-use rapier3d::math::{Rotation, Vector};
+use parry3d::math::{Rotation, Vector};
 use serde::Deserialize;
 use std::path::Path;
 

@@ -15,6 +15,8 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
+mod tools;
+
 /// How often the reporter thread prints statistics and statuses and pings the watchdog.
 const REPORT_POLL: Duration = Duration::from_millis(20);
 
@@ -52,9 +54,116 @@ struct Cli {
     /// Also write the final statistics (JSON) to this file.
     #[arg(long)]
     stats_json: Option<PathBuf>,
-    /// Write a run log into this folder (`herbctl replay`, `herbctl explain`).
+    /// Write a run log into this folder (`herbd replay`, `herbd explain`).
     #[arg(long)]
     record: Option<PathBuf>,
+    /// An offline tool instead of the daemon.
+    #[command(subcommand)]
+    tool: Option<Tool>,
+}
+
+/// herbd's offline tools (they run herbd's own code, not the daemon).
+#[derive(Debug, clap::Subcommand)]
+enum Tool {
+    /// Re-run a run log (`herbd --record DIR`) offline: the job state machine on the recorded
+    /// inputs, the decisions and motion plans on the recorded heightmaps; report the first
+    /// divergence. Exit 0: reproduced bit for bit; 1: diverged; 3: the log is incomplete.
+    Replay {
+        /// A segment file (RUN-<start>-<n>.log).
+        log: PathBuf,
+        /// Replay even if the catalog or a model differs from the run's.
+        #[arg(long)]
+        force: bool,
+        /// Also write what the replay saw as JSON lines for a recording
+        /// (`python -m herb_client.view --events FILE --save job.rrd`): each status but the
+        /// heartbeats, and each heightmap a decision was made on.
+        #[arg(long)]
+        events: Option<PathBuf>,
+    },
+    /// Why object N (1-based, as `herbctl pack` numbers them) went where it did: the
+    /// heightmap it was decided on and the next one (PNGs), the policy's action, the z
+    /// estimate, the placement, the outcome.
+    Explain {
+        /// A segment file.
+        log: PathBuf,
+        /// The object (1-based, in the packing order).
+        #[arg(long)]
+        object: u32,
+        /// Where to write object-N-before.png and object-N-after.png.
+        #[arg(long, default_value = ".")]
+        out: PathBuf,
+        /// Explain even if the catalog or a model differs from the run's.
+        #[arg(long)]
+        force: bool,
+    },
+    /// Measure the box and pick-station poses for the `[cell]` table by touching them with the
+    /// gripper (the arm moved by hand; the arm adapter must run, under the configuration's
+    /// prefix): prints the lines to paste.
+    CalibrateCell {
+        /// Box corners to touch: 3 or 4.
+        #[arg(long, default_value_t = 4)]
+        corners: usize,
+        /// From the gripper's endpoint to the touching tip, along its approach axis (m).
+        #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+        tip_offset: f64,
+    },
+}
+
+/// Runs `tool` (the daemon does not start).
+fn run_tool(cli: &Cli, tool: &Tool) -> ExitCode {
+    let fail = |e: String| {
+        eprintln!("herbd: error: {e}");
+        ExitCode::from(2)
+    };
+    match tool {
+        Tool::Replay { log, force, events } => {
+            tools::replay(cli.boxed.clone(), log, *force, events.as_deref())
+        }
+        Tool::Explain {
+            log,
+            object,
+            out,
+            force,
+        } => {
+            let catalog = match Catalog::builtin(&paths::MeshSource::None(
+                "herbd explain needs no meshes".into(),
+            )) {
+                Ok(c) => c,
+                Err(e) => return fail(e.to_string()),
+            };
+            match tools::explain(cli.boxed.clone(), &catalog, log, *object, out, *force) {
+                Ok(_) => ExitCode::SUCCESS,
+                Err(e) => fail(e),
+            }
+        }
+        Tool::CalibrateCell {
+            corners,
+            tip_offset,
+        } => {
+            let prefix = match (&cli.prefix, &cli.config) {
+                (Some(p), _) => p.clone(),
+                (None, Some(path)) => match Config::load(path) {
+                    Ok(c) => c.ipc_prefix,
+                    Err(e) => return fail(e.to_string()),
+                },
+                (None, None) => Config::default().ipc_prefix,
+            };
+            let stdin = std::io::stdin();
+            match herb_daemon::cellcal::run(
+                &prefix,
+                *corners,
+                *tip_offset,
+                &mut stdin.lock(),
+                &mut std::io::stderr(),
+            ) {
+                Ok(cell) => {
+                    println!("[cell]\n{cell}");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => fail(e.to_string()),
+            }
+        }
+    }
 }
 
 fn config(cli: &Cli) -> Result<Config, String> {
@@ -506,7 +615,11 @@ fn run(cli: Cli) -> Result<(), String> {
 }
 
 fn main() -> ExitCode {
-    match run(Cli::parse()) {
+    let cli = Cli::parse();
+    if let Some(tool) = &cli.tool {
+        return run_tool(&cli, tool);
+    }
+    match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             logfmt::log("error", &[("error", &e)]);

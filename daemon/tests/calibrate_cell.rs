@@ -1,13 +1,13 @@
-//! `herbctl calibrate-cell` against a scripted arm: the test publishes the joint states an arm
+//! `herbd calibrate-cell` against a scripted arm: the test publishes the joint states an arm
 //! adapter would (the configurations that put the gripper's tip on the corners of a box at a
 //! known pose, found by inverse kinematics, then on a pick station), presses Enter at each of
-//! herbctl's prompts, and reads back the `[cell]` lines it prints.
+//! its prompts, and reads back the `[cell]` lines it prints.
 
+use herb_core::frames::{BOX_HALF_X, BOX_HALF_Y};
 use herb_ipc::bus::Bus;
 use herb_ipc::{Header, JointState, Services};
 use herb_robot::cell::CellConfig;
 use herb_robot::kinematics::{Arm, DOF, IkOptions, LEFT_TOP_DOWN_NOMINAL};
-use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y};
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -70,13 +70,13 @@ fn touched_corners_give_the_box_pose_and_the_pick_station() {
             }
         })
     };
-    let mut ctl = Command::new(env!("CARGO_BIN_EXE_herbctl"))
+    let mut ctl = Command::new(env!("CARGO_BIN_EXE_herbd"))
         .args(["--prefix", &prefix, "calibrate-cell", "--corners", "4"])
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .expect("herbctl runs");
+        .expect("herbd runs");
     let mut stdin = ctl.stdin.take().unwrap();
     let (tx, rx) = mpsc::channel();
     let stderr = BufReader::new(ctl.stderr.take().unwrap());
@@ -91,7 +91,7 @@ fn touched_corners_give_the_box_pose_and_the_pick_station() {
         loop {
             let l = rx
                 .recv_timeout(Duration::from_secs(20))
-                .unwrap_or_else(|_| panic!("no prompt; herbctl said {said:?}"));
+                .unwrap_or_else(|_| panic!("no prompt; herbd said {said:?}"));
             said.push(l.clone());
             if l.starts_with("Touch") {
                 break;
@@ -122,7 +122,7 @@ fn touched_corners_give_the_box_pose_and_the_pick_station() {
 #[test]
 fn without_an_arm_adapter_it_says_so() {
     let prefix = format!("calnone{}", std::process::id());
-    let mut ctl = Command::new(env!("CARGO_BIN_EXE_herbctl"))
+    let mut ctl = Command::new(env!("CARGO_BIN_EXE_herbd"))
         .args(["--prefix", &prefix, "calibrate-cell"])
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
