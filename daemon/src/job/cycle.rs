@@ -1,0 +1,418 @@
+//! One object's cycle: its decision asked for while its pick is planned, the samples streamed
+//! one per tick, the grasp (after the operator's confirmation when the job asks for one), the
+//! wait for the decision at the lift pose, the place, the release, a missed grasp retried or
+//! skipped, and the next object.
+
+use super::*;
+
+impl Job {
+    /// Starts the current object: its decision is asked for, and its pick planned meanwhile.
+    pub(super) fn begin_object(&mut self, fx: &mut impl Effects, now: u64) {
+        self.decision_failed = None;
+        self.confirmed = false;
+        self.decide_since = now;
+        self.ask_decision(fx, now);
+        self.phase = Phase::Starting;
+        self.request_motion(fx, Motion::Pick);
+    }
+
+    /// Asks the decision worker where the current object goes (again on a later tick if its
+    /// ring is full).
+    pub(super) fn ask_decision(&mut self, fx: &mut impl Effects, now: u64) {
+        let req = DecisionRequest {
+            job_id: self.job_id,
+            index: self.index as u32,
+            order: self.order,
+            count: self.count as u32,
+            after_stamp_ns: self.release_stamp,
+        };
+        match fx.decide(req) {
+            Ok(()) => {
+                self.deciding = Some((self.index, now));
+                self.decide_due = false;
+            }
+            Err(_) => self.decide_due = true,
+        }
+    }
+
+    /// The picked object is held at the lift pose: its place is planned if its placement is
+    /// decided; else the arm holds it there until the decision comes (the wait is counted),
+    /// and a failed decision ends the job.
+    pub(super) fn await_decision(&mut self, fx: &mut impl Effects, now: u64) {
+        if let Some(f) = self.decision_failed {
+            self.fault = f;
+            self.finish(fx, StatusEvent::JobFailed);
+        } else if self.decided_pose().is_some() {
+            self.request_place(fx, now);
+        } else {
+            if self.deciding.is_none() && !self.decide_due {
+                self.decide_since = now;
+                self.decide_due = true;
+            }
+            self.phase = Phase::AwaitDecision { since: now };
+        }
+    }
+
+    /// Asks for the held object's place at its decided placement.
+    pub(super) fn request_place(&mut self, fx: &mut impl Effects, now: u64) {
+        self.phase = Phase::AwaitDecision { since: now };
+        self.request_motion(fx, Motion::Place { flip: self.flip });
+    }
+
+    /// Asks the planner for the current object's `motion` (a place or a pick and place at its
+    /// decided placement) when a trajectory buffer is home; the phase becomes `Planning`, or
+    /// stays as it is (`Starting`, `AwaitDecision`) to ask again on a later tick.
+    pub(super) fn request_motion(&mut self, fx: &mut impl Effects, motion: Motion) {
+        let pose = match motion {
+            Motion::Pick => [0.0; 4],
+            Motion::Place { .. } | Motion::PickAndPlace => match self.decided_pose() {
+                Some(p) => p,
+                None => return,
+            },
+        };
+        let Some(buf) = self.spare.take() else {
+            return;
+        };
+        let req = Request::Plan {
+            index: self.index as u32,
+            object: self.order[self.index],
+            from: self.out.cmd.position,
+            motion,
+            pose,
+            buf,
+        };
+        match fx.plan(req) {
+            Ok(()) => {
+                self.phase = Phase::Planning;
+                if self.confirm_picks && !self.confirmed && !matches!(motion, Motion::Place { .. })
+                {
+                    // A pick: the operator is asked for the object now, while the arm comes.
+                    self.emit(
+                        fx,
+                        StatusEvent::AwaitingObject,
+                        self.current_type(),
+                        [0.0; 4],
+                        0,
+                    );
+                }
+            }
+            Err(Request::Plan { buf, .. }) => self.spare = Some(buf),
+            Err(_) => {}
+        }
+    }
+
+    pub(super) fn step(&mut self, now: u64, fx: &mut impl Effects) {
+        // The decision runs beside the motion: asked again when due, and given up when it does
+        // not come in time (a hung worker never holds the arm).
+        let live = self.job_id != 0
+            && !self.stopping
+            && !self.cancelling
+            && matches!(
+                self.phase,
+                Phase::Starting
+                    | Phase::Planning
+                    | Phase::Streaming { .. }
+                    | Phase::Gripper { .. }
+                    | Phase::AwaitOperator { .. }
+                    | Phase::Regrasp { .. }
+                    | Phase::AwaitDecision { .. }
+            );
+        if live && self.decision_failed.is_none() && self.decided_pose().is_none() {
+            if self.decide_due && self.deciding.is_none() {
+                self.ask_decision(fx, now);
+            }
+            if let Some((_, at)) = self.deciding
+                && now.saturating_sub(at) > self.p.decision_timeout_ns
+            {
+                self.deciding = None;
+                self.decision_failed = Some(Fault::Decision);
+            }
+        }
+        match self.phase {
+            Phase::Idle | Phase::Ordering | Phase::Planning => {}
+            Phase::Starting => {
+                if !self.stopping {
+                    self.request_motion(fx, Motion::Pick);
+                }
+            }
+            Phase::AwaitDecision { since } => {
+                if self.stopping {
+                    return;
+                }
+                if let Some(f) = self.decision_failed {
+                    self.wait_ns += now.saturating_sub(since);
+                    self.fault = f;
+                    self.finish(fx, StatusEvent::JobFailed);
+                } else if self.decided_pose().is_some() {
+                    self.request_motion(fx, Motion::Place { flip: self.flip });
+                    if self.phase == Phase::Planning {
+                        self.wait_ns += now.saturating_sub(since);
+                    }
+                }
+            }
+            Phase::Streaming { seg, cursor } => self.stream(fx, now, seg, cursor),
+            Phase::Gripper { action, seg, since } => self.grip(fx, now, action, seg, since),
+            Phase::AwaitOperator { seg } => {
+                if self.confirmed && !self.stopping && !self.cancelling {
+                    self.next_segment(fx, now, seg + 1);
+                }
+            }
+            Phase::Regrasp { since } => self.regrasp(fx, now, since),
+            Phase::Braking {
+                cursor,
+                seg,
+                active_cursor,
+            } => self.brake_step(fx, cursor, seg, active_cursor),
+            Phase::Retreating { asked: false } => self.retreat(fx),
+            Phase::Retreating { asked: true } | Phase::Recovering { asked: true } => {}
+            Phase::Abandoning => {
+                self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+                self.finish(fx, StatusEvent::JobFailed);
+            }
+            Phase::Recovering { asked: false } => {
+                let (objects, ordered) = if self.ordered {
+                    (self.order, true)
+                } else {
+                    (self.objects, false)
+                };
+                let order = Request::Order {
+                    job_id: self.job_id,
+                    objects,
+                    count: self.count,
+                    ordered,
+                };
+                if fx.plan(order).is_ok() {
+                    self.phase = Phase::Recovering { asked: true };
+                    self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+                }
+            }
+            Phase::Faulted {
+                healthy_since,
+                recovered,
+            } => {
+                if self.cancelling {
+                    // Cancelled where it stopped (its inputs may be gone: no retreat).
+                    self.finish(fx, StatusEvent::JobCancelled);
+                    return;
+                }
+                if self.stopping || self.job_id == 0 {
+                    return;
+                }
+                if let Some(why) = self.not_ready(now) {
+                    self.phase = Phase::Faulted {
+                        healthy_since: None,
+                        recovered,
+                    };
+                    // The arm adapter said more about the joint states that stopped (or it
+                    // changed: an e-stop became a disable): say it once.
+                    // (An adapter that says "ready" while its first joint state is on the way
+                    // changes nothing.)
+                    let ready_said =
+                        self.inputs.arm_blocker == ArmBlocker::None && self.arm_status_fresh(now);
+                    let limits = matches!(why, Fault::OutsideLimits | Fault::BeyondArmLimits);
+                    if (arm_unseen(why) && arm_unseen(self.fault) && !ready_said || limits)
+                        && why != self.fault
+                    {
+                        // A held job that the arm's position keeps from resuming: said once,
+                        // naming the joint.
+                        self.fault = why;
+                        if limits {
+                            self.excess = self.measured_excess().map(|(_, e)| e);
+                        }
+                        self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+                    }
+                    return;
+                }
+                let since = healthy_since.unwrap_or(now);
+                // Resume once both trajectory buffers are home (a plan may still be in flight).
+                let resuming =
+                    now - since >= self.p.timeouts.resume_after_ns && self.spare.is_some();
+                // A recovered job is the journal's, commanding nothing, until it resumes.
+                self.phase = Phase::Faulted {
+                    healthy_since: Some(since),
+                    recovered: recovered && !resuming,
+                };
+                if resuming {
+                    self.resume(fx, now, recovered);
+                }
+            }
+        }
+    }
+
+    pub(super) fn grip(
+        &mut self,
+        fx: &mut impl Effects,
+        now: u64,
+        action: GripperAction,
+        seg: usize,
+        since: u64,
+    ) {
+        let Some(g) = self.inputs.gs else { return };
+        let reached = match action {
+            GripperAction::Close => g.closed == 1 && g.holding == 1,
+            GripperAction::Open => g.closed == 0,
+        };
+        if reached && g.header.stamp_ns >= since {
+            match action {
+                GripperAction::Close => self.holding = true,
+                GripperAction::Open => {
+                    self.holding = false;
+                    self.release_stamp = g.header.stamp_ns;
+                    let dns = self.decision_ns;
+                    let (ty, pose) = self
+                        .active
+                        .as_ref()
+                        .map(|p| (p.object as u32, p.pose))
+                        .unwrap_or((NO_OBJECT, [0.0; 4]));
+                    self.done += 1;
+                    self.emit(fx, StatusEvent::Placed, ty, pose, dns);
+                    self.index += 1;
+                    self.announced = false;
+                    self.missed = 0;
+                    self.placement = None;
+                    self.decision_ns = 0;
+                    self.forget_decision();
+                }
+            }
+            self.next_segment(fx, now, seg + 1);
+        } else if now.saturating_sub(since) > self.p.timeouts.gripper_action_ns {
+            if action == GripperAction::Close && g.holding == 0 {
+                // Closed on nothing (or not holding in time): open, then pick again or skip.
+                self.fault = Fault::MissedGrasp;
+                self.missed += 1;
+                self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+                self.out.grip_cmd = GripperAction::Open;
+                self.out.grip_object = NO_OBJECT;
+                self.out.grip_due = true;
+                self.phase = Phase::Regrasp { since: now };
+                return;
+            }
+            self.fault = Fault::Gripper;
+            self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+            self.finish(fx, StatusEvent::JobFailed);
+        }
+    }
+
+    /// After a missed grasp: once the gripper reports open, pick again with the same placement
+    /// (at most `grasp_retries` times), else skip the object.
+    pub(super) fn regrasp(&mut self, fx: &mut impl Effects, now: u64, since: u64) {
+        if self.stopping {
+            return;
+        }
+        let Some(g) = self.inputs.gs else { return };
+        let opened = g.closed == 0 && g.header.stamp_ns >= since;
+        if !opened {
+            if now.saturating_sub(since) > self.p.timeouts.gripper_action_ns {
+                self.fault = Fault::Gripper;
+                self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+                self.finish(fx, StatusEvent::JobFailed);
+            }
+            return;
+        }
+        if self.cancelling {
+            self.retreat(fx);
+            return;
+        }
+        if let Some(f) = self.decision_failed {
+            // Its decision failed meanwhile: the job ends here, the gripper open.
+            self.fault = f;
+            self.finish(fx, StatusEvent::JobFailed);
+            return;
+        }
+        if self.missed <= self.p.grasp_retries {
+            // The same object picked again; its decision (made or still coming) stands. A
+            // person feeding the station puts it back and confirms this try.
+            self.confirmed = false;
+            self.phase = Phase::Starting;
+            self.request_motion(fx, Motion::Pick);
+            return;
+        }
+        // Given up: skipped with its reason, the job goes on.
+        self.emit(fx, StatusEvent::Skipped, self.current_type(), [0.0; 4], 0);
+        self.index += 1;
+        self.announced = false;
+        self.missed = 0;
+        self.placement = None;
+        self.forget_decision();
+        if self.index >= self.count {
+            self.finish(fx, StatusEvent::JobDone);
+        } else {
+            self.begin_object(fx, now);
+        }
+    }
+
+    pub(super) fn next_segment(&mut self, fx: &mut impl Effects, now: u64, seg: usize) {
+        let n = self.active.as_ref().map_or(0, |p| p.n_segments);
+        if seg < n {
+            let start = self
+                .active
+                .as_ref()
+                .map_or(0, |p| if seg == 0 { 0 } else { p.segments[seg - 1].end });
+            self.phase = Phase::Streaming { seg, cursor: start };
+        } else if self.cancelling {
+            self.finish(fx, StatusEvent::JobCancelled);
+        } else if self.holding {
+            // Picked: the place once its placement is decided.
+            self.await_decision(fx, now);
+        } else if self.index >= self.count {
+            self.finish(fx, StatusEvent::JobDone);
+        } else {
+            self.begin_object(fx, now);
+        }
+    }
+
+    pub(super) fn stream(&mut self, fx: &mut impl Effects, now: u64, seg: usize, cursor: usize) {
+        let Some(p) = &self.active else { return };
+        let Some(sg) = p.segments().get(seg).copied() else {
+            self.next_segment(fx, now, seg);
+            return;
+        };
+        if cursor < sg.end {
+            if let Some(s) = p.setpoints.get(cursor) {
+                self.out.cmd = *s;
+            }
+            self.phase = Phase::Streaming {
+                seg,
+                cursor: cursor + 1,
+            };
+            return;
+        }
+        // At the segment's end, at rest.
+        self.out.cmd.velocity = [0.0; DOF];
+        self.out.cmd.acceleration = [0.0; DOF];
+        if let Some(f) = self.decision_failed
+            && !self.holding
+        {
+            // The decision failed and nothing is held: the job ends at this standstill.
+            self.fault = f;
+            self.finish(fx, StatusEvent::JobFailed);
+            return;
+        }
+        let grasp_next = p
+            .segments()
+            .get(seg + 1)
+            .is_some_and(|n| n.then == Some(GripperAction::Close));
+        if sg.then.is_none() && grasp_next && self.confirm_picks && !self.confirmed {
+            // Above the station: no descent before the operator says the object is there.
+            self.phase = Phase::AwaitOperator { seg };
+            return;
+        }
+        match sg.then {
+            Some(action) => {
+                self.out.grip_cmd = action;
+                self.out.grip_object = if action == GripperAction::Close {
+                    p.object as u32
+                } else {
+                    NO_OBJECT
+                };
+                self.out.grip_due = true;
+                self.phase = Phase::Gripper {
+                    action,
+                    seg,
+                    since: now,
+                };
+            }
+            None => self.next_segment(fx, now, seg + 1),
+        }
+    }
+}
