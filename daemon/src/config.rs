@@ -3,10 +3,10 @@
 //! names the bad one; nothing is acted on before it passes.
 
 use herb_decide::PolicySpec;
+pub use herb_process::config_file::{ConfigError, ConfigFile, Invalid};
+pub use herb_process::rt::RtConfig;
 use herb_robot::cell::CellConfig;
-pub use herb_robot::config_file::{ConfigError, ConfigFile, Invalid};
 use herb_robot::motion::JointLimits;
-pub use herb_robot::rt::RtConfig;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 

@@ -24,8 +24,8 @@ use herb_ipc::{
     GripperAction, GripperCommand, GripperState, Header, HeightmapFrame, JointCommand, JointState,
     PackJobReply, PackJobRequest, Payload, RejectReason, Status, StatusEvent, monotonic_ns,
 };
+use herb_process::rt::{set_timer_slack, sleep_until};
 use herb_robot::motion::Setpoint;
-use herb_robot::rt::{set_timer_slack, sleep_until};
 use iceoryx2::active_request::ActiveRequest;
 use iceoryx2::prelude::ipc;
 use std::sync::Arc;

@@ -93,7 +93,7 @@ pub enum ReplayError {
     Config(toml::de::Error),
     /// The recorded configuration does not validate (with this build's rules).
     #[error("the recorded configuration: {0}")]
-    Invalid(herb_robot::config_file::Invalid),
+    Invalid(herb_process::config_file::Invalid),
     /// The catalog cannot be built.
     #[error("catalog: {0}")]
     Catalog(herb_core::SimError),

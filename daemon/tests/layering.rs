@@ -142,6 +142,7 @@ const RULES: &[(&str, &[&str])] = &[
             "herb-testkit",
         ],
     ),
+    // The camera adapter needs no arm: no kinematics, no Ruckig.
     (
         "herb-camera",
         &[
@@ -153,6 +154,22 @@ const RULES: &[(&str, &[&str])] = &[
             "herb-daemon",
             "herb-loopback",
             "herb-testkit",
+            "herb-robot",
+            "ruckig",
+        ],
+    ),
+    // Process plumbing (configuration files, real-time timing): apart from the arm's
+    // kinematics and motion.
+    (
+        "herb-process",
+        &[
+            "ruckig",
+            "nalgebra",
+            "rapier3d",
+            "tract-onnx",
+            "herb-robot",
+            "herb-core",
+            "herb-daemon",
         ],
     ),
     // The ROS side knows ROS only: no HERB crate, no IPC, no motion.

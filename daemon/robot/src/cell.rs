@@ -59,6 +59,13 @@ pub enum CellError {
     TransitClearance(f64),
 }
 
+impl From<CellError> for herb_process::config_file::Invalid {
+    /// The `[cell]` table's error, as a configuration error.
+    fn from(e: CellError) -> Self {
+        Self::Other(e.to_string())
+    }
+}
+
 impl CellConfig {
     /// Checks that every number is finite and the depths are in range.
     pub fn validate(&self) -> Result<(), CellError> {

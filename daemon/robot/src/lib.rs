@@ -8,7 +8,5 @@
 /// Cell calibration by touch: the box pose for `[cell]` from touched corners.
 pub mod calibrate;
 pub mod cell;
-pub mod config_file;
 pub mod kinematics;
 pub mod motion;
-pub mod rt;

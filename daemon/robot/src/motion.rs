@@ -214,6 +214,13 @@ pub enum LimitsError {
     },
 }
 
+impl From<LimitsError> for herb_process::config_file::Invalid {
+    /// The `[limits]` table's error, as a configuration error.
+    fn from(e: LimitsError) -> Self {
+        Self::Other(format!("limits: {e}"))
+    }
+}
+
 /// One sample: position, velocity, acceleration.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Setpoint {

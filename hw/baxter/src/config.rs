@@ -2,7 +2,7 @@
 //! command is checked against, so the adapter and herbd agree) and its own file (the ROS
 //! master, rates, modes, topic names, gripper settings). Unknown keys are errors, as in herbd.
 
-use herb_robot::config_file::{ConfigFile, Invalid, in_range};
+use herb_process::config_file::{ConfigFile, Invalid, in_range};
 use herb_robot::motion::JointLimits;
 use serde::Deserialize;
 

@@ -3,7 +3,7 @@
 //! key. The IPC prefix comes from herbd's file (`--config`), as for every adapter.
 
 use crate::project::Params;
-use herb_robot::config_file::{ConfigFile, Invalid, in_range};
+use herb_process::config_file::{ConfigFile, Invalid, in_range};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use serde::Deserialize;
 

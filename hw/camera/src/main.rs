@@ -10,7 +10,7 @@ use herb_camera::project::{Depth, FrameStats, Intrinsics, Median, Projector};
 use herb_core::heightmap::GridSpec;
 use herb_ipc::bus::Bus;
 use herb_ipc::{Services, monotonic_ns};
-use herb_robot::config_file::ConfigFile;
+use herb_process::config_file::ConfigFile;
 use herb_ros1::Advertised;
 use herb_ros1::node::{MasterView, Next, announce_again, connect, master_view, next, topic_of};
 use herb_ros1::sensor_msgs::{CameraInfo, Image};
@@ -165,7 +165,7 @@ impl Default for HerbdPrefix {
 }
 
 impl ConfigFile for HerbdPrefix {
-    fn validate(&self) -> Result<(), herb_robot::config_file::Invalid> {
+    fn validate(&self) -> Result<(), herb_process::config_file::Invalid> {
         Services::new(&self.ipc_prefix)
             .map(|_| ())
             .map_err(|e| e.to_string().into())

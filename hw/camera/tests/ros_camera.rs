@@ -126,8 +126,9 @@ fn calibrate_fits_the_camera_pose_from_the_empty_box() {
     );
     let file = dir.join("calibrated.toml");
     std::fs::write(&file, &text).unwrap();
-    let c = <herb_camera::config::CameraConfig as herb_robot::config_file::ConfigFile>::load(&file)
-        .expect("the printed pose is a valid camera file");
+    let c =
+        <herb_camera::config::CameraConfig as herb_process::config_file::ConfigFile>::load(&file)
+            .expect("the printed pose is a valid camera file");
     let want = herb_testkit::ros::TEST_CAMERA_POSE;
     let t = c.pose.translation;
     let dt =

@@ -4,9 +4,9 @@
 //! plans with. The other tables are herbd's and are ignored here; within the tables read,
 //! unknown keys are errors, as in herbd.
 
+pub use herb_process::config_file::ConfigFile;
+use herb_process::config_file::Invalid;
 use herb_robot::cell::CellConfig;
-pub use herb_robot::config_file::ConfigFile;
-use herb_robot::config_file::Invalid;
 use herb_robot::motion::JointLimits;
 use serde::Deserialize;
 use std::path::PathBuf;

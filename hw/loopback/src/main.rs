@@ -38,9 +38,9 @@ use herb_ipc::{
     monotonic_ns,
 };
 use herb_loopback::config::{ConfigFile, LoopbackConfig};
+use herb_process::rt::{set_timer_slack, sleep_until};
 use herb_robot::cell::CellConfig;
 use herb_robot::kinematics::{Arm, DOF, LEFT_TOP_DOWN_NOMINAL};
-use herb_robot::rt::{set_timer_slack, sleep_until};
 use herb_sim::{Catalog, PackingWorld, TypeIdx, WorldConfig, paths};
 use nalgebra::Isometry3;
 use rapier3d::math::{Pose, Rotation, Vector};

@@ -555,7 +555,7 @@ fn run(cli: Cli) -> Result<(), String> {
             .map_err(|e| format!("cannot start the reporter: {e}"))?
     };
 
-    for w in herb_robot::rt::apply(&cfg.rt) {
+    for w in herb_process::rt::apply(&cfg.rt) {
         logfmt::log("warning", &[("what", &w)]);
     }
     notifier.send(Notice::Ready);

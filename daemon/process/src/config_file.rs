@@ -1,8 +1,6 @@
-//! Configuration files of the robot-side processes (herbd, the adapters): TOML, every value
+//! Configuration files of HERB's processes (herbd, the adapters): TOML, every value
 //! checked before anything acts on it, errors naming the file and the bad value.
 
-use crate::cell::CellError;
-use crate::motion::LimitsError;
 use std::path::{Path, PathBuf};
 
 /// A configuration value that is not allowed: the error names it and says why.
@@ -20,12 +18,6 @@ pub enum Invalid {
         /// Highest allowed.
         hi: f64,
     },
-    /// The `[limits]` table.
-    #[error("limits: {0}")]
-    Limits(#[from] LimitsError),
-    /// The `[cell]` table.
-    #[error(transparent)]
-    Cell(#[from] CellError),
     /// Any other value a configuration checks, in words that name it.
     #[error("{0}")]
     Other(String),
