@@ -115,13 +115,9 @@ enum Cmd {
     },
 }
 
+/// Type `t`'s catalog id and name (`-` if none).
 fn name(catalog: &Catalog, t: u32) -> String {
-    if (t as usize) < catalog.len() {
-        let s = catalog.spec(TypeIdx(t as u16));
-        format!("{} {}", s.id, s.name)
-    } else {
-        "-".into()
-    }
+    catalog.label(t)
 }
 
 /// The catalog id of type `t` (`-` if none).

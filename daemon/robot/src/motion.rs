@@ -382,6 +382,19 @@ impl MotionPlanner {
         }
     }
 
+    /// Sets Ruckig's input for a time-synchronised move from rest at `from` to rest at `to`.
+    fn rest_to_rest(&mut self, from: &[f64; DOF], to: &[f64; DOF]) {
+        let z = vec![0.0; DOF];
+        self.input.control_interface = ControlInterface::Position;
+        self.input.synchronization = Synchronization::Time;
+        self.input.current_position = from.to_vec();
+        self.input.current_velocity = z.clone();
+        self.input.current_acceleration = z.clone();
+        self.input.target_position = to.to_vec();
+        self.input.target_velocity = z.clone();
+        self.input.target_acceleration = z;
+    }
+
     fn calculate(&mut self) -> Result<f64, MotionError> {
         match self.ruckig.calculate(&mut self.input, &mut self.traj) {
             RResult::Working | RResult::Finished => Ok(self.traj.get_duration()),
@@ -400,15 +413,7 @@ impl MotionPlanner {
     ) -> Result<f64, MotionError> {
         self.check("start", from)?;
         self.check("target", to)?;
-        let z = vec![0.0; DOF];
-        self.input.control_interface = ControlInterface::Position;
-        self.input.synchronization = Synchronization::Time;
-        self.input.current_position = from.to_vec();
-        self.input.current_velocity = z.clone();
-        self.input.current_acceleration = z.clone();
-        self.input.target_position = to.to_vec();
-        self.input.target_velocity = z.clone();
-        self.input.target_acceleration = z;
+        self.rest_to_rest(from, to);
         let duration = self.calculate()?;
         let start = out.len();
         self.sample(duration, out, |_, _| {})?;
@@ -467,19 +472,11 @@ impl MotionPlanner {
             )));
         }
         let to = self.limits.pulled_inside(from, margin);
-        let z = vec![0.0; DOF];
         let scaled = |v: &[f64; DOF]| v.iter().map(|x| x * speed).collect::<Vec<_>>();
         self.input.max_velocity = scaled(&self.limits.velocity);
         self.input.max_acceleration = scaled(&self.limits.acceleration);
         self.input.max_jerk = scaled(&self.limits.jerk);
-        self.input.control_interface = ControlInterface::Position;
-        self.input.synchronization = Synchronization::Time;
-        self.input.current_position = from.to_vec();
-        self.input.current_velocity = z.clone();
-        self.input.current_acceleration = z.clone();
-        self.input.target_position = to.to_vec();
-        self.input.target_velocity = z.clone();
-        self.input.target_acceleration = z;
+        self.rest_to_rest(from, &to);
         let result = self.calculate();
         self.input.max_velocity = self.limits.velocity.to_vec();
         self.input.max_acceleration = self.limits.acceleration.to_vec();

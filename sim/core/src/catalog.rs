@@ -132,6 +132,17 @@ impl ObjectSpec {
 }
 
 impl Catalog {
+    /// Type `t`'s catalog id and name for people (`003 cracker box`), `-` for a code that names
+    /// no type (e.g. `NO_OBJECT` in a status).
+    pub fn label(&self, t: u32) -> String {
+        if (t as usize) < self.len() {
+            let s = self.spec(TypeIdx(t as u16));
+            format!("{} {}", s.id, s.name)
+        } else {
+            "-".into()
+        }
+    }
+
     /// Loads the built-in catalog with shapes from `meshes`.
     pub fn builtin(meshes: &MeshSource) -> Result<Self> {
         Self::from_toml(BUILTIN_CATALOG, "built-in models/objects.toml", meshes)

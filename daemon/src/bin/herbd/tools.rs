@@ -3,7 +3,7 @@
 //! measures the cell with the arm moved by hand. They need herbd's own code, which is why they
 //! live here and not in the client (`herbctl`).
 
-use herb_core::{Catalog, GridSpec, Heightmap, TypeIdx};
+use herb_core::{Catalog, GridSpec, Heightmap};
 use herb_daemon::record::Log;
 use herb_daemon::replay::{self, Outcome, ReplayOptions, Replayed};
 use herb_ipc::{Fault, HeightmapFrame, Status, StatusEvent};
@@ -12,12 +12,7 @@ use std::process::ExitCode;
 
 /// Type `t`'s catalog id and name (`-` if none).
 fn name(catalog: &Catalog, t: u32) -> String {
-    if (t as usize) < catalog.len() {
-        let s = catalog.spec(TypeIdx(t as u16));
-        format!("{} {}", s.id, s.name)
-    } else {
-        "-".into()
-    }
+    catalog.label(t)
 }
 
 /// `herbd replay`.
