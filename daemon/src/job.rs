@@ -534,6 +534,12 @@ impl Job {
         self.out.limit_holds
     }
 
+    /// Every change of phase goes through here: the one place to watch (or check) the
+    /// machine's transitions.
+    fn set_phase(&mut self, phase: Phase) {
+        self.phase = phase;
+    }
+
     fn current_type(&self) -> u32 {
         if self.index < self.count {
             self.order[self.index] as u32
@@ -554,7 +560,7 @@ impl Job {
 
     /// Ends the job with `end` (`JobDone`, `JobFailed` or `JobCancelled`).
     fn finish(&mut self, fx: &mut impl Effects, end: StatusEvent) {
-        self.phase = Phase::Idle;
+        self.set_phase(Phase::Idle);
         self.cancelling = false;
         self.forget_decision();
         self.emit(fx, end, NO_OBJECT, [0.0; 4], 0);

@@ -12,7 +12,7 @@ impl Job {
         self.confirmed = false;
         self.decide_since = now;
         self.ask_decision(fx, now);
-        self.phase = Phase::Starting;
+        self.set_phase(Phase::Starting);
         self.request_motion(fx, Motion::Pick);
     }
 
@@ -49,13 +49,13 @@ impl Job {
                 self.decide_since = now;
                 self.decide_due = true;
             }
-            self.phase = Phase::AwaitDecision { since: now };
+            self.set_phase(Phase::AwaitDecision { since: now });
         }
     }
 
     /// Asks for the held object's place at its decided placement.
     pub(super) fn request_place(&mut self, fx: &mut impl Effects, now: u64) {
-        self.phase = Phase::AwaitDecision { since: now };
+        self.set_phase(Phase::AwaitDecision { since: now });
         self.request_motion(fx, Motion::Place { flip: self.flip });
     }
 
@@ -83,7 +83,7 @@ impl Job {
         };
         match fx.plan(req) {
             Ok(()) => {
-                self.phase = Phase::Planning;
+                self.set_phase(Phase::Planning);
                 if self.confirm_picks && !self.confirmed && !matches!(motion, Motion::Place { .. })
                 {
                     // A pick: the operator is asked for the object now, while the arm comes.
@@ -182,7 +182,7 @@ impl Job {
                     ordered,
                 };
                 if fx.plan(order).is_ok() {
-                    self.phase = Phase::Recovering { asked: true };
+                    self.set_phase(Phase::Recovering { asked: true });
                     self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
                 }
             }
@@ -199,10 +199,10 @@ impl Job {
                     return;
                 }
                 if let Some(why) = self.not_ready(now) {
-                    self.phase = Phase::Faulted {
+                    self.set_phase(Phase::Faulted {
                         healthy_since: None,
                         recovered,
-                    };
+                    });
                     // The arm adapter said more about the joint states that stopped (or it
                     // changed: an e-stop became a disable): say it once.
                     // (An adapter that says "ready" while its first joint state is on the way
@@ -228,10 +228,10 @@ impl Job {
                 let resuming =
                     now - since >= self.p.timeouts.resume_after_ns && self.spare.is_some();
                 // A recovered job is the journal's, commanding nothing, until it resumes.
-                self.phase = Phase::Faulted {
+                self.set_phase(Phase::Faulted {
                     healthy_since: Some(since),
                     recovered: recovered && !resuming,
-                };
+                });
                 if resuming {
                     self.resume(fx, now, recovered);
                 }
@@ -284,7 +284,7 @@ impl Job {
                 self.out.grip_cmd = GripperAction::Open;
                 self.out.grip_object = NO_OBJECT;
                 self.out.grip_due = true;
-                self.phase = Phase::Regrasp { since: now };
+                self.set_phase(Phase::Regrasp { since: now });
                 return;
             }
             self.fault = Fault::Gripper;
@@ -323,7 +323,7 @@ impl Job {
             // The same object picked again; its decision (made or still coming) stands. A
             // person feeding the station puts it back and confirms this try.
             self.confirmed = false;
-            self.phase = Phase::Starting;
+            self.set_phase(Phase::Starting);
             self.request_motion(fx, Motion::Pick);
             return;
         }
@@ -348,7 +348,7 @@ impl Job {
                 .active
                 .as_ref()
                 .map_or(0, |p| if seg == 0 { 0 } else { p.segments[seg - 1].end });
-            self.phase = Phase::Streaming { seg, cursor: start };
+            self.set_phase(Phase::Streaming { seg, cursor: start });
         } else if self.cancelling {
             self.finish(fx, StatusEvent::JobCancelled);
         } else if self.holding {
@@ -371,10 +371,10 @@ impl Job {
             if let Some(s) = p.setpoints.get(cursor) {
                 self.out.cmd = *s;
             }
-            self.phase = Phase::Streaming {
+            self.set_phase(Phase::Streaming {
                 seg,
                 cursor: cursor + 1,
-            };
+            });
             return;
         }
         // At the segment's end, at rest.
@@ -394,7 +394,7 @@ impl Job {
             .is_some_and(|n| n.then == Some(GripperAction::Close));
         if sg.then.is_none() && grasp_next && self.confirm_picks && !self.confirmed {
             // Above the station: no descent before the operator says the object is there.
-            self.phase = Phase::AwaitOperator { seg };
+            self.set_phase(Phase::AwaitOperator { seg });
             return;
         }
         match sg.then {
@@ -406,11 +406,11 @@ impl Job {
                     NO_OBJECT
                 };
                 self.out.grip_due = true;
-                self.phase = Phase::Gripper {
+                self.set_phase(Phase::Gripper {
                     action,
                     seg,
                     since: now,
-                };
+                });
             }
             None => self.next_segment(fx, now, seg + 1),
         }

@@ -168,7 +168,7 @@ impl Job {
     pub(super) fn retreat(&mut self, fx: &mut impl Effects) {
         self.out.cmd.velocity = [0.0; DOF];
         self.out.cmd.acceleration = [0.0; DOF];
-        self.phase = Phase::Retreating { asked: false };
+        self.set_phase(Phase::Retreating { asked: false });
         let Some(buf) = self.spare.take() else {
             return;
         };
@@ -179,7 +179,7 @@ impl Job {
             buf,
         };
         match fx.plan(req) {
-            Ok(()) => self.phase = Phase::Retreating { asked: true },
+            Ok(()) => self.set_phase(Phase::Retreating { asked: true }),
             Err(Request::Retreat { buf, .. }) => self.spare = Some(buf),
             Err(_) => {}
         }
@@ -224,7 +224,7 @@ impl Job {
             count: n,
             ordered: false,
         });
-        self.phase = Phase::Ordering;
+        self.set_phase(Phase::Ordering);
         self.emit(fx, StatusEvent::Accepted, NO_OBJECT, [0.0; 4], 0);
         self.say_outside_limits(fx);
     }
@@ -255,10 +255,10 @@ impl Job {
                 match self.phase {
                     Phase::Ordering => self.begin_object(fx, now),
                     Phase::Recovering { .. } | Phase::Abandoning => {
-                        self.phase = Phase::Faulted {
+                        self.set_phase(Phase::Faulted {
                             healthy_since: None,
                             recovered: true,
-                        }
+                        })
                     }
                     _ => {}
                 }
@@ -281,7 +281,7 @@ impl Job {
                     self.recycle(old);
                 }
                 self.active = Some(plan);
-                self.phase = Phase::Streaming { seg: 0, cursor: 0 };
+                self.set_phase(Phase::Streaming { seg: 0, cursor: 0 });
             }
             Response::Planned(plan) => {
                 let planning = matches!(self.phase, Phase::Planning);
@@ -300,7 +300,7 @@ impl Job {
                     }
                     self.flip = plan.flip;
                     self.active = Some(plan);
-                    self.phase = Phase::Streaming { seg: 0, cursor: 0 };
+                    self.set_phase(Phase::Streaming { seg: 0, cursor: 0 });
                 } else {
                     self.recycle(plan);
                     if planning && self.cancelling && !self.stopping {
@@ -314,11 +314,11 @@ impl Job {
                 } = self.phase
                 {
                     self.brake = Some(buf);
-                    self.phase = Phase::Braking {
+                    self.set_phase(Phase::Braking {
                         cursor: Some(0),
                         seg,
                         active_cursor,
-                    };
+                    });
                 } else {
                     self.recycle(buf);
                 }

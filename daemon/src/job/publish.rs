@@ -31,7 +31,7 @@ impl Job {
     pub fn restore(&mut self, s: &JobSnapshot) {
         self.inputs = s.inputs;
         self.out = s.commands;
-        self.phase = Phase::Idle;
+        self.set_phase(Phase::Idle);
         let r = &s.job;
         self.job_id = r.job_id;
         self.count = (r.count as usize).min(MAX_JOB_OBJECTS);

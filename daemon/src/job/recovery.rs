@@ -41,11 +41,11 @@ impl Job {
         self.cancelling = false;
         self.confirm_picks = r.confirm_picks;
         self.confirmed = false;
-        self.phase = if resume {
+        self.set_phase(if resume {
             Phase::Recovering { asked: false }
         } else {
             Phase::Abandoning
-        };
+        });
     }
 
     /// A fault: report, brake if moving and the arm is seen, hold.
@@ -79,11 +79,11 @@ impl Job {
                 buf,
             }) {
                 Ok(()) => {
-                    self.phase = Phase::Braking {
+                    self.set_phase(Phase::Braking {
                         cursor: None,
                         seg,
                         active_cursor: cursor,
-                    };
+                    });
                     return;
                 }
                 Err(Request::Brake { buf, .. }) => self.spare = Some(buf),
@@ -96,10 +96,10 @@ impl Job {
     pub(super) fn enter_faulted(&mut self, fx: &mut impl Effects) {
         self.out.cmd.velocity = [0.0; DOF];
         self.out.cmd.acceleration = [0.0; DOF];
-        self.phase = Phase::Faulted {
+        self.set_phase(Phase::Faulted {
             healthy_since: None,
             recovered: self.recovered(),
-        };
+        });
         self.emit(fx, StatusEvent::Braked, self.current_type(), [0.0; 4], 0);
     }
 
@@ -132,11 +132,11 @@ impl Job {
                     && let Some(s) = p.setpoints.get(active_cursor)
                 {
                     self.out.cmd = *s;
-                    self.phase = Phase::Braking {
+                    self.set_phase(Phase::Braking {
                         cursor: None,
                         seg,
                         active_cursor: active_cursor + 1,
-                    };
+                    });
                 } else {
                     self.out.cmd.velocity = [0.0; DOF];
                     self.out.cmd.acceleration = [0.0; DOF];
@@ -150,11 +150,11 @@ impl Job {
                 match next {
                     Some(s) => {
                         self.out.cmd = s;
-                        self.phase = Phase::Braking {
+                        self.set_phase(Phase::Braking {
                             cursor: Some(k + 1),
                             seg,
                             active_cursor,
-                        };
+                        });
                     }
                     None => {
                         if let Some(b) = self.brake.take() {
@@ -238,7 +238,7 @@ impl Job {
             // Halted before the grasp, or the object was lost from the gripper: pick it (again)
             // and place it where it was decided (nothing was released since); one decision,
             // announced once.
-            self.phase = Phase::Starting;
+            self.set_phase(Phase::Starting);
             self.request_motion(fx, Motion::PickAndPlace);
             if self.phase == Phase::Starting {
                 // No buffer home yet: the pick alone, the place once it is held.
@@ -251,7 +251,7 @@ impl Job {
             if self.deciding.is_none() {
                 self.begin_object(fx, now);
             } else {
-                self.phase = Phase::Starting;
+                self.set_phase(Phase::Starting);
                 self.request_motion(fx, Motion::Pick);
             }
         }
