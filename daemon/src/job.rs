@@ -425,11 +425,6 @@ fn release_q(plan: &MotionPlan) -> Option<[f64; DOF]> {
         .map(|s| s.position)
 }
 
-/// Faults that mean the arm's state is not seen (joint states stopped).
-fn arm_unseen(f: Fault) -> bool {
-    f.arm_unseen()
-}
-
 /// A state is not from the future when stamped at most [`MAX_FUTURE_STAMP_NS`] past the
 /// cycle's start, or not past the clock when it was received (the loop may have been preempted
 /// since the cycle began).

@@ -444,11 +444,17 @@ impl CancelJobRequest {
 
     /// Header and a non-zero job id; the error is `Malformed`.
     pub fn validate(&self) -> Result<(), RejectReason> {
-        if self.header.validate().is_err() || self.job_id == 0 {
-            return Err(RejectReason::Malformed);
-        }
-        Ok(())
+        control_request(&self.header, self.job_id)
     }
+}
+
+/// A job-control request's (cancel, confirm) header and job id: `Malformed` unless the header
+/// is valid and the id non-zero.
+fn control_request(header: &Header, job_id: u64) -> Result<(), RejectReason> {
+    if header.validate().is_err() || job_id == 0 {
+        return Err(RejectReason::Malformed);
+    }
+    Ok(())
 }
 
 /// The reply to a [`CancelJobRequest`].
@@ -504,10 +510,7 @@ impl ConfirmPickRequest {
 
     /// Header and a non-zero job id; the error is `Malformed`.
     pub fn validate(&self) -> Result<(), RejectReason> {
-        if self.header.validate().is_err() || self.job_id == 0 {
-            return Err(RejectReason::Malformed);
-        }
-        Ok(())
+        control_request(&self.header, self.job_id)
     }
 }
 

@@ -210,7 +210,7 @@ impl Job {
                     let ready_said =
                         self.inputs.arm_blocker == ArmBlocker::None && self.arm_status_fresh(now);
                     let limits = matches!(why, Fault::OutsideLimits | Fault::BeyondArmLimits);
-                    if (arm_unseen(why) && arm_unseen(self.fault) && !ready_said || limits)
+                    if (why.arm_unseen() && self.fault.arm_unseen() && !ready_said || limits)
                         && why != self.fault
                     {
                         // A held job that the arm's position keeps from resuming: said once,

@@ -87,15 +87,8 @@ impl Job {
         });
         let (reason, detail) = verdict.err().unwrap_or((RejectReason::None, 0));
         if reason != RejectReason::None {
+            // A joint outside its limits is named by the next heartbeat ([`Job::publish`]).
             self.inputs.rejected_requests += 1;
-            if matches!(
-                Fault::from_code(detail),
-                Some(Fault::OutsideLimits | Fault::BeyondArmLimits)
-            ) && reason == RejectReason::NotReady
-            {
-                // Named in the statuses that follow (the client reads the next heartbeat).
-                self.excess = self.measured_excess().map(|(_, e)| e);
-            }
         }
         fx.reply(r.job_id, reason, detail);
         if reason == RejectReason::None {

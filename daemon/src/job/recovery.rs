@@ -52,7 +52,7 @@ impl Job {
     pub(super) fn raise(&mut self, fx: &mut impl Effects, fault: Fault) {
         self.fault = fault;
         self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
-        if arm_unseen(fault) {
+        if fault.arm_unseen() {
             // No joint state: the adapter passes no command on; a brake streamed now would
             // only be a setpoint planned before the interruption.
             self.enter_faulted(fx);
