@@ -279,7 +279,8 @@ pub(crate) fn pack(cli: &Cli, catalog: &Catalog, a: &PackArgs<'_>) -> Result<u8,
 
     // Submit, waiting for the daemon to come up and the robot to be ready (said at once, and
     // again when the reason changes).
-    let mut not_ready: Option<Fault> = None;
+    // The reason last said, and the tries it has gone without its detail.
+    let mut not_ready: Option<(Fault, u32)> = None;
     let flags = if operator {
         herb_ipc::PackJobRequest::CONFIRM_PICKS
     } else {
@@ -291,16 +292,32 @@ pub(crate) fn pack(cli: &Cli, catalog: &Catalog, a: &PackArgs<'_>) -> Result<u8,
         flags,
         deadline,
         |why| {
-            if not_ready != Some(why) {
-                // A joint outside its limits: the heartbeat says which, where, and what to do.
-                let limits = matches!(why, Fault::OutsideLimits | Fault::BeyondArmLimits);
-                let detail = limits
-                    .then(|| client.status(Duration::from_millis(500)).ok())
-                    .flatten()
-                    .and_then(|s| s.limit_words())
-                    .map_or(String::new(), |w| format!(": {w}"));
-                println!("robot not ready: {}{detail}; waiting", why.describe());
-                not_ready = Some(why);
+            // A joint outside its limits: the heartbeat says which, where, and what to do. A
+            // heartbeat that does not come in time (a loaded machine) is asked for again at the
+            // next refusal, and the reason said without it after a few.
+            let limits = matches!(why, Fault::OutsideLimits | Fault::BeyondArmLimits);
+            let tries = match not_ready {
+                Some((f, _)) if f == why && !limits => return,
+                Some((f, n)) if f == why => n,
+                _ => 0,
+            };
+            if tries == u32::MAX {
+                return; // said, with its detail or without
+            }
+            let detail = limits
+                .then(|| client.status(Duration::from_millis(500)).ok())
+                .flatten()
+                .and_then(|s| s.limit_words());
+            match detail {
+                Some(w) => {
+                    println!("robot not ready: {}: {w}; waiting", why.describe());
+                    not_ready = Some((why, u32::MAX));
+                }
+                None if limits && tries < 3 => not_ready = Some((why, tries + 1)),
+                None => {
+                    println!("robot not ready: {}; waiting", why.describe());
+                    not_ready = Some((why, u32::MAX));
+                }
             }
         },
         || interrupt::count() > 0,
