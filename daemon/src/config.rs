@@ -157,7 +157,7 @@ pub enum DecisionMethod {
     Search,
 }
 
-/// The world the search's rollouts run in ([`herb_sim::search::TwinKind`]).
+/// The world the search's rollouts run in ([`herb_search::TwinKind`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DecisionTwin {

@@ -3,11 +3,11 @@
 //!
 //! The loop sends a [`DecisionRequest`] when an object's pick starts and gets a
 //! [`DecisionResponse`] back over two wait-free rings. The worker keeps the newest valid
-//! heightmap (every cell checked on receipt; a bad frame is dropped and counted), waits for
-//! one newer than the last release, and decides with the configured method
-//! (`[decision] method`): the placement policy of `[models] policy` through the
-//! [`herb_decide::Decider`], or the search ([`herb_sim::search`], the default) through the
-//! same `Decider` (the same heightmap checks and the same z estimate). The search's twin is the
+//! heightmap (every cell checked once, on receipt, by the decision core, which keeps its copy;
+//! a bad frame is dropped and counted), waits for one newer than the last release, and decides
+//! with the configured method (`[decision] method`): the placement policy of `[models] policy`
+//! through the [`herb_decide::Decider`], or the search ([`herb_search`], the default) as the
+//! same `Decider`'s policy (the same heightmap check and the same z estimate). The search's twin is the
 //! job's own (`[decision] twin = "job"`, the default: the job's decisions replayed, fitted to
 //! the heightmaps; a new job id starts it from an empty box) or one built from the heightmap
 //! alone. A search's time budget is not reproducible, so a response says what it allowed
@@ -20,17 +20,15 @@
 use crate::config::{Config, DecisionMethod, DecisionTwin};
 use crate::plan::{DecisionRequest, DecisionResponse, NOT_A_SEARCH};
 use crate::planner::PlannerError;
-use herb_core::observation::placement_to_action;
 use herb_core::{SharedCatalog, TypeIdx};
-use herb_decide::policy::{DecisionInput, Policy};
+use herb_decide::policy::Policy;
 use herb_decide::{DecideError, Decider, HeightmapView};
 use herb_ipc::bus::{Bus, Pub, Sub};
 use herb_ipc::{
     CandidateReport, DecisionReport, Fault, Header, HeightmapFrame, MAX_REPORTED_CANDIDATES,
     Services,
 };
-use herb_sim::WorldConfig;
-use herb_sim::search::{Budget, Search, SearchReport, SearchSettings, TwinKind};
+use herb_search::{Budget, Search, SearchReport, SearchSettings, TwinKind, WorldConfig};
 use iceoryx2::prelude::ipc;
 use iceoryx2::sample::Sample;
 use std::sync::Arc;
@@ -51,62 +49,10 @@ const FRAME_WAIT: Duration = Duration::from_millis(500);
 /// How often a waiting decision looks for a new frame.
 const FRAME_POLL: Duration = Duration::from_millis(1);
 
-/// The search as a placement policy of the [`Decider`]: the candidate it chooses becomes the
-/// action, and the `Decider` checks it and estimates its z as for any policy.
-pub struct SearchPolicy {
-    search: Search,
-}
-
-impl SearchPolicy {
-    /// A search over `catalog` with `settings`, its twins built with `world` (whose clearance
-    /// must be the decision core's: the job's twin replays the arm's releases).
-    pub fn new(catalog: SharedCatalog, world: WorldConfig, settings: SearchSettings) -> Self {
-        Self {
-            search: Search::new(catalog, world, settings),
-        }
-    }
-
-    /// What the last decision did: candidates, finished rollouts and their returns, the one
-    /// chosen.
-    pub fn report(&self) -> &SearchReport {
-        self.search.report()
-    }
-}
-
-impl Policy for SearchPolicy {
-    fn name(&self) -> &str {
-        "search"
-    }
-
-    /// A new job: the job's twin starts from an empty box.
-    fn begin_episode(&mut self, _seed: u64) {
-        self.search.new_job();
-    }
-
-    fn decide(&mut self, input: &DecisionInput) -> herb_decide::Result<[f32; 3]> {
-        let mut remaining = Vec::with_capacity(1 + input.after.len());
-        remaining.push(input.object);
-        remaining.extend_from_slice(input.after);
-        let p = self
-            .search
-            .decide(input.heightmap, &remaining, None)
-            .map_err(|e| DecideError::Rejected {
-                policy: "search".into(),
-                reason: e.to_string(),
-            })?
-            .ok_or(DecideError::NoFeasiblePlacement)?;
-        Ok(placement_to_action(p.x, p.y, p.theta()))
-    }
-
-    fn needs_observation(&self) -> bool {
-        false
-    }
-}
-
 /// How the worker decides.
 enum Method {
     Policy(Decider),
-    Search(Decider<SearchPolicy>),
+    Search(Decider<Search>),
 }
 
 /// The worker's decisions without its thread and ports: herbd's worker and `herbctl replay`
@@ -117,6 +63,8 @@ pub struct DecisionCore {
     /// The job of the last decision: a decision of another job starts the method's episode
     /// (the search's job twin forgets the last job's objects).
     job: Option<u64>,
+    /// The request's remaining objects as catalog types (kept between decisions).
+    remaining: Vec<TypeIdx>,
 }
 
 impl DecisionCore {
@@ -148,14 +96,15 @@ impl DecisionCore {
                     clearance_m: clearance,
                     ..WorldConfig::default()
                 };
-                let policy = Box::new(SearchPolicy::new(catalog.clone(), world, settings));
-                Method::Search(Decider::new(policy, catalog, clearance))
+                let search = Box::new(Search::new(catalog.clone(), world, settings));
+                Method::Search(Decider::new(search, catalog, clearance))
             }
         };
         Ok(Self {
             method,
             budget,
             job: None,
+            remaining: Vec::new(),
         })
     }
 
@@ -166,24 +115,54 @@ impl DecisionCore {
             method: Method::Policy(Decider::new(policy, catalog, cfg.models.clearance_m as f32)),
             budget: Budget::Rollouts(0),
             job: None,
+            remaining: Vec::new(),
         }
     }
 
-    /// Decides `req` on `frame`. `allowed`: run that many rollouts instead of the time budget
-    /// (a replay of what a recorded decision's budget allowed); ignored by a policy.
-    pub fn decide(
-        &mut self,
-        req: &DecisionRequest,
-        frame: &HeightmapFrame,
-        allowed: Option<u32>,
-    ) -> DecisionResponse {
+    /// Checks `frame` and keeps its one copy for the next decisions
+    /// ([`DecisionCore::decide_observed`]); a bad frame is refused, and they stay on the last
+    /// good one.
+    pub fn observe(&mut self, frame: &HeightmapFrame) -> Result<(), DecideError> {
         let view = HeightmapView {
             nx: frame.nx as usize,
             ny: frame.ny as usize,
             cell_m: frame.cell_m,
             cells: frame.cells(),
         };
-        let remaining: Vec<TypeIdx> = req.remaining().iter().map(|&o| TypeIdx(o)).collect();
+        match &mut self.method {
+            Method::Policy(p) => p.observe(view),
+            Method::Search(s) => s.observe(view),
+        }
+    }
+
+    /// Decides `req` on `frame` ([`DecisionCore::observe`] then
+    /// [`DecisionCore::decide_observed`]; a frame refused answers `Decision`).
+    pub fn decide(
+        &mut self,
+        req: &DecisionRequest,
+        frame: &HeightmapFrame,
+        allowed: Option<u32>,
+    ) -> DecisionResponse {
+        match self.observe(frame) {
+            Ok(()) => self.decide_observed(req, allowed),
+            Err(_) => DecisionResponse {
+                outcome: Err(Fault::Decision),
+                ..no_fresh_frame(req)
+            },
+        }
+    }
+
+    /// Decides `req` on the last frame observed. `allowed`: run that many rollouts instead of
+    /// the time budget (a replay of what a recorded decision's budget allowed); ignored by a
+    /// policy.
+    pub fn decide_observed(
+        &mut self,
+        req: &DecisionRequest,
+        allowed: Option<u32>,
+    ) -> DecisionResponse {
+        self.remaining.clear();
+        self.remaining
+            .extend(req.remaining().iter().map(|&o| TypeIdx(o)));
         let object = req.remaining().first().copied().unwrap_or(0);
         let t0 = Instant::now();
         if self.job.replace(req.job_id) != Some(req.job_id) {
@@ -192,15 +171,14 @@ impl DecisionCore {
                 Method::Search(s) => s.begin_episode(req.job_id),
             }
         }
-        let (d, allowed) = match (&mut self.method, remaining.split_first()) {
-            (_, None) => (Err(DecideError::NoFeasiblePlacement), NOT_A_SEARCH),
-            (Method::Policy(p), Some((&o, after))) => {
-                (p.decide(view, o, req.index as usize, after), NOT_A_SEARCH)
-            }
-            (Method::Search(s), Some((&o, after))) => {
+        let step = req.index as usize;
+        let (d, allowed) = match (&mut self.method, self.remaining.is_empty()) {
+            (_, true) => (Err(DecideError::NoFeasiblePlacement), NOT_A_SEARCH),
+            (Method::Policy(p), false) => (p.decide(&self.remaining, step), NOT_A_SEARCH),
+            (Method::Search(s), false) => {
                 let budget = allowed.map_or(self.budget, |n| Budget::Rollouts(n as usize));
-                s.policy_mut().search.set_budget(budget);
-                let d = s.decide(view, o, req.index as usize, after);
+                s.policy_mut().set_budget(budget);
+                let d = s.decide(&self.remaining, step);
                 let finished = s.policy().report().finished.len() as u32;
                 (d, finished)
             }
@@ -219,16 +197,15 @@ impl DecisionCore {
         }
     }
 
-    /// [`DecisionCore::decide`], with a panic of the method answered `Decision` (logged): the
-    /// worker goes on with the next request.
+    /// [`DecisionCore::decide_observed`], with a panic of the method answered `Decision`
+    /// (logged): the worker goes on with the next request.
     pub fn decide_guarded(
         &mut self,
         req: &DecisionRequest,
-        frame: &HeightmapFrame,
         allowed: Option<u32>,
     ) -> DecisionResponse {
         match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            self.decide(req, frame, allowed)
+            self.decide_observed(req, allowed)
         })) {
             Ok(resp) => resp,
             Err(_) => {
@@ -376,11 +353,13 @@ impl Worker {
         }
     }
 
-    /// Receives every frame that arrived, checking every cell of each: a bad frame is dropped
-    /// and counted, the newest good one kept.
+    /// Receives every frame that arrived: the header checked here, the grid and every cell by
+    /// the core, which keeps its copy ([`DecisionCore::observe`], the frame's one check). A bad
+    /// frame is dropped and counted, the newest good one kept.
     fn drain_frames(&mut self) {
         while let Ok(Some(s)) = self.hm_sub.receive() {
-            if s.payload().validate().is_ok() {
+            let frame = s.payload();
+            if frame.validate_meta().is_ok() && self.core.observe(frame).is_ok() {
                 self.latest = Some(s);
             } else {
                 self.rejected_frames.fetch_add(1, Ordering::Relaxed);
@@ -397,10 +376,11 @@ impl Worker {
             log(self.handled, frame);
         }
         self.handled += 1;
-        let Some(frame) = frame else {
+        if frame.is_none() {
             return no_fresh_frame(&r);
-        };
-        let d = self.core.decide_guarded(&r, frame, None);
+        }
+        // On the frame just checked and copied as it arrived (the newest good one).
+        let d = self.core.decide_guarded(&r, None);
         // With the job's twin, whether the rollouts ran in it (this thread may format).
         if let Some(j) = self.core.search_report().and_then(|s| s.job) {
             crate::logfmt::log(

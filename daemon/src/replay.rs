@@ -15,7 +15,7 @@ use crate::planner::PlannerCore;
 use crate::record::{Entry, Log, OutDigest, catalog_digest};
 use herb_ipc::{GripperAction, HeightmapFrame, Payload, RejectReason, Status, StatusEvent};
 use herb_robot::motion::Setpoint;
-use herb_sim::search::SearchReport;
+use herb_search::SearchReport;
 use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::sync::Arc;

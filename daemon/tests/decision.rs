@@ -9,7 +9,7 @@ use herb_core::{Catalog, GridSpec, Heightmap, TypeIdx};
 use herb_daemon::config::{Config, DecisionMethod};
 use herb_daemon::decision::DecisionCore;
 use herb_daemon::plan::{DecisionRequest, NOT_A_SEARCH};
-use herb_decide::{DecisionInput, Policy};
+use herb_decide::{DecisionInput, PlanarPose, Policy};
 use herb_ipc::{Fault, HeightmapFrame, MAX_JOB_OBJECTS};
 use std::path::Path;
 use std::sync::Arc;
@@ -100,7 +100,7 @@ impl Policy for Panics {
         "panics (fixture)"
     }
     fn begin_episode(&mut self, _seed: u64) {}
-    fn decide(&mut self, _input: &DecisionInput) -> herb_decide::Result<[f32; 3]> {
+    fn decide(&mut self, _input: &DecisionInput) -> herb_decide::Result<PlanarPose> {
         panic!("a broken decision method")
     }
     fn needs_observation(&self) -> bool {
@@ -113,8 +113,9 @@ fn a_method_that_panics_answers_a_decision_fault_and_the_worker_goes_on() {
     let cfg = config(DecisionMethod::Policy, 1.0);
     let mut core = DecisionCore::with_policy(&cfg, catalog(), Box::new(Panics));
     let req = request(&[5]);
+    core.observe(&frame(0.0)).expect("a good frame");
     for _ in 0..2 {
-        let d = core.decide_guarded(&req, &frame(0.0), None);
+        let d = core.decide_guarded(&req, None);
         assert_eq!(d.outcome, Err(Fault::Decision));
         assert_eq!((d.job_id, d.index), (3, 0));
     }
@@ -132,11 +133,11 @@ fn heightmaps_not_of_the_box_or_not_finite_are_refused_by_both_methods() {
         let mut grid = frame(0.02);
         grid.nx = 100;
         for (what, f) in [("NaN", nan), ("out of range", high), ("another grid", grid)] {
-            let d = core.decide_guarded(&request(&[5, 6]), &f, None);
+            let d = core.decide(&request(&[5, 6]), &f, None);
             assert_eq!(d.outcome, Err(Fault::Decision), "{method:?}, {what}");
         }
         // A good frame afterwards is decided as usual.
-        let d = core.decide_guarded(&request(&[5, 6]), &frame(0.02), None);
+        let d = core.decide(&request(&[5, 6]), &frame(0.02), None);
         assert!(d.outcome.is_ok(), "{method:?}: {d:?}");
     }
 }

@@ -9,6 +9,7 @@
 //! Budget: `PROPTEST_CASES` cases (a quarter of proptest's default 256 in CI, each case plans
 //! a whole pick and place); `scripts/fuzz.sh` runs more.
 
+use herb_core::frames::{BOX_HALF_X, BOX_HALF_Y};
 use herb_core::observation::ObsLayout;
 use herb_core::paths::MeshSource;
 use herb_core::{Catalog, GridSpec, TypeIdx};
@@ -16,14 +17,16 @@ use herb_daemon::config::Config;
 use herb_daemon::decision::DecisionCore;
 use herb_daemon::plan::{DecisionRequest, Motion, MotionPlan, Request, Response};
 use herb_daemon::planner::PlannerCore;
-use herb_decide::{DecisionInput, Order, Policy, SequenceModel};
+use herb_decide::{DecisionInput, Order, PlanarPose, Policy, SequenceModel};
 use herb_ipc::{Fault, HeightmapFrame, MAX_JOB_OBJECTS};
 use herb_robot::kinematics::LEFT_TOP_DOWN_NOMINAL;
 use proptest::prelude::*;
 use std::path::Path;
 use std::sync::Arc;
 
-/// A policy that answers with a fixed action, whatever it is shown (a test fixture).
+/// A policy that answers with a fixed placement, whatever it is shown (a test fixture), given
+/// as a normalised action: x and y over the box's half sides, the yaw over pi (the generated
+/// values reach past the box and are not always finite).
 struct Scripted([f32; 3]);
 
 impl Policy for Scripted {
@@ -31,8 +34,13 @@ impl Policy for Scripted {
         "scripted (fixture)"
     }
     fn begin_episode(&mut self, _seed: u64) {}
-    fn decide(&mut self, _input: &DecisionInput) -> herb_decide::Result<[f32; 3]> {
-        Ok(self.0)
+    fn decide(&mut self, _input: &DecisionInput) -> herb_decide::Result<PlanarPose> {
+        let [x, y, t] = self.0;
+        Ok(PlanarPose {
+            x: x * BOX_HALF_X,
+            y: y * BOX_HALF_Y,
+            theta: t * std::f32::consts::PI,
+        })
     }
     fn needs_observation(&self) -> bool {
         false
@@ -157,7 +165,10 @@ proptest! {
         object in 0u16..24,
     ) {
         let cfg = config();
-        let valid = action.iter().all(|a| a.is_finite() && (-1.0..=1.0).contains(a));
+        // Refused: a value not finite, or a position past the box (a yaw of any size is
+        // wrapped into (-pi, pi] and planned).
+        let valid = action.iter().all(|a| a.is_finite())
+            && action[..2].iter().all(|a| (-1.0..=1.0).contains(a));
         let outcome = decide_and_plan(&cfg, object, action)?;
         if !valid {
             prop_assert_eq!(outcome, Some(Fault::Decision), "action {:?}", action);

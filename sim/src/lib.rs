@@ -17,9 +17,11 @@
 pub mod env;
 pub mod eval;
 pub mod reserve;
-pub mod search;
 pub mod teacher;
-pub mod world;
+
+// The world, a crate of its own (herbd links it, through the search, without this crate),
+// under its old path.
+pub use herb_world as world;
 
 // The domain core (no physics engine), re-exported under its old paths.
 pub use herb_core::{

@@ -31,6 +31,7 @@
 use clap::Parser;
 use herb_adapter::guard::{GuardSettings, JumpGuard, REFUSAL_HOLD_NS, Refusal};
 use herb_adapter::{ArmPorts, CameraPort, Heightmap};
+use herb_core::{Catalog, TypeIdx, paths};
 use herb_ipc::bus::Bus;
 use herb_ipc::{
     ArmBlocker, CommandChecks, GripperAction, GripperCommand, GripperState, Header, JointCommand,
@@ -41,7 +42,7 @@ use herb_loopback::config::{ConfigFile, LoopbackConfig};
 use herb_process::rt::{set_timer_slack, sleep_until};
 use herb_robot::cell::CellConfig;
 use herb_robot::kinematics::{Arm, DOF, LEFT_TOP_DOWN_NOMINAL};
-use herb_sim::{Catalog, PackingWorld, TypeIdx, WorldConfig, paths};
+use herb_world::{PackingWorld, WorldConfig};
 use nalgebra::Isometry3;
 use rapier3d::math::{Pose, Rotation, Vector};
 use std::path::PathBuf;
@@ -110,7 +111,7 @@ struct Released {
     /// Every object in the box: where it is, whether inside.
     placed: [SimObject; MAX_JOB_OBJECTS],
     /// The outcome, the released type, the release pose and the releasing job.
-    outcome: Option<(herb_sim::PlacementOutcome, u32, [f32; 4], u64)>,
+    outcome: Option<(herb_world::PlacementOutcome, u32, [f32; 4], u64)>,
 }
 
 /// What the publishing loop asks of the world thread.

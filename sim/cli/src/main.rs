@@ -17,7 +17,7 @@ mod plot;
 
 use herb_decide::{Order, PolicySpec, SequenceModel};
 use herb_methods::{Method, MethodSettings};
-use herb_sim::search::{Budget, SearchSettings, TwinKind};
+use herb_search::{Budget, SearchSettings, TwinKind};
 
 /// The replays `herb-sim pack` shows.
 const REPLAYS: [Method; 3] = [Method::Human, Method::HumanPose, Method::Random];

@@ -29,7 +29,7 @@
 //!
 //! The episodes are `training/validate.py`'s (the bindings' sampler: 10 to 25 random catalog
 //! objects in HERB's order, one generator per episode seeded from `SEED`, default 777). Each is
-//! packed by the search (`herb_sim::search`: k = 8 candidates in lattice BLBF's order, each
+//! packed by the search (`herb_search`: k = 8 candidates in lattice BLBF's order, each
 //! rolled out to the job's end in the twin, the best return chosen). At every decision the same
 //! search also runs in a clone of the episode's world (the exact clone), and each candidate is
 //! placed once in both, so that the two can be compared on the same state:
@@ -45,11 +45,11 @@
 //! and the meshes from BoxED when it is found (`HERB_BOXED`, `../shared/boxed`).
 
 use herb_decide::{Order, SequenceModel};
+use herb_search::{Budget, RobustRollouts, Search, SearchSettings, TwinKind};
 use herb_sim::catalog::{Catalog, SharedCatalog, TypeIdx};
 use herb_sim::env::{PackingEnv, RewardMode};
 use herb_sim::lattice::{Lattice, Placement};
 use herb_sim::paths;
-use herb_sim::search::{Budget, RobustRollouts, Search, SearchSettings, TwinKind};
 use herb_sim::teacher::CandidateOutcome;
 use herb_sim::world::{PackingWorld, WorldConfig};
 use rand::{Rng, SeedableRng};

@@ -45,7 +45,7 @@ pub enum Method {
     GeoLookahead,
     /// The search: lattice candidates in lattice BLBF's order, the best by the return of a
     /// rollout to the job's end in a twin built from the heightmap, within a budget
-    /// ([`herb_sim::search`]; HERB's order by default).
+    /// ([`herb_search`]; HERB's order by default).
     Search,
 }
 

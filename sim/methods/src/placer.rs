@@ -5,9 +5,9 @@
 use crate::method::Method;
 use herb_decide::policy::{PackitSo3, Policy};
 use herb_decide::{DecideError, Decider, PolicySpec, Result};
+use herb_search::{Search, SearchSettings, TwinKind};
 use herb_sim::boxed::{Episode, participant};
-use herb_sim::eval::{Decision, PlaceError, Placer, ReplayPlacer};
-use herb_sim::search::{Search, SearchSettings};
+use herb_sim::eval::{Decision, PlaceError, Placer, ReplayPlacer, release_at};
 use herb_sim::{PackingEnv, RewardMode, SharedCatalog, WorldConfig};
 use std::path::PathBuf;
 
@@ -25,28 +25,65 @@ impl<P: Policy + ?Sized> Placer for DeciderPlacer<P> {
     }
 
     /// herbd's decision path on the world's heightmap: the policy, the checks and the z
-    /// estimate (one [`Decider::decide`] call).
+    /// estimate (one [`Decider::decide_on`] call).
     fn decide(
         &mut self,
         env: &mut PackingEnv,
     ) -> std::result::Result<Option<Decision>, PlaceError> {
-        let Some(object) = env.next_object() else {
-            return Ok(None);
-        };
-        let after = env.remaining().get(1..).unwrap_or(&[]);
-        match self.0.decide(
-            env.world().heightmap().into(),
-            object,
-            env.step_index(),
-            after,
-        ) {
-            Ok(d) => Ok(Some(Decision::Pose(d.pose()))),
-            Err(DecideError::NoFeasiblePlacement) => Ok(None),
-            Err(e) => Err(e.into()),
-        }
+        decide_in(&mut self.0, env)
     }
 }
 
+/// One decision of `decider` on the world's heightmap for the environment's remaining objects
+/// (`None` when nothing is left or nothing fits).
+fn decide_in<P: Policy + ?Sized>(
+    decider: &mut Decider<P>,
+    env: &mut PackingEnv,
+) -> std::result::Result<Option<Decision>, PlaceError> {
+    if env.next_object().is_none() {
+        return Ok(None);
+    }
+    let d = decider.decide_on(
+        env.world().heightmap().into(),
+        env.remaining(),
+        env.step_index(),
+    );
+    match d {
+        Ok(d) => Ok(Some(Decision::Pose(d.pose()))),
+        Err(DecideError::NoFeasiblePlacement) => Ok(None),
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// The search as Table I runs it: herbd's decision path ([`Decider`] with the [`Search`] as
+/// its policy), named with its budget and twin. With [`TwinKind::ExactClone`] (a measurement
+/// of the twins' fidelity bound, not something herbd can do) the rollouts run in clones of the
+/// evaluation's own world, outside the decision core.
+pub struct SearchPlacer(pub Decider<Search>);
+
+impl Placer for SearchPlacer {
+    fn name(&self) -> String {
+        self.0.policy().label()
+    }
+
+    /// A new episode is a new job: the job's twin starts from an empty box.
+    fn begin_episode(&mut self, _ep: &Episode, seed: u64) -> std::result::Result<(), PlaceError> {
+        self.0.begin_episode(seed);
+        Ok(())
+    }
+
+    fn decide(
+        &mut self,
+        env: &mut PackingEnv,
+    ) -> std::result::Result<Option<Decision>, PlaceError> {
+        let search = self.0.policy_mut();
+        if search.settings().twin == TwinKind::ExactClone {
+            let p = search.decide(env.world().heightmap(), env.remaining(), Some(env.world()))?;
+            return Ok(release_at(env, p));
+        }
+        decide_in(&mut self.0, env)
+    }
+}
 /// The PackIt SO(3) heuristic as a placer of the episode loop.
 pub struct PackitPlacer(pub PackitSo3);
 
@@ -183,11 +220,14 @@ impl Method {
             }
             Self::Blbf => Box::new(decider(Box::new(herb_decide::Blbf::new()))),
             Self::PackitSo3 => Box::new(PackitPlacer(PackitSo3::new())),
-            Self::Search => Box::new(Search::new(
-                catalog.clone(),
-                settings.world.clone(),
-                settings.search,
-            )),
+            Self::Search => {
+                let search = Search::new(catalog.clone(), settings.world.clone(), settings.search);
+                Box::new(SearchPlacer(Decider::new(
+                    Box::new(search),
+                    catalog.clone(),
+                    settings.world.clearance_m,
+                )))
+            }
             other => {
                 return Err(DecideError::Method {
                     method: other.name(),

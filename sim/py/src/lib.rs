@@ -18,10 +18,10 @@
 use herb_decide::sequence::SequenceModel;
 use herb_decide::{Blbf, Decider, Order};
 use herb_methods::Method;
+use herb_search::{Budget, Search, SearchSettings, TwinKind};
 use herb_sim::features::{self, CANDIDATE_LEN, CONTEXT_LEN, DecisionFeatures};
 use herb_sim::lattice::{Lattice, MAX_CANDIDATES, Placement};
 use herb_sim::paths::{self, MeshSource};
-use herb_sim::search::{Budget, Search, SearchSettings, TwinKind};
 use herb_sim::teacher::{LatticeRule, Lookahead};
 use herb_sim::{Catalog, ObsLayout, PackingEnv, RewardMode, SharedCatalog, TypeIdx, WorldConfig};
 use numpy::ndarray::{Array1, Array2, Array3, Array4};
@@ -395,18 +395,17 @@ impl VecEnv {
                 slots
                     .par_iter_mut()
                     .map(|s| {
-                        let object = s.env.next_object()?;
-                        // herbd's decision itself (`Decider::decide`): the labels are the
-                        // actions the `blbf` rows of Table I send.
-                        s.expert
-                            .decide(
-                                s.env.world().heightmap().into(),
-                                object,
-                                s.len as usize,
-                                s.env.remaining().get(1..).unwrap_or(&[]),
-                            )
-                            .ok()
-                            .map(|d| d.action)
+                        s.env.next_object()?;
+                        // herbd's decision itself (`Decider::decide_on`): the labels are the
+                        // placements the `blbf` rows of Table I send, as actions.
+                        let heightmap = s.env.world().heightmap().into();
+                        let d = s
+                            .expert
+                            .decide_on(heightmap, s.env.remaining(), s.len as usize);
+                        let p = d.ok()?.placement;
+                        Some(herb_sim::observation::placement_to_action(
+                            p.x, p.y, p.theta,
+                        ))
                     })
                     .collect()
             })
@@ -672,7 +671,7 @@ impl VecEnv {
     /// (`[N]` bool), only the environments marked true are stepped (the others report reward
     /// 0, not terminated, and keep their state). `horizon` limits the `lookahead` teacher's
     /// rollouts to that many objects (see [`VecEnv::teacher`]). `search` is the decision-time
-    /// search (`herb_sim::search`): the first `k` lattice candidates in lattice BLBF's order,
+    /// search (`herb_search`): the first `k` lattice candidates in lattice BLBF's order,
     /// each rolled out (`rollouts`, default `k`), in the job's own twin (`twin="job"`, herbd's
     /// and the default), a twin built from the heightmap (`twin="heightmap"`) or a clone of the
     /// environment's world (`twin="exact"`).

@@ -19,10 +19,9 @@
 //! No NaN and no placement over a wall ever leaves.
 
 use crate::error::{DecideError, ModelReadError, Result};
-use crate::policy::{DecisionInput, Policy, check_action};
+use crate::policy::{DecisionInput, PlanarPose, Policy};
 use herb_core::features::{CANDIDATE_LEN, CONTEXT_LEN, CandidateLayout, DecisionFeatures};
 use herb_core::lattice::{Lattice, MAX_CANDIDATES, Placement};
-use herb_core::observation::placement_to_action;
 use herb_core::{Catalog, Heightmap, TypeIdx};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -285,15 +284,8 @@ impl Policy for CandidatePolicy {
     fn needs_observation(&self) -> bool {
         false
     }
-    fn decide(&mut self, input: &DecisionInput) -> Result<[f32; 3]> {
-        input
-            .heightmap
-            .validate()
-            .map_err(|e| DecideError::Rejected {
-                policy: "candidates".into(),
-                reason: format!("heightmap: {e}"),
-            })?;
-        let p = self.choose(input.catalog, input.heightmap, input.object, input.after)?;
-        check_action("candidates", placement_to_action(p.x, p.y, p.theta()))
+    fn decide(&mut self, input: &DecisionInput) -> Result<PlanarPose> {
+        let p = self.choose(input.catalog, input.heightmap, input.object, input.after())?;
+        Ok(p.into())
     }
 }

@@ -1,3 +1,11 @@
+//! # herb-search: deciding by searching
+//!
+//! The placement lattice's candidates ranked by a prior, the best first each rolled out to the
+//! job's end (`herb_world::rollout`) in a twin of the box, and the candidate of the best return chosen. A
+//! [`Policy`] of the decision core (`herb_decide::Decider`, which checks the heightmap once and
+//! adds the release height): herbd decides with it, and so does Table I's search row. herbd's
+//! one way to the physics engine (`herb-world`).
+//!
 //! Deciding by searching: the placement lattice's candidates ranked by a prior, the best first
 //! each rolled out to the job's end (the candidate placed and settled, then the remaining
 //! objects by lattice BLBF, each settled), in a twin of the box built from its heightmap
@@ -11,15 +19,19 @@
 //! rollout budget is the same in every run; what a deadline allowed is reported
 //! ([`SearchReport`]) so that it can be replayed exactly as a count.
 
-use crate::catalog::{SharedCatalog, TypeIdx};
-use crate::env::{PackingEnv, RewardMode};
-use crate::error::{Result, SimError};
-use crate::heightmap::Heightmap;
-use crate::lattice::{Lattice, Placement};
-use crate::teacher::{CandidateOutcome, rollout_until};
-use crate::world::{PackingWorld, ReleaseNoise, WorldConfig, offset_pose};
-use crate::zestimate::ZScratch;
-use crate::zestimate::release_pose_on;
+#![warn(missing_docs)]
+
+pub use herb_world::{CandidateOutcome, PackingWorld, ReleaseNoise, RewardMode, WorldConfig};
+
+use herb_core::catalog::{SharedCatalog, TypeIdx};
+use herb_core::error::{Result, SimError};
+use herb_core::heightmap::Heightmap;
+use herb_core::lattice::{Lattice, Placement};
+use herb_core::zestimate::{ZScratch, release_pose_on};
+use herb_decide::DecideError;
+use herb_decide::policy::{DecisionInput, PlanarPose, Policy};
+use herb_world::offset_pose;
+use herb_world::rollout::rollout_until;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rapier3d::math::{Pose, Rotation};
@@ -220,6 +232,15 @@ impl Search {
             report: SearchReport::default(),
             job: None,
         }
+    }
+
+    /// Its name in tables: the budget and the twin, e.g. `search (8 rollouts, job)`.
+    pub fn label(&self) -> String {
+        let budget = match self.settings.budget {
+            Budget::Rollouts(r) => format!("{r} rollouts"),
+            Budget::Time(d) => format!("{:.2} s", d.as_secs_f64()),
+        };
+        format!("search ({budget}, {})", self.settings.twin.name())
     }
 
     /// The settings.
@@ -498,35 +519,30 @@ fn fit_release(
     Ok(best)
 }
 
-impl crate::eval::Placer for Search {
-    fn name(&self) -> String {
-        let budget = match self.settings.budget {
-            Budget::Rollouts(r) => format!("{r} rollouts"),
-            Budget::Time(d) => format!("{:.2} s", d.as_secs_f64()),
-        };
-        let twin = self.settings.twin.name();
-        format!("search ({budget}, {twin})")
+/// The search as the decision core's policy: the placement it chooses for the input's
+/// remaining objects, over the heightmap the `Decider` checked (the job's twin continued, or
+/// one built from that heightmap).
+impl Policy for Search {
+    fn name(&self) -> &str {
+        "search"
     }
 
-    /// A new episode is a new job: the job's twin starts from an empty box.
-    fn begin_episode(
-        &mut self,
-        _ep: &crate::boxed::Episode,
-        _seed: u64,
-    ) -> std::result::Result<(), crate::eval::PlaceError> {
+    /// A new job: the job's twin starts from an empty box.
+    fn begin_episode(&mut self, _seed: u64) {
         self.new_job();
-        Ok(())
     }
 
-    /// The search over the environment's heightmap and remaining objects, released at the
-    /// world's release pose (part of the timed decision). The evaluation's world is passed for
-    /// [`TwinKind::ExactClone`] only.
-    fn decide(
-        &mut self,
-        env: &mut PackingEnv,
-    ) -> std::result::Result<Option<crate::eval::Decision>, crate::eval::PlaceError> {
-        let exact = (self.settings.twin == TwinKind::ExactClone).then(|| env.world());
-        let p = Search::decide(self, env.world().heightmap(), env.remaining(), exact)?;
-        Ok(crate::eval::release_at(env, p))
+    fn decide(&mut self, input: &DecisionInput) -> herb_decide::Result<PlanarPose> {
+        let p = Search::decide(self, input.heightmap, input.remaining, None)
+            .map_err(|e| DecideError::Rejected {
+                policy: "search".into(),
+                reason: e.to_string(),
+            })?
+            .ok_or(DecideError::NoFeasiblePlacement)?;
+        Ok(p.into())
+    }
+
+    fn needs_observation(&self) -> bool {
+        false
     }
 }

@@ -4,8 +4,9 @@
 //! training.
 //!
 //! The observation layout, the z estimate and the object catalog are `herb-core`'s (one
-//! implementation each); this crate only decides. It links no physics engine: the registry of
-//! every evaluated method (`herb-methods`) and the search's physics (`herb-sim`) sit on top.
+//! implementation each); this crate only decides. It links no physics engine: the search
+//! (`herb-search`, a [`Policy`] of its own), the registry of every evaluated method
+//! (`herb-methods`) and the evaluation (`herb-sim`) sit on top.
 
 #![warn(missing_docs)]
 
@@ -22,7 +23,7 @@ pub use decider::{Decider, Decision, HeightmapView};
 pub use error::{DecideError, ModelReadError, NameError, Result};
 pub use onnx::OnnxPolicy;
 pub use order::Order;
-pub use policy::{Blbf, DecisionInput, PackitSo3, Policy};
+pub use policy::{Blbf, DecisionInput, PackitSo3, PlanarPose, Policy};
 pub use sequence::{SequenceModel, beam3, beam3_last};
 
 /// Which placement policy to run: the BLBF heuristic, one of the shipped policies or an ONNX

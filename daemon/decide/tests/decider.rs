@@ -1,5 +1,5 @@
-//! The one decision path (`Decider`): the same placement the world releases at, and bad
-//! heightmaps refused with a reason, before any policy runs.
+//! The one decision path (`Decider`): the same placement the world releases at, carried as the
+//! policy chose it, and bad heightmaps refused with a reason, before any policy runs.
 
 use herb_decide::{Blbf, DecideError, Decider, HeightmapView};
 use herb_sim::paths::MeshSource;
@@ -27,11 +27,18 @@ fn the_decided_pose_is_the_one_the_world_releases_at() {
     let mut d = Decider::new(Box::new(Blbf::new()), c.clone(), clearance);
     for id in ["005", "006", "007", "013"] {
         let t = c.by_id(id).unwrap();
-        let got = d.decide(w.heightmap().into(), t, 2, &[]).expect("decision");
+        let got = d
+            .decide_on(w.heightmap().into(), &[t], 2)
+            .expect("decision");
         let [x, y, _] = got.position;
         let want = w.release_pose(t, x, y, got.rotation());
         assert_eq!(got.pose(), want, "{id}");
-        assert!(got.action.iter().all(|a| (-1.0..=1.0).contains(a)));
+        // The placement as BLBF chose it, not decoded from an action.
+        let shape = c.shape(t);
+        let (bx, by, btheta, _) = Blbf::new().best(w.heightmap(), shape).expect("fits");
+        let p = got.placement;
+        assert_eq!((p.x, p.y, p.theta), (bx, by, btheta), "{id}");
+        assert_eq!((x, y, got.theta), (bx, by, btheta), "{id}");
     }
 }
 
@@ -43,7 +50,7 @@ fn bad_heightmaps_are_refused_with_the_reason() {
     let t = c.by_id("005").unwrap();
     let good: HeightmapView = w.heightmap().into();
     let mut cells = good.cells.to_vec();
-    let refused = |d: &mut Decider<Blbf>, v: HeightmapView| match d.decide(v, t, 0, &[]) {
+    let refused = |d: &mut Decider<Blbf>, v: HeightmapView| match d.decide_on(v, &[t], 0) {
         Err(DecideError::Rejected { reason, .. }) => reason,
         other => panic!("expected a refusal, got {other:?}"),
     };
@@ -82,7 +89,7 @@ fn bad_heightmaps_are_refused_with_the_reason() {
             ..good
         },
     );
-    assert!(r.contains("the box needs"), "{r}");
+    assert!(r.contains("values for a"), "{r}");
     let r = refused(
         &mut d,
         HeightmapView {
@@ -94,5 +101,24 @@ fn bad_heightmaps_are_refused_with_the_reason() {
 
     // A good frame after the bad ones decides as before.
     assert_eq!(good.cell_m, ObsLayout::CELL_M);
-    d.decide(good, t, 0, &[]).expect("decision after refusals");
+    let first = d.decide_on(good, &[t], 0).expect("decision after refusals");
+
+    // A bad frame after a good one is refused and leaves the good one to decide on.
+    cells[7] = f32::NAN;
+    let bad = HeightmapView {
+        cells: &cells,
+        ..good
+    };
+    assert!(d.observe(bad).is_err());
+    assert_eq!(d.decide(&[t], 0).expect("on the good frame"), first);
+    // Nothing to place, or nothing observed yet: refused.
+    assert!(matches!(
+        d.decide(&[], 0),
+        Err(DecideError::Rejected { .. })
+    ));
+    let mut fresh = Decider::new(Box::new(Blbf::new()), c.clone(), 0.005);
+    assert!(matches!(
+        fresh.decide(&[t], 0),
+        Err(DecideError::Rejected { .. })
+    ));
 }

@@ -1,14 +1,17 @@
-//! Placement policies behind one trait: the observation in, an action `(x, y, theta)` in
-//! `[-1, 1]^3` out (mapped to the box by `herb_core::observation::action_to_placement`).
+//! Placement policies behind one trait: what the decision core knows in, a placement
+//! ([`PlanarPose`]: x, y and yaw in the box frame) out; z comes from the heightmap (the
+//! [`crate::Decider`]'s one release pose).
 //!
 //! A policy sees a [`DecisionInput`]: the observation tensor in the shared layout
-//! (`herb_core::ObsLayout`), and, for policies that are not networks, the heightmap it was
-//! built from and the next object. Decisions are checked before they leave: a non-finite or
-//! out-of-range action is a [`DecideError::Rejected`] naming the policy, never passed on.
+//! (`herb_core::ObsLayout`), the heightmap it was built from (checked once, by the
+//! `Decider`), the next object and those after it. A network that answers a normalised action
+//! (the observation contract, [`crate::OnnxPolicy`]) decodes it once, itself; a method that
+//! chooses a placement (BLBF, the candidate contract, the search of `herb-search`) returns it
+//! as it is. Decisions are checked before they leave: a placement that is not finite or lies
+//! outside the box is a [`DecideError::Rejected`] naming the policy, never passed on.
 
 use crate::error::{DecideError, Result};
 use herb_core::frames::{BOX_HALF_X, BOX_HALF_Y, SUCCESS_TOP_Z};
-use herb_core::observation::placement_to_action;
 use herb_core::zestimate::{ZScratch, bottom_footprint, estimate_z_rotated, rest_height};
 use herb_core::{Catalog, GridSpec, Heightmap, ObjectShape, ObsLayout, TypeIdx};
 use parry3d::math::{Mat3, Pose, Rotation, Vector};
@@ -28,8 +31,38 @@ pub struct DecisionInput<'a> {
     pub step: usize,
     /// The catalog (shapes of every object type).
     pub catalog: &'a Catalog,
+    /// The objects of the job still to place, this one first, in order.
+    pub remaining: &'a [TypeIdx],
+}
+
+impl DecisionInput<'_> {
     /// The objects of the job still to place after this one, in order.
-    pub after: &'a [TypeIdx],
+    pub fn after(&self) -> &[TypeIdx] {
+        self.remaining.get(1..).unwrap_or(&[])
+    }
+}
+
+/// Where a policy puts an object: the canonical origin's x and y in the box frame B (m) and its
+/// yaw about B z (rad). The release height is not the policy's: the [`crate::Decider`] adds it
+/// (the z estimate on the heightmap plus the clearance).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlanarPose {
+    /// B x (m).
+    pub x: f32,
+    /// B y (m).
+    pub y: f32,
+    /// Yaw about B z (rad).
+    pub theta: f32,
+}
+
+impl From<herb_core::lattice::Placement> for PlanarPose {
+    fn from(p: herb_core::lattice::Placement) -> Self {
+        Self {
+            x: p.x,
+            y: p.y,
+            theta: p.theta(),
+        }
+    }
 }
 
 /// A placement policy.
@@ -38,8 +71,8 @@ pub trait Policy {
     fn name(&self) -> &str;
     /// Starts an episode (seeds stochastic policies; replays reset their cursor).
     fn begin_episode(&mut self, seed: u64);
-    /// The action for `input`, in `[-1, 1]^3`.
-    fn decide(&mut self, input: &DecisionInput) -> Result<[f32; 3]>;
+    /// Where `input.object` goes. [`DecideError::NoFeasiblePlacement`] when nothing fits.
+    fn decide(&mut self, input: &DecisionInput) -> Result<PlanarPose>;
     /// Whether [`DecisionInput::observation`] is read. Callers may skip building it (and pass
     /// an empty slice) for policies that return false.
     fn needs_observation(&self) -> bool {
@@ -47,8 +80,8 @@ pub trait Policy {
     }
 }
 
-/// Checks an input before a policy sees it: observation length and values in `[0, 1]`, and a
-/// valid heightmap (finite, in range).
+/// Checks an observation before a network sees it: its length and values in `[0, 1]` (the
+/// heightmap under it was checked once, by the `Decider`).
 pub fn check_input(policy: &str, input: &DecisionInput) -> Result<()> {
     let reject = |reason: String| DecideError::Rejected {
         policy: policy.to_owned(),
@@ -61,20 +94,17 @@ pub fn check_input(policy: &str, input: &DecisionInput) -> Result<()> {
             ObsLayout::LEN
         )));
     }
-    if let Some(i) = input
+    match input
         .observation
         .iter()
         .position(|v| !(0.0..=1.0).contains(v))
     {
-        return Err(reject(format!(
+        Some(i) => Err(reject(format!(
             "observation value {} at index {i} outside [0, 1]",
             input.observation[i]
-        )));
+        ))),
+        None => Ok(()),
     }
-    input
-        .heightmap
-        .validate()
-        .map_err(|e| reject(format!("heightmap: {e}")))
 }
 
 /// Checks an action before it leaves a policy: finite and within `[-1, 1]`.
@@ -85,6 +115,23 @@ pub fn check_action(policy: &str, a: [f32; 3]) -> Result<[f32; 3]> {
         Err(DecideError::Rejected {
             policy: policy.to_owned(),
             reason: format!("action {a:?} is not finite and within [-1, 1]"),
+        })
+    }
+}
+
+/// Checks a placement before it leaves the decision core: finite, and its origin over the box
+/// (`|x| <= BOX_HALF_X`, `|y| <= BOX_HALF_Y`, as a normalised action within `[-1, 1]` is).
+pub fn check_placement(policy: &str, p: PlanarPose) -> Result<PlanarPose> {
+    let finite = p.x.is_finite() && p.y.is_finite() && p.theta.is_finite();
+    if finite && p.x.abs() <= BOX_HALF_X && p.y.abs() <= BOX_HALF_Y {
+        Ok(p)
+    } else {
+        Err(DecideError::Rejected {
+            policy: policy.to_owned(),
+            reason: format!(
+                "placement x {} m, y {} m, yaw {} rad is not finite and over the box",
+                p.x, p.y, p.theta
+            ),
         })
     }
 }
@@ -288,20 +335,13 @@ impl Policy for Blbf {
         "blbf"
     }
     fn begin_episode(&mut self, _seed: u64) {}
-    fn decide(&mut self, input: &DecisionInput) -> Result<[f32; 3]> {
-        input
-            .heightmap
-            .validate()
-            .map_err(|e| DecideError::Rejected {
-                policy: "blbf".into(),
-                reason: format!("heightmap: {e}"),
-            })?;
+    fn decide(&mut self, input: &DecisionInput) -> Result<PlanarPose> {
         let (x, y, theta, _) =
             self.best(input.heightmap, input.shape)
                 .ok_or_else(|| DecideError::Rejected {
                     policy: "blbf".into(),
                     reason: "the object does not fit between the walls in either yaw".into(),
                 })?;
-        check_action("blbf", placement_to_action(x, y, theta))
+        Ok(PlanarPose { x, y, theta })
     }
 }

@@ -1,4 +1,12 @@
-//! The packing world: the BoxED box in rapier3d, placement, settling and the paper's metrics.
+//! # herb-world: HERB's packing world
+//!
+//! The BoxED box in rapier3d, placement, settling and the paper's metrics and rewards
+//! ([`RewardMode`]); rollouts of the lattice BLBF rule after a candidate placement
+//! ([`rollout`]); the twins of a box built from its heightmap ([`PackingWorld::twin`]); a
+//! gripper's release error ([`ReleaseNoise`]). herbd links it only through the search
+//! (`herb-search`), the loopback simulates the cell with it, and the evaluation and training
+//! (`herb-sim`) run in it. Frames and units: SI, right-handed, z up, the box frame B of
+//! `herb_core::frames`.
 //!
 //! # Metrics (per placement, after the world settles)
 //!
@@ -17,18 +25,23 @@
 //!   axis-aligned bounding box, in B, of all placed objects' hull vertices at their settled
 //!   poses (B's axes are the container's, so this is the tightest container-aligned box).
 
-use crate::catalog::{SharedCatalog, TypeIdx};
-use crate::error::{Result, SimError};
-use crate::frames::{
+use herb_core::catalog::{SharedCatalog, TypeIdx};
+use herb_core::error::{Result, SimError};
+use herb_core::frames::{
     BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, BOX_WALL_THICKNESS, SUCCESS_TOP_Z, tilt_from,
 };
-use crate::heightmap::{GridSpec, Heightmap};
-use crate::observation::ObsLayout;
-use crate::zestimate::{ZScratch, estimate_z_rotated, release_pose_on};
+use herb_core::heightmap::{GridSpec, Heightmap};
+use herb_core::observation::ObsLayout;
+use herb_core::zestimate::{ZScratch, estimate_z_rotated, release_pose_on};
 use rapier3d::math::{Pose, Rotation, Vector};
 use rapier3d::prelude::*;
 
-pub use crate::frames::INSIDE_TOLERANCE_M;
+mod reward;
+pub mod rollout;
+pub use reward::RewardMode;
+pub use rollout::{CandidateOutcome, RolloutFailure};
+
+pub use herb_core::frames::INSIDE_TOLERANCE_M;
 
 /// Settings of the packing world. Defaults are the values used for training and evaluation.
 #[derive(Debug, Clone, PartialEq)]
@@ -56,8 +69,8 @@ pub struct WorldConfig {
     /// Fastest speed at which the solver pushes overlapping bodies apart (m/s).
     pub max_corrective_speed_mps: f32,
     /// Release noise of the evaluation: standard deviation (m) of the x and y offsets by which
-    /// [`crate::PackingEnv`] releases each object off the pose it was given, as a real gripper
-    /// does (0: exactly there). The world's own calls ([`PackingWorld::place_pose`]) and the
+    /// the evaluation's environment (`herb_sim::PackingEnv`) releases each object off the pose
+    /// it was given, as a real gripper does (0: exactly there). The world's own calls ([`PackingWorld::place_pose`]) and the
     /// search's twins never add noise, so with noise the world is no longer their model.
     pub release_noise_m: f32,
     /// Release noise about z: standard deviation of the yaw offset (degrees).
@@ -68,7 +81,7 @@ impl Default for WorldConfig {
     fn default() -> Self {
         Self {
             heightmap_cell_m: ObsLayout::CELL_M,
-            clearance_m: crate::frames::RELEASE_CLEARANCE_M,
+            clearance_m: herb_core::frames::RELEASE_CLEARANCE_M,
             dt: 1.0 / 60.0,
             settle_cap_s: 3.0,
             time_until_sleep_s: 0.2,
@@ -226,7 +239,7 @@ impl std::fmt::Debug for PackingWorld {
 /// states (tested). rapier's `PhysicsWorld` is not `Clone`, but everything in it that carries
 /// state between steps is (bodies, colliders, joints, islands, broad and narrow phase with
 /// their contact manifolds and warm-start impulses); the pipelines hold per-step workspaces
-/// only and start fresh. The teacher ([`crate::teacher`]) clones a world per candidate
+/// only and start fresh. The lookahead teacher and the search clone a world per candidate
 /// placement to simulate what would follow it.
 impl Clone for PackingWorld {
     fn clone(&self) -> Self {
@@ -463,7 +476,7 @@ impl PackingWorld {
     }
 
     /// Lowest collision-free origin height for `ty` at `(x, y, theta)` over the current
-    /// heightmap (no clearance). See [`crate::zestimate`].
+    /// heightmap (no clearance). See [`herb_core::zestimate`].
     pub fn estimate_z(&mut self, ty: TypeIdx, x: f32, y: f32, theta: f32) -> f32 {
         self.estimate_z_rotated(ty, x, y, Rotation::from_rotation_z(theta))
     }
@@ -548,7 +561,7 @@ impl PackingWorld {
             return Err(SimError::InvalidPlacement {
                 x,
                 y,
-                theta: crate::frames::yaw_of(rot),
+                theta: herb_core::frames::yaw_of(rot),
             });
         }
         self.check_type(ty)?;
@@ -766,7 +779,7 @@ impl PackingWorld {
 
 /// The success volume (module docs): the box interior extended upwards to `SUCCESS_TOP_Z`,
 /// widened by a tolerance. The one check of "inside" for the world's placements and for the
-/// humans' recorded poses ([`crate::eval`]).
+/// humans' recorded poses (the evaluation, `herb_sim::eval`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SuccessVolume {
     lo: Vector,

@@ -4,6 +4,7 @@
 
 use herb_decide::policy::{DecisionInput, Policy};
 use herb_decide::{DecideError, OnnxPolicy};
+use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y};
 use herb_sim::paths::MeshSource;
 use herb_sim::{Catalog, Heightmap, ObsLayout};
 use std::path::PathBuf;
@@ -113,10 +114,12 @@ fn decisions_are_finite_and_in_range_or_rejected() {
                 shape: c.shape(t),
                 step: 0,
                 catalog: &c,
-                after: &[],
+                remaining: &[t],
             })
             .unwrap();
-        assert!(a.iter().all(|v| v.is_finite() && v.abs() <= 1.0), "{a:?}");
+        // Decoded once from an action within [-1, 1]: over the box, the yaw within [-pi, pi].
+        assert!(a.x.abs() <= BOX_HALF_X && a.y.abs() <= BOX_HALF_Y, "{a:?}");
+        assert!(a.theta.abs() <= std::f32::consts::PI, "{a:?}");
     }
     obs[3] = f32::NAN;
     let e = p
@@ -127,7 +130,7 @@ fn decisions_are_finite_and_in_range_or_rejected() {
             shape: c.shape(t),
             step: 0,
             catalog: &c,
-            after: &[],
+            remaining: &[t],
         })
         .unwrap_err();
     assert!(matches!(e, DecideError::Rejected { .. }), "{e}");

@@ -5,7 +5,6 @@ mod common;
 use common::decide;
 use herb_decide::policy::{Blbf, DecisionInput, check_input};
 use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y};
-use herb_sim::observation::action_to_placement;
 use herb_sim::paths::MeshSource;
 use herb_sim::{Catalog, Heightmap, ObsLayout, TypeIdx};
 use parry3d::math::Rotation;
@@ -65,8 +64,8 @@ fn blbf_never_proposes_a_position_overlapping_the_walls() {
         for t in c.types() {
             let a =
                 decide(&mut p, &c, &hm, t, &[]).expect("an upright object fits between the walls");
-            assert!(a.iter().all(|v| v.is_finite() && v.abs() <= 1.0), "{a:?}");
-            let (x, y, theta) = action_to_placement(a).unwrap();
+            let (x, y, theta) = (a.x, a.y, a.theta);
+            assert!(x.is_finite() && y.is_finite() && theta.is_finite(), "{a:?}");
             assert!(
                 inside_walls(&c, t, x, y, theta),
                 "{}: ({x}, {y}, {theta}) crosses a wall",
@@ -128,13 +127,15 @@ fn blbf_fills_deep_bottom_left_back_first() {
 fn bad_input_is_rejected_with_a_reason_not_passed_on() {
     let c = catalog();
     let t = c.by_id("004").unwrap();
-    let mut p = Blbf::new();
+    // A bad heightmap is refused by its one check, in the decision core, before BLBF runs.
+    let shared = std::sync::Arc::new(catalog());
+    let mut d = herb_decide::Decider::new(Box::new(Blbf::new()), shared, 0.005);
     let mut hm = Heightmap::new(ObsLayout::grid());
     hm.data_mut()[100] = f32::NAN;
-    let e = decide(&mut p, &c, &hm, t, &[]).unwrap_err().to_string();
-    assert!(e.contains("blbf") && e.contains("heightmap"), "{e}");
+    let e = d.decide_on((&hm).into(), &[t], 0).unwrap_err().to_string();
+    assert!(e.contains("decider") && e.contains("NaN"), "{e}");
     hm.data_mut()[100] = 5.0;
-    assert!(decide(&mut p, &c, &hm, t, &[]).is_err());
+    assert!(d.decide_on((&hm).into(), &[t], 0).is_err());
     // The input check names what is wrong.
     let good = Heightmap::new(ObsLayout::grid());
     let mut obs = vec![0.0; ObsLayout::LEN];
@@ -146,7 +147,7 @@ fn bad_input_is_rejected_with_a_reason_not_passed_on() {
         shape: c.shape(t),
         step: 0,
         catalog: &c,
-        after: &[],
+        remaining: &[t],
     };
     let e = check_input("onnx", &input).unwrap_err().to_string();
     assert!(e.contains("index 7"), "{e}");

@@ -1,11 +1,13 @@
 //! The search's twin: a box known only by its heightmap ([`PackingWorld::twin`]), and the
-//! search over it ([`herb_sim::search`]).
+//! search over it ([`herb_search`]).
 
+// The simulation tests' helpers (catalogs, fixture piles), shared by path.
+#[path = "../../../sim/tests/common/mod.rs"]
 mod common;
 
+use herb_search::{Budget, Search, SearchSettings, TwinKind};
 use herb_sim::env::RewardMode;
 use herb_sim::lattice::Lattice;
-use herb_sim::search::{Budget, Search, SearchSettings, TwinKind};
 use herb_sim::{Heightmap, PackingWorld, SharedCatalog, WorldConfig};
 
 const IDS: [&str; 6] = ["003", "005", "013", "007", "011", "004"];
@@ -173,7 +175,7 @@ fn pack_with(
     ids: &[&str],
     twin: TwinKind,
     noise: (f32, f32),
-) -> Vec<(herb_sim::lattice::Placement, herb_sim::search::SearchReport)> {
+) -> Vec<(herb_sim::lattice::Placement, herb_search::SearchReport)> {
     let cfg = WorldConfig {
         release_noise_m: noise.0 * 1e-3,
         release_noise_deg: noise.1,
@@ -301,7 +303,7 @@ fn the_jobs_twin_leaves_out_an_object_never_released_and_forgets_a_finished_job(
 
 #[test]
 fn the_robust_search_ranks_by_noisy_rollouts_that_a_replay_draws_again() {
-    use herb_sim::search::RobustRollouts;
+    use herb_search::RobustRollouts;
     use herb_sim::world::ReleaseNoise;
     let c = common::primitives();
     let world = exact(&c);
@@ -331,7 +333,7 @@ fn the_robust_search_ranks_by_noisy_rollouts_that_a_replay_draws_again() {
     };
     let (p, r) = search(noise);
     assert_eq!(r.finished.len(), 3, "{r:?}");
-    let rets = |r: &herb_sim::search::SearchReport| -> Vec<f32> {
+    let rets = |r: &herb_search::SearchReport| -> Vec<f32> {
         r.finished.iter().map(|(_, o)| o.ret).collect()
     };
     assert_ne!(rets(&r), rets(&plain.1), "the noisy rollouts moved");

@@ -99,6 +99,34 @@ pub struct Heightmap {
     data: Vec<f32>,
 }
 
+/// The one check of a heightmap's cells for `spec` (a camera frame before it is copied, or a
+/// [`Heightmap`]): `spec.len()` values, each finite and within [`HEIGHT_RANGE_M`]; the error
+/// names the first bad cell.
+pub fn check_cells(spec: &GridSpec, data: &[f32]) -> Result<()> {
+    if data.len() != spec.len() {
+        return Err(SimError::Heightmap(format!(
+            "{} values for a {} x {} grid",
+            data.len(),
+            spec.nx,
+            spec.ny
+        )));
+    }
+    if let Some((i, v)) = data
+        .iter()
+        .enumerate()
+        .find(|(_, v)| !(v.is_finite() && (HEIGHT_RANGE_M.0..=HEIGHT_RANGE_M.1).contains(*v)))
+    {
+        return Err(SimError::Heightmap(format!(
+            "cell (col {}, row {}) holds {v}: values must be finite and within {}..={} m",
+            i % spec.nx,
+            i / spec.nx,
+            HEIGHT_RANGE_M.0,
+            HEIGHT_RANGE_M.1
+        )));
+    }
+    Ok(())
+}
+
 impl Heightmap {
     /// An empty box: every cell at the floor (0).
     pub fn new(spec: GridSpec) -> Self {
@@ -118,28 +146,7 @@ impl Heightmap {
 
     /// Checks the size and every value; the error names the first bad cell.
     pub fn validate(&self) -> Result<()> {
-        if self.data.len() != self.spec.len() {
-            return Err(SimError::Heightmap(format!(
-                "{} values for a {} x {} grid",
-                self.data.len(),
-                self.spec.nx,
-                self.spec.ny
-            )));
-        }
-        if let Some((i, v)) =
-            self.data.iter().enumerate().find(|(_, v)| {
-                !(v.is_finite() && (HEIGHT_RANGE_M.0..=HEIGHT_RANGE_M.1).contains(*v))
-            })
-        {
-            return Err(SimError::Heightmap(format!(
-                "cell (col {}, row {}) holds {v}: values must be finite and within {}..={} m",
-                i % self.spec.nx,
-                i / self.spec.nx,
-                HEIGHT_RANGE_M.0,
-                HEIGHT_RANGE_M.1
-            )));
-        }
-        Ok(())
+        check_cells(&self.spec, &self.data)
     }
 
     /// The grid.

@@ -14,7 +14,7 @@
 //! does not allocate.
 
 use crate::error::{DecideError, Result};
-use crate::policy::{DecisionInput, Policy, check_action, check_input};
+use crate::policy::{DecisionInput, PlanarPose, Policy, check_action, check_input};
 use herb_core::ObsLayout;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -223,9 +223,12 @@ impl Policy for OnnxPolicy {
         "onnx"
     }
     fn begin_episode(&mut self, _seed: u64) {}
-    fn decide(&mut self, input: &DecisionInput) -> Result<[f32; 3]> {
+    /// The network's action, checked and decoded once into the box
+    /// (`herb_core::observation::action_to_placement`).
+    fn decide(&mut self, input: &DecisionInput) -> Result<PlanarPose> {
         check_input("onnx", input)?;
-        let a = self.infer(input.observation)?;
-        check_action("onnx", a)
+        let a = check_action("onnx", self.infer(input.observation)?)?;
+        let (x, y, theta) = herb_core::observation::action_to_placement(a)?;
+        Ok(PlanarPose { x, y, theta })
     }
 }

@@ -8,7 +8,6 @@ mod common;
 use common::decide;
 use herb_decide::{CandidatePolicy, DecideError, PolicySpec, load_policy};
 use herb_sim::frames::{BOX_HALF_X, BOX_HALF_Y, SUCCESS_TOP_Z};
-use herb_sim::observation::action_to_placement;
 use herb_sim::paths::MeshSource;
 use herb_sim::{Catalog, Heightmap, ObsLayout, TypeIdx};
 use parry3d::math::Rotation;
@@ -48,7 +47,7 @@ fn decisions_are_candidates_inside_the_walls() {
             },
         ] {
             let a = decide(&mut p, &c, &hm, t, &after).unwrap();
-            let (x, y, theta) = action_to_placement(a).unwrap();
+            let (x, y, theta) = (a.x, a.y, a.theta);
             let (lo, hi) = c.shape(t).rotated_bounds(Rotation::from_rotation_z(theta));
             let tol = 1e-3;
             assert!(

@@ -2,7 +2,7 @@
 #![allow(dead_code)]
 
 use herb_decide::DecideError;
-use herb_decide::policy::{DecisionInput, Policy};
+use herb_decide::policy::{DecisionInput, PlanarPose, Policy};
 use herb_sim::{Catalog, Heightmap, ObsLayout, TypeIdx};
 
 /// One decision of `p` for object `t` over `hm` at step 0 (a zero observation), with `after`
@@ -13,8 +13,9 @@ pub fn decide(
     hm: &Heightmap,
     t: TypeIdx,
     after: &[TypeIdx],
-) -> Result<[f32; 3], DecideError> {
+) -> Result<PlanarPose, DecideError> {
     let obs = vec![0.0; ObsLayout::LEN];
+    let remaining: Vec<TypeIdx> = std::iter::once(t).chain(after.iter().copied()).collect();
     p.decide(&DecisionInput {
         observation: &obs,
         heightmap: hm,
@@ -22,6 +23,6 @@ pub fn decide(
         shape: c.shape(t),
         step: 0,
         catalog: c,
-        after,
+        remaining: &remaining,
     })
 }

@@ -1,15 +1,20 @@
 //! The one decision from a heightmap to a placement, as herbd runs it and as the evaluation, the
 //! decision bench and the bindings' expert labels run it.
 //!
-//! **Decision latency** (herbd's `decision_ns`, Table I's latency column, the decision bench) is
-//! the duration of one [`Decider::decide`] call: checking the heightmap and taking one copy of
-//! it, writing the observation when the policy reads one, the policy (with its own lattice or
-//! features), checking its action, and the z estimate of the chosen placement. Waiting for a
+//! A heightmap is checked once and copied once, when the decider receives it
+//! ([`Decider::observe`]: herbd's decision worker does so as each camera frame arrives); every
+//! decision on it ([`Decider::decide`]) then trusts it, and so do the policies.
+//!
+//! **Decision latency** (Table I's latency column, the decision bench) is the duration of one
+//! [`Decider::decide_on`] call: checking the heightmap and taking one copy of it, writing the
+//! observation when the policy reads one, the policy (with its own lattice or features),
+//! checking its placement, and the z estimate of the chosen placement. herbd's `decision_ns` is
+//! the same without the check and the copy, which it does as the frame arrives. Waiting for a
 //! heightmap and planning the motion are not part of it.
 
 use crate::error::{DecideError, Result};
-use crate::policy::{DecisionInput, Policy, check_action};
-use herb_core::observation::{Projections, action_to_placement};
+use crate::policy::{DecisionInput, PlanarPose, Policy, check_placement};
+use herb_core::observation::Projections;
 use herb_core::zestimate::{ZScratch, release_pose_on};
 use herb_core::{GridSpec, Heightmap, ObsLayout, SharedCatalog, TypeIdx};
 use parry3d::math::{Pose, Rotation, Vector};
@@ -40,11 +45,11 @@ impl<'a> From<&'a Heightmap> for HeightmapView<'a> {
     }
 }
 
-/// Where an object goes: the policy's action and the release pose it gives.
+/// Where an object goes: the policy's placement and the release pose it gives.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Decision {
-    /// The policy's normalised action (x, y, theta in -1..=1).
-    pub action: [f32; 3],
+    /// The placement the policy chose (x, y, yaw in B), as it chose it.
+    pub placement: PlanarPose,
     /// Release position of the canonical origin in the box frame B (m): x, y, and z from the
     /// heightmap plus the release clearance.
     pub position: [f32; 3],
@@ -80,6 +85,7 @@ pub struct Decider<P: Policy + ?Sized = dyn Policy> {
     catalog: SharedCatalog,
     projections: Projections,
     obs: Vec<f32>,
+    /// The last good heightmap observed (`None` before the first).
     hm: Option<Heightmap>,
     zs: ZScratch,
     clearance_m: f32,
@@ -140,43 +146,58 @@ impl<P: Policy + ?Sized> Decider<P> {
         self.policy.begin_episode(seed);
     }
 
-    /// The placement of `object` (step `step` of the episode, `after` the objects still to come)
-    /// on `heightmap`. A heightmap whose grid is not the box's at its cell size, or with a cell
-    /// that is not finite or out of range, is rejected; so is a non-finite or out-of-range
-    /// action. [`DecideError::NoFeasiblePlacement`] when the policy finds nothing that fits.
-    pub fn decide(
-        &mut self,
-        heightmap: HeightmapView<'_>,
-        object: TypeIdx,
-        step: usize,
-        after: &[TypeIdx],
-    ) -> Result<Decision> {
+    /// Checks `heightmap` and takes its one copy, on which the next decisions are made. A
+    /// heightmap whose grid is not the box's at its cell size, or with a cell that is not finite
+    /// or out of range, is rejected, and the decisions stay on the last good one.
+    pub fn observe(&mut self, heightmap: HeightmapView<'_>) -> Result<()> {
         let bad = |reason: String| DecideError::Rejected {
             policy: "decider".into(),
             reason,
         };
         let spec =
             GridSpec::for_box(heightmap.cell_m).map_err(|e| bad(format!("heightmap: {e}")))?;
-        if (spec.nx, spec.ny) != (heightmap.nx, heightmap.ny) || heightmap.cells.len() != spec.len()
-        {
+        if (spec.nx, spec.ny) != (heightmap.nx, heightmap.ny) {
             return Err(bad(format!(
-                "heightmap of {} x {} cells ({} values) of {} m; the box needs {} x {}",
-                heightmap.nx,
-                heightmap.ny,
-                heightmap.cells.len(),
-                heightmap.cell_m,
-                spec.nx,
-                spec.ny
+                "heightmap of {} x {} cells of {} m; the box needs {} x {}",
+                heightmap.nx, heightmap.ny, heightmap.cell_m, spec.nx, spec.ny
             )));
         }
+        herb_core::heightmap::check_cells(&spec, heightmap.cells)
+            .map_err(|e| bad(e.to_string()))?;
         if self.hm.as_ref().map(|h| *h.spec()) != Some(spec) {
             self.hm = Some(Heightmap::new(spec));
         }
-        let hm = self.hm.as_mut().expect("set above");
         // One snapshot (a shared frame must not change under the decision).
+        let hm = self.hm.as_mut().expect("set above");
         hm.data_mut().copy_from_slice(heightmap.cells);
-        hm.validate().map_err(|e| bad(e.to_string()))?;
-        let hm = &*hm;
+        Ok(())
+    }
+
+    /// [`Decider::observe`] then [`Decider::decide`]: one decision on a heightmap of its own.
+    pub fn decide_on(
+        &mut self,
+        heightmap: HeightmapView<'_>,
+        remaining: &[TypeIdx],
+        step: usize,
+    ) -> Result<Decision> {
+        self.observe(heightmap)?;
+        self.decide(remaining, step)
+    }
+
+    /// The placement of `remaining[0]` (step `step` of the episode, the rest the objects still
+    /// to come) on the heightmap last observed. A placement that is not finite or lies outside
+    /// the box is rejected; so is a decision without a checked heightmap or without an object.
+    /// [`DecideError::NoFeasiblePlacement`] when the policy finds nothing that fits.
+    pub fn decide(&mut self, remaining: &[TypeIdx], step: usize) -> Result<Decision> {
+        let bad = |reason: &str| DecideError::Rejected {
+            policy: "decider".into(),
+            reason: reason.into(),
+        };
+        let &object = remaining.first().ok_or_else(|| bad("no object to place"))?;
+        let hm = self
+            .hm
+            .as_ref()
+            .ok_or_else(|| bad("no checked heightmap to decide on"))?;
         let observation: &[f32] = if self.policy.needs_observation() {
             ObsLayout::write(hm, Some(self.projections.get(object)), &mut self.obs)?;
             &self.obs
@@ -184,7 +205,7 @@ impl<P: Policy + ?Sized> Decider<P> {
             &[]
         };
         let shape = self.catalog.shape(object);
-        let action = self
+        let placement = self
             .policy
             .decide(&DecisionInput {
                 observation,
@@ -193,10 +214,16 @@ impl<P: Policy + ?Sized> Decider<P> {
                 shape,
                 step,
                 catalog: &self.catalog,
-                after,
+                remaining,
             })
-            .and_then(|a| check_action(self.policy.name(), a))?;
-        let (x, y, theta) = action_to_placement(action)?;
+            .and_then(|p| check_placement(self.policy.name(), p))?;
+        let PlanarPose { x, y, theta } = placement;
+        // Yaw within (-pi, pi] as the arm plans it; one already there is kept bit for bit.
+        let theta = if (-std::f32::consts::PI..=std::f32::consts::PI).contains(&theta) {
+            theta
+        } else {
+            herb_core::frames::wrap_angle(theta)
+        };
         // Normalised once, by the release pose (as before it was moved there).
         let rot = Rotation::from_rotation_z(theta);
         // The one release pose (z estimate plus the clearance), as the search's job twin
@@ -205,7 +232,7 @@ impl<P: Policy + ?Sized> Decider<P> {
             .translation
             .z;
         Ok(Decision {
-            action,
+            placement,
             position: [x, y, z],
             theta,
         })
