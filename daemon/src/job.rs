@@ -14,7 +14,7 @@
 //!
 //! and the machine answers through [`Effects`]: replies, status events, joint and gripper
 //! commands, planner and decision requests, in the order the shell must publish them. Unit tests
-//! (`job/tests.rs`) drive it with scripted inputs and a fake clock.
+//! (`job/tests/`) drive it with scripted inputs and a fake clock.
 //!
 //! # Per object
 //!
@@ -206,11 +206,13 @@ enum Phase {
     AwaitOperator {
         seg: usize,
     },
-    /// Braking: `cursor` into the brake buffer once it arrived (`None` while it is computed).
+    /// Braking: `cursor` into the brake buffer once it arrived (`None` while it is computed);
+    /// `then` what follows the brake.
     Braking {
         cursor: Option<usize>,
         seg: usize,
         active_cursor: usize,
+        then: AfterBrake,
     },
     /// Holding after a fault, commanding no joint: resumes once every input has been fresh
     /// since `healthy_since` for `resume_after_s`. `recovered`: the job was taken up from the
@@ -236,26 +238,66 @@ enum Phase {
     Retreating {
         asked: bool,
     },
+    /// The daemon stops (SIGINT, SIGTERM): the arm at rest, nothing more planned or streamed,
+    /// jobs refused; the loop may exit. A job that ran is reported halted where it stopped
+    /// (`recovered`: one taken up from the journal that had not resumed, commanding nothing).
+    Stopped {
+        recovered: bool,
+    },
 }
 
-/// The job state machine. Built once; no method allocates.
-pub struct Job {
-    /// What the machine is built with.
-    p: JobParams,
-    inputs: Inputs,
-    // the job; what belongs to one phase only is in its `Phase` variant
-    phase: Phase,
-    job_id: u64,
+/// What follows a brake.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum AfterBrake {
+    /// Hold, faulted, until every input is fresh again (a fault's brake).
+    Hold,
+    /// The retreat of a cancelled job.
+    Retreat,
+    /// The daemon stops ([`Phase::Stopped`]).
+    Stop,
+}
+
+/// How far a job got: its objects, their packing order, the current object and the counts.
+/// The running job's; between jobs the last one's, which statuses go on reporting.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Progress {
     /// The job's objects as submitted.
     objects: [u16; MAX_JOB_OBJECTS],
-    /// `order` holds this job's packing order.
+    /// `order` holds the job's packing order (else the objects as submitted).
     ordered: bool,
     order: [u16; MAX_JOB_OBJECTS],
     count: usize,
+    /// The current object, in `order`.
     index: usize,
+    /// Objects placed.
     done: usize,
-    release_stamp: u64,
-    holding: bool,
+    /// Time the job held objects at the lift pose waiting for decisions (ns).
+    wait_ns: u64,
+    /// Missed grasps of the current object.
+    missed: u32,
+}
+
+impl Progress {
+    /// No job yet.
+    const NONE: Progress = Progress {
+        objects: [0; MAX_JOB_OBJECTS],
+        ordered: false,
+        order: [0; MAX_JOB_OBJECTS],
+        count: 0,
+        index: 0,
+        done: 0,
+        wait_ns: 0,
+        missed: 0,
+    };
+}
+
+/// One job: everything that belongs to it alone, built whole when it is accepted
+/// ([`Job::job_request`]) or taken up from the journal ([`Job::recover`]), and dropped when it
+/// ends ([`Job::finish`]): nothing of a job is reset by hand for the next.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Run {
+    job_id: u64,
+    progress: Progress,
     /// The current object's decided placement (journaled: a restart does not decide it again)
     /// and, once its place is planned, its release configuration.
     placement: Option<Placement>,
@@ -270,31 +312,67 @@ pub struct Job {
     decide_since: u64,
     /// The current object's decision failed: the job ends at the arm's next standstill.
     decision_failed: Option<Fault>,
-    /// The object in the gripper is held turned by a half turn (from its pick's plan).
-    flip: bool,
-    /// Time this job held objects at the lift pose waiting for decisions (ns).
-    wait_ns: u64,
-    /// Missed grasps of the current object.
-    missed: u32,
     /// The current object's `Decided` was sent.
     announced: bool,
-    fault: Fault,
-    /// A client cancelled the job: brake, retreat, report `JobCancelled`.
-    cancelling: bool,
-    // trajectory buffers: two, moved between the machine and the planner, never allocated
-    active: Option<Box<MotionPlan>>,
-    spare: Option<Box<MotionPlan>>,
-    brake: Option<Box<MotionPlan>>,
-    out: Commands,
-    /// The daemon is stopping (SIGINT, SIGTERM): brake, refuse jobs, exit.
-    stopping: bool,
-    /// The joint outside its limits the last `OutsideLimits` or `BeyondArmLimits` fault named.
-    excess: Option<Excess>,
     /// The job waits for a confirmation before each grasp
     /// ([`PackJobRequest::CONFIRM_PICKS`]).
     confirm_picks: bool,
     /// The current try of the current object's pick is confirmed.
     confirmed: bool,
+    /// A client cancelled it: it brakes, retreats and ends `JobCancelled`. Carried by the job,
+    /// not by one phase: a cancelled job still passes through the motion's phases (its brake,
+    /// its retreat's stream, a fault on the way up).
+    cancelled: bool,
+}
+
+impl Run {
+    /// A job just accepted or taken up: `progress` so far, nothing decided, nothing asked.
+    fn new(job_id: u64, progress: Progress, confirm_picks: bool) -> Self {
+        Self {
+            job_id,
+            progress,
+            placement: None,
+            decision_ns: 0,
+            deciding: None,
+            decide_due: false,
+            decide_since: 0,
+            decision_failed: None,
+            announced: false,
+            confirm_picks,
+            confirmed: false,
+            cancelled: false,
+        }
+    }
+}
+
+/// The job state machine. Built once; no method allocates.
+pub struct Job {
+    /// What the machine is built with.
+    p: JobParams,
+    inputs: Inputs,
+    /// Where the machine stands; what belongs to one phase only is in its variant. Every change
+    /// goes through [`Job::set_phase`].
+    phase: Phase,
+    /// The job that runs (`None` between jobs).
+    run: Option<Run>,
+    /// The last job's progress, reported between jobs.
+    last: Progress,
+    // what outlives a job: the gripper, the box, the last word on faults
+    /// The gripper holds the current (or, after a job, the last) object.
+    holding: bool,
+    /// The object in the gripper is held turned by a half turn (from its pick's plan).
+    flip: bool,
+    /// Capture stamp of the gripper state that reported the last release: a decision waits
+    /// for a heightmap newer than it.
+    release_stamp: u64,
+    fault: Fault,
+    /// The joint outside its limits the last `OutsideLimits` or `BeyondArmLimits` fault named.
+    excess: Option<Excess>,
+    // trajectory buffers: two, moved between the machine and the planner, never allocated
+    active: Option<Box<MotionPlan>>,
+    spare: Option<Box<MotionPlan>>,
+    brake: Option<Box<MotionPlan>>,
+    out: Commands,
 }
 
 /// The machine's latched inputs: the newest valid sample of each source, the order checks that
@@ -439,50 +517,31 @@ impl Job {
             p,
             inputs: Inputs::default(),
             phase: Phase::Idle,
-            job_id: 0,
-            objects: [0; MAX_JOB_OBJECTS],
-            ordered: false,
-            order: [0; MAX_JOB_OBJECTS],
-            count: 0,
-            index: 0,
-            done: 0,
-            release_stamp: 0,
+            run: None,
+            last: Progress::NONE,
             holding: false,
-            placement: None,
-            decision_ns: 0,
-            deciding: None,
-            decide_due: false,
-            decide_since: 0,
-            decision_failed: None,
             flip: false,
-            wait_ns: 0,
-            missed: 0,
-            announced: false,
+            release_stamp: 0,
             fault: Fault::None,
-            cancelling: false,
+            excess: None,
             active: Some(a),
             spare: Some(b),
             brake: None,
             out: Commands::default(),
-            stopping: false,
-            excess: None,
-            confirm_picks: false,
-            confirmed: false,
         }
     }
 
     /// The rest of a cycle: the stop request (`stop`, seen once), input health, one step of
     /// the current phase, then the commands and the heartbeat. True when the daemon may exit
-    /// (stopping, and the arm no longer braking).
+    /// (stopped: the arm no longer braking).
     pub fn tick(&mut self, now: u64, stop: bool, fx: &mut impl Effects) -> bool {
-        if stop && !self.stopping {
-            self.stopping = true;
+        if stop && !self.stopping() {
             self.begin_stop(fx);
         }
         self.check_health(now, fx);
         self.step(now, fx);
         self.publish(now, fx);
-        self.stopping && !matches!(self.phase, Phase::Braking { .. })
+        matches!(self.phase, Phase::Stopped { .. })
     }
 
     /// The state reported in statuses.
@@ -491,8 +550,23 @@ impl Job {
             Phase::Idle => JobState::Idle,
             Phase::Braking { .. } => JobState::Braking,
             Phase::Faulted { .. } => JobState::Faulted,
+            // A job stopped with the daemon is halted where it stood.
+            Phase::Stopped { .. } if self.run.is_some() => JobState::Faulted,
+            Phase::Stopped { .. } => JobState::Idle,
             _ => JobState::Running,
         }
+    }
+
+    /// The daemon stops: braking for the stop, or stopped.
+    fn stopping(&self) -> bool {
+        matches!(
+            self.phase,
+            Phase::Stopped { .. }
+                | Phase::Braking {
+                    then: AfterBrake::Stop,
+                    ..
+                }
+        )
     }
 
     /// The job was taken up from the journal and has not resumed yet.
@@ -505,13 +579,14 @@ impl Job {
                     recovered: true,
                     ..
                 }
+                | Phase::Stopped { recovered: true }
         )
     }
 
     /// Commands are published: a job runs, and it is not a recovered one that has not resumed
     /// yet (between jobs, and until a job taken up from the journal resumes, nothing is).
     fn commanding(&self) -> bool {
-        !matches!(self.phase, Phase::Idle) && !self.recovered()
+        self.run.is_some() && !self.recovered()
     }
 
     /// Sensor inputs rejected so far (invalid, from the future, out of order).
@@ -535,9 +610,20 @@ impl Job {
         self.phase = phase;
     }
 
+    /// The running job's id (0 between jobs).
+    fn job_id(&self) -> u64 {
+        self.run.map_or(0, |r| r.job_id)
+    }
+
+    /// How far the running job got; between jobs, the last one.
+    fn progress(&self) -> &Progress {
+        self.run.as_ref().map_or(&self.last, |r| &r.progress)
+    }
+
     fn current_type(&self) -> u32 {
-        if self.index < self.count {
-            self.order[self.index] as u32
+        let p = self.progress();
+        if p.index < p.count {
+            p.order[p.index] as u32
         } else {
             NO_OBJECT
         }
@@ -553,28 +639,59 @@ impl Job {
         }
     }
 
-    /// Ends the job with `end` (`JobDone`, `JobFailed` or `JobCancelled`).
+    /// Ends the job with `end` (`JobDone`, `JobFailed` or `JobCancelled`): reported, then
+    /// dropped (its progress kept for the statuses between jobs).
     fn finish(&mut self, fx: &mut impl Effects, end: StatusEvent) {
-        self.set_phase(Phase::Idle);
-        self.cancelling = false;
-        self.forget_decision();
+        self.set_phase(if self.stopping() {
+            Phase::Stopped { recovered: false }
+        } else {
+            Phase::Idle
+        });
         self.emit(fx, end, NO_OBJECT, [0.0; 4], 0);
-        self.job_id = 0;
+        if let Some(r) = self.run.take() {
+            self.last = r.progress;
+        }
     }
 
     /// Drops the current object's decision and stops waiting for one (a late answer is then
     /// stale).
     fn forget_decision(&mut self) {
-        self.deciding = None;
-        self.decide_due = false;
-        self.decision_failed = None;
+        if let Some(r) = &mut self.run {
+            r.deciding = None;
+            r.decide_due = false;
+            r.decision_failed = None;
+        }
     }
 
     /// The current object's placement, decided already.
     fn decided_pose(&self) -> Option<[f32; 4]> {
-        self.placement
-            .filter(|p| p.index as usize == self.index)
+        let r = self.run.as_ref()?;
+        r.placement
+            .filter(|p| p.index as usize == r.progress.index)
             .map(|p| p.pose)
+    }
+
+    /// The current object's decision failed (the job ends at the arm's next standstill).
+    fn decision_failed(&self) -> Option<Fault> {
+        self.run.and_then(|r| r.decision_failed)
+    }
+
+    /// The running job was cancelled.
+    fn cancelled(&self) -> bool {
+        self.run.is_some_and(|r| r.cancelled)
+    }
+
+    /// The current object is done with (placed or skipped): the next one is current, with
+    /// nothing of this one's decision or tries left.
+    fn next_object(&mut self) {
+        if let Some(r) = &mut self.run {
+            r.progress.index += 1;
+            r.progress.missed = 0;
+            r.announced = false;
+            r.placement = None;
+            r.decision_ns = 0;
+        }
+        self.forget_decision();
     }
 }
 

@@ -8,9 +8,11 @@ use super::*;
 impl Job {
     /// Starts the current object: its decision is asked for, and its pick planned meanwhile.
     pub(super) fn begin_object(&mut self, fx: &mut impl Effects, now: u64) {
-        self.decision_failed = None;
-        self.confirmed = false;
-        self.decide_since = now;
+        if let Some(r) = &mut self.run {
+            r.decision_failed = None;
+            r.confirmed = false;
+            r.decide_since = now;
+        }
         self.ask_decision(fx, now);
         self.set_phase(Phase::Starting);
         self.request_motion(fx, Motion::Pick);
@@ -19,19 +21,22 @@ impl Job {
     /// Asks the decision worker where the current object goes (again on a later tick if its
     /// ring is full).
     pub(super) fn ask_decision(&mut self, fx: &mut impl Effects, now: u64) {
+        let after_stamp_ns = self.release_stamp;
+        let Some(r) = &mut self.run else { return };
+        let p = &r.progress;
         let req = DecisionRequest {
-            job_id: self.job_id,
-            index: self.index as u32,
-            order: self.order,
-            count: self.count as u32,
-            after_stamp_ns: self.release_stamp,
+            job_id: r.job_id,
+            index: p.index as u32,
+            order: p.order,
+            count: p.count as u32,
+            after_stamp_ns,
         };
         match fx.decide(req) {
             Ok(()) => {
-                self.deciding = Some((self.index, now));
-                self.decide_due = false;
+                r.deciding = Some((r.progress.index, now));
+                r.decide_due = false;
             }
-            Err(_) => self.decide_due = true,
+            Err(_) => r.decide_due = true,
         }
     }
 
@@ -39,15 +44,18 @@ impl Job {
     /// decided; else the arm holds it there until the decision comes (the wait is counted),
     /// and a failed decision ends the job.
     pub(super) fn await_decision(&mut self, fx: &mut impl Effects, now: u64) {
-        if let Some(f) = self.decision_failed {
+        if let Some(f) = self.decision_failed() {
             self.fault = f;
             self.finish(fx, StatusEvent::JobFailed);
         } else if self.decided_pose().is_some() {
             self.request_place(fx, now);
         } else {
-            if self.deciding.is_none() && !self.decide_due {
-                self.decide_since = now;
-                self.decide_due = true;
+            if let Some(r) = &mut self.run
+                && r.deciding.is_none()
+                && !r.decide_due
+            {
+                r.decide_since = now;
+                r.decide_due = true;
             }
             self.set_phase(Phase::AwaitDecision { since: now });
         }
@@ -70,12 +78,14 @@ impl Job {
                 None => return,
             },
         };
+        let Some(r) = self.run else { return };
+        let (index, order) = (r.progress.index, r.progress.order);
         let Some(buf) = self.spare.take() else {
             return;
         };
         let req = Request::Plan {
-            index: self.index as u32,
-            object: self.order[self.index],
+            index: index as u32,
+            object: order[index],
             from: self.out.cmd.position,
             motion,
             pose,
@@ -84,8 +94,7 @@ impl Job {
         match fx.plan(req) {
             Ok(()) => {
                 self.set_phase(Phase::Planning);
-                if self.confirm_picks && !self.confirmed && !matches!(motion, Motion::Place { .. })
-                {
+                if r.confirm_picks && !r.confirmed && !matches!(motion, Motion::Place { .. }) {
                     // A pick: the operator is asked for the object now, while the arm comes.
                     self.emit(
                         fx,
@@ -104,9 +113,7 @@ impl Job {
     pub(super) fn step(&mut self, now: u64, fx: &mut impl Effects) {
         // The decision runs beside the motion: asked again when due, and given up when it does
         // not come in time (a hung worker never holds the arm).
-        let live = self.job_id != 0
-            && !self.stopping
-            && !self.cancelling
+        let live = self.run.is_some_and(|r| !r.cancelled)
             && matches!(
                 self.phase,
                 Phase::Starting
@@ -117,43 +124,44 @@ impl Job {
                     | Phase::Regrasp { .. }
                     | Phase::AwaitDecision { .. }
             );
-        if live && self.decision_failed.is_none() && self.decided_pose().is_none() {
-            if self.decide_due && self.deciding.is_none() {
+        if live && self.decision_failed().is_none() && self.decided_pose().is_none() {
+            if self
+                .run
+                .is_some_and(|r| r.decide_due && r.deciding.is_none())
+            {
                 self.ask_decision(fx, now);
             }
-            if let Some((_, at)) = self.deciding
-                && now.saturating_sub(at) > self.p.decision_timeout_ns
+            let timeout = self.p.decision_timeout_ns;
+            if let Some(r) = &mut self.run
+                && let Some((_, at)) = r.deciding
+                && now.saturating_sub(at) > timeout
             {
-                self.deciding = None;
-                self.decision_failed = Some(Fault::Decision);
+                r.deciding = None;
+                r.decision_failed = Some(Fault::Decision);
             }
         }
         match self.phase {
             Phase::Idle | Phase::Ordering | Phase::Planning => {}
-            Phase::Starting => {
-                if !self.stopping {
-                    self.request_motion(fx, Motion::Pick);
-                }
-            }
+            // A job cancelled before the stop ends cancelled where it stands.
+            Phase::Stopped { .. } if self.cancelled() => self.finish(fx, StatusEvent::JobCancelled),
+            Phase::Stopped { .. } => {}
+            Phase::Starting => self.request_motion(fx, Motion::Pick),
             Phase::AwaitDecision { since } => {
-                if self.stopping {
-                    return;
-                }
-                if let Some(f) = self.decision_failed {
-                    self.wait_ns += now.saturating_sub(since);
+                if let Some(f) = self.decision_failed() {
+                    self.add_wait(now, since);
                     self.fault = f;
                     self.finish(fx, StatusEvent::JobFailed);
                 } else if self.decided_pose().is_some() {
                     self.request_motion(fx, Motion::Place { flip: self.flip });
                     if self.phase == Phase::Planning {
-                        self.wait_ns += now.saturating_sub(since);
+                        self.add_wait(now, since);
                     }
                 }
             }
             Phase::Streaming { seg, cursor } => self.stream(fx, now, seg, cursor),
             Phase::Gripper { action, seg, since } => self.grip(fx, now, action, seg, since),
             Phase::AwaitOperator { seg } => {
-                if self.confirmed && !self.stopping && !self.cancelling {
+                if self.run.is_some_and(|r| r.confirmed && !r.cancelled) {
                     self.next_segment(fx, now, seg + 1);
                 }
             }
@@ -162,7 +170,8 @@ impl Job {
                 cursor,
                 seg,
                 active_cursor,
-            } => self.brake_step(fx, cursor, seg, active_cursor),
+                then,
+            } => self.brake_step(fx, cursor, seg, active_cursor, then),
             Phase::Retreating { asked: false } => self.retreat(fx),
             Phase::Retreating { asked: true } | Phase::Recovering { asked: true } => {}
             Phase::Abandoning => {
@@ -170,15 +179,17 @@ impl Job {
                 self.finish(fx, StatusEvent::JobFailed);
             }
             Phase::Recovering { asked: false } => {
-                let (objects, ordered) = if self.ordered {
-                    (self.order, true)
+                let Some(r) = self.run else { return };
+                let p = &r.progress;
+                let (objects, ordered) = if p.ordered {
+                    (p.order, true)
                 } else {
-                    (self.objects, false)
+                    (p.objects, false)
                 };
                 let order = Request::Order {
-                    job_id: self.job_id,
+                    job_id: r.job_id,
                     objects,
-                    count: self.count,
+                    count: p.count,
                     ordered,
                 };
                 if fx.plan(order).is_ok() {
@@ -190,12 +201,12 @@ impl Job {
                 healthy_since,
                 recovered,
             } => {
-                if self.cancelling {
+                if self.cancelled() {
                     // Cancelled where it stopped (its inputs may be gone: no retreat).
                     self.finish(fx, StatusEvent::JobCancelled);
                     return;
                 }
-                if self.stopping || self.job_id == 0 {
+                if self.run.is_none() {
                     return;
                 }
                 if let Some(why) = self.not_ready(now) {
@@ -258,20 +269,18 @@ impl Job {
                 GripperAction::Open => {
                     self.holding = false;
                     self.release_stamp = g.header.stamp_ns;
-                    let dns = self.decision_ns;
                     let (ty, pose) = self
                         .active
                         .as_ref()
                         .map(|p| (p.object as u32, p.pose))
                         .unwrap_or((NO_OBJECT, [0.0; 4]));
-                    self.done += 1;
+                    let mut dns = 0;
+                    if let Some(r) = &mut self.run {
+                        r.progress.done += 1;
+                        dns = r.decision_ns;
+                    }
                     self.emit(fx, StatusEvent::Placed, ty, pose, dns);
-                    self.index += 1;
-                    self.announced = false;
-                    self.missed = 0;
-                    self.placement = None;
-                    self.decision_ns = 0;
-                    self.forget_decision();
+                    self.next_object();
                 }
             }
             self.next_segment(fx, now, seg + 1);
@@ -279,7 +288,9 @@ impl Job {
             if action == GripperAction::Close && g.holding == 0 {
                 // Closed on nothing (or not holding in time): open, then pick again or skip.
                 self.fault = Fault::MissedGrasp;
-                self.missed += 1;
+                if let Some(r) = &mut self.run {
+                    r.progress.missed += 1;
+                }
                 self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
                 self.out.grip_cmd = GripperAction::Open;
                 self.out.grip_object = NO_OBJECT;
@@ -296,9 +307,6 @@ impl Job {
     /// After a missed grasp: once the gripper reports open, pick again with the same placement
     /// (at most `grasp_retries` times), else skip the object.
     pub(super) fn regrasp(&mut self, fx: &mut impl Effects, now: u64, since: u64) {
-        if self.stopping {
-            return;
-        }
         let Some(g) = self.inputs.gs else { return };
         let opened = g.closed == 0 && g.header.stamp_ns >= since;
         if !opened {
@@ -309,32 +317,30 @@ impl Job {
             }
             return;
         }
-        if self.cancelling {
+        if self.cancelled() {
             self.retreat(fx);
             return;
         }
-        if let Some(f) = self.decision_failed {
+        if let Some(f) = self.decision_failed() {
             // Its decision failed meanwhile: the job ends here, the gripper open.
             self.fault = f;
             self.finish(fx, StatusEvent::JobFailed);
             return;
         }
-        if self.missed <= self.p.grasp_retries {
+        if self.progress().missed <= self.p.grasp_retries {
             // The same object picked again; its decision (made or still coming) stands. A
             // person feeding the station puts it back and confirms this try.
-            self.confirmed = false;
+            if let Some(r) = &mut self.run {
+                r.confirmed = false;
+            }
             self.set_phase(Phase::Starting);
             self.request_motion(fx, Motion::Pick);
             return;
         }
         // Given up: skipped with its reason, the job goes on.
         self.emit(fx, StatusEvent::Skipped, self.current_type(), [0.0; 4], 0);
-        self.index += 1;
-        self.announced = false;
-        self.missed = 0;
-        self.placement = None;
-        self.forget_decision();
-        if self.index >= self.count {
+        self.next_object();
+        if self.progress().index >= self.progress().count {
             self.finish(fx, StatusEvent::JobDone);
         } else {
             self.begin_object(fx, now);
@@ -349,12 +355,12 @@ impl Job {
                 .as_ref()
                 .map_or(0, |p| if seg == 0 { 0 } else { p.segments[seg - 1].end });
             self.set_phase(Phase::Streaming { seg, cursor: start });
-        } else if self.cancelling {
+        } else if self.cancelled() {
             self.finish(fx, StatusEvent::JobCancelled);
         } else if self.holding {
             // Picked: the place once its placement is decided.
             self.await_decision(fx, now);
-        } else if self.index >= self.count {
+        } else if self.progress().index >= self.progress().count {
             self.finish(fx, StatusEvent::JobDone);
         } else {
             self.begin_object(fx, now);
@@ -380,7 +386,7 @@ impl Job {
         // At the segment's end, at rest.
         self.out.cmd.velocity = [0.0; DOF];
         self.out.cmd.acceleration = [0.0; DOF];
-        if let Some(f) = self.decision_failed
+        if let Some(f) = self.decision_failed()
             && !self.holding
         {
             // The decision failed and nothing is held: the job ends at this standstill.
@@ -392,7 +398,8 @@ impl Job {
             .segments()
             .get(seg + 1)
             .is_some_and(|n| n.then == Some(GripperAction::Close));
-        if sg.then.is_none() && grasp_next && self.confirm_picks && !self.confirmed {
+        let unconfirmed = self.run.is_some_and(|r| r.confirm_picks && !r.confirmed);
+        if sg.then.is_none() && grasp_next && unconfirmed {
             // Above the station: no descent before the operator says the object is there.
             self.set_phase(Phase::AwaitOperator { seg });
             return;
@@ -413,6 +420,13 @@ impl Job {
                 });
             }
             None => self.next_segment(fx, now, seg + 1),
+        }
+    }
+
+    /// Counts a wait at the lift pose for the current object's decision, since `since`.
+    pub(super) fn add_wait(&mut self, now: u64, since: u64) {
+        if let Some(r) = &mut self.run {
+            r.progress.wait_ns += now.saturating_sub(since);
         }
     }
 }

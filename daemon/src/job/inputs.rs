@@ -67,7 +67,7 @@ impl Job {
     /// started when accepted.
     pub fn job_request(&mut self, r: &PackJobRequest, now: u64, fx: &mut impl Effects) {
         let verdict = r.validate(self.p.catalog_len).and_then(|()| {
-            if self.stopping {
+            if self.stopping() {
                 Err((RejectReason::ShuttingDown, 0))
             } else if self.phase != Phase::Idle {
                 Err((RejectReason::Busy, 0))
@@ -103,20 +103,33 @@ impl Job {
     pub fn cancel_request(&mut self, r: &CancelJobRequest, fx: &mut impl Effects) {
         let reason = match r.validate() {
             Err(e) => e,
-            Ok(()) if self.stopping => RejectReason::ShuttingDown,
-            Ok(()) if self.job_id == 0 || r.job_id != self.job_id => RejectReason::NoSuchJob,
+            Ok(()) if self.stopping() => RejectReason::ShuttingDown,
+            Ok(()) if self.job_id() == 0 || r.job_id != self.job_id() => RejectReason::NoSuchJob,
             Ok(()) => RejectReason::None,
         };
         if reason != RejectReason::None {
             self.inputs.rejected_requests += 1;
         }
         fx.cancel_reply(r.job_id, reason);
-        if reason != RejectReason::None || self.cancelling {
+        let Some(run) = &mut self.run else { return };
+        if reason != RejectReason::None || run.cancelled {
             return;
         }
-        self.cancelling = true;
+        run.cancelled = true;
         match self.phase {
-            Phase::Streaming { .. } if self.moving() => self.begin_brake(fx),
+            Phase::Streaming { .. } if self.moving() => self.begin_brake(fx, AfterBrake::Retreat),
+            // Braking for a fault: the retreat follows the brake.
+            Phase::Braking {
+                cursor,
+                seg,
+                active_cursor,
+                then: AfterBrake::Hold,
+            } => self.set_phase(Phase::Braking {
+                cursor,
+                seg,
+                active_cursor,
+                then: AfterBrake::Retreat,
+            }),
             // At rest: retreat now.
             Phase::Ordering
             | Phase::Starting
@@ -136,14 +149,13 @@ impl Job {
     pub fn confirm_request(&mut self, r: &ConfirmPickRequest, fx: &mut impl Effects) {
         let reason = match r.validate() {
             Err(e) => e,
-            Ok(()) if self.stopping => RejectReason::ShuttingDown,
-            Ok(()) if self.job_id == 0 || r.job_id != self.job_id => RejectReason::NoSuchJob,
+            Ok(()) if self.stopping() => RejectReason::ShuttingDown,
+            Ok(()) if self.job_id() == 0 || r.job_id != self.job_id() => RejectReason::NoSuchJob,
             Ok(())
-                if !self.confirm_picks
-                    || self.cancelling
+                if !self.run.is_some_and(|j| j.confirm_picks && !j.cancelled)
                     || self.holding
-                    || r.object_index as usize != self.index
-                    || r.attempt != self.missed =>
+                    || r.object_index as usize != self.progress().index
+                    || r.attempt != self.progress().missed =>
             {
                 RejectReason::NotAwaited
             }
@@ -151,8 +163,8 @@ impl Job {
         };
         if reason != RejectReason::None {
             self.inputs.rejected_requests += 1;
-        } else {
-            self.confirmed = true;
+        } else if let Some(j) = &mut self.run {
+            j.confirmed = true;
         }
         fx.confirm_reply(r.job_id, reason);
     }
@@ -166,9 +178,10 @@ impl Job {
             return;
         };
         let held = self.holding || self.inputs.gs.is_some_and(|g| g.holding == 1);
+        let p = self.progress();
         let req = Request::Retreat {
             from: self.out.cmd.position,
-            held: held.then(|| self.order.get(self.index).copied()).flatten(),
+            held: held.then(|| p.order.get(p.index).copied()).flatten(),
             buf,
         };
         match fx.plan(req) {
@@ -182,24 +195,19 @@ impl Job {
         let n = r.objects().len();
         let mut objects = [0u16; MAX_JOB_OBJECTS];
         objects[..n].copy_from_slice(r.objects());
-        self.job_id = r.job_id;
-        self.objects = objects;
-        self.ordered = false;
-        self.placement = None;
-        self.forget_decision();
-        self.flip = false;
-        self.wait_ns = 0;
-        self.count = n;
-        self.index = 0;
-        self.done = 0;
-        self.fault = Fault::None;
-        self.cancelling = false;
+        let progress = Progress {
+            objects,
+            count: n,
+            ..Progress::NONE
+        };
+        let confirm_picks = r.flags & PackJobRequest::CONFIRM_PICKS != 0;
+        self.run = Some(Run::new(r.job_id, progress, confirm_picks));
+        // What outlives a job, taken up from the measured state: the gripper's, and no release
+        // or fault of an earlier job.
         self.holding = self.inputs.gs.is_some_and(|g| g.holding == 1);
-        self.missed = 0;
-        self.announced = false;
+        self.flip = false;
         self.release_stamp = 0;
-        self.confirm_picks = r.flags & PackJobRequest::CONFIRM_PICKS != 0;
-        self.confirmed = false;
+        self.fault = Fault::None;
         self.excess = None;
         let q = self.inputs.js.map(|j| j.position).unwrap_or_default();
         self.out.cmd = Setpoint::at_rest(q);
@@ -241,10 +249,12 @@ impl Job {
                 job_id,
                 order,
                 count,
-            } if job_id == self.job_id => {
-                self.order = order;
-                self.count = count;
-                self.ordered = true;
+            } if job_id == self.job_id() => {
+                if let Some(r) = &mut self.run {
+                    r.progress.order = order;
+                    r.progress.count = count;
+                    r.progress.ordered = true;
+                }
                 match self.phase {
                     Phase::Ordering => self.begin_object(fx, now),
                     Phase::Recovering { .. } | Phase::Abandoning => {
@@ -258,7 +268,7 @@ impl Job {
             }
             Response::Ordered { .. } => {}
             Response::OrderFailed { job_id }
-                if job_id == self.job_id
+                if job_id == self.job_id()
                     && matches!(
                         self.phase,
                         Phase::Ordering | Phase::Recovering { .. } | Phase::Abandoning
@@ -278,14 +288,16 @@ impl Job {
             }
             Response::Planned(plan) => {
                 let planning = matches!(self.phase, Phase::Planning);
-                if planning && !self.stopping && !self.cancelling {
+                if planning && !self.cancelled() {
                     if let Some(old) = self.active.take() {
                         self.recycle(old);
                     }
                     // A place (or pick and place) knows where the gripper opens: journaled, so
                     // that a restart tells a released object from a held one.
-                    if let Some(q) = release_q(&plan) {
-                        self.placement = Some(Placement {
+                    if let Some(q) = release_q(&plan)
+                        && let Some(r) = &mut self.run
+                    {
+                        r.placement = Some(Placement {
                             index: plan.index as u16,
                             pose: plan.pose,
                             release_q: Some(q),
@@ -296,14 +308,17 @@ impl Job {
                     self.set_phase(Phase::Streaming { seg: 0, cursor: 0 });
                 } else {
                     self.recycle(plan);
-                    if planning && self.cancelling && !self.stopping {
+                    if planning && self.cancelled() {
                         self.retreat(fx);
                     }
                 }
             }
             Response::Braked(buf) => {
                 if let Phase::Braking {
-                    seg, active_cursor, ..
+                    seg,
+                    active_cursor,
+                    then,
+                    ..
                 } = self.phase
                 {
                     self.brake = Some(buf);
@@ -311,6 +326,7 @@ impl Job {
                         cursor: Some(0),
                         seg,
                         active_cursor,
+                        then,
                     });
                 } else {
                     self.recycle(buf);
@@ -319,12 +335,13 @@ impl Job {
             Response::Failed { fault, buf } => {
                 self.recycle(buf);
                 match self.phase {
-                    Phase::Planning if self.cancelling => self.retreat(fx),
+                    Phase::Planning if self.cancelled() => self.retreat(fx),
                     Phase::Planning => {
                         self.fault = fault;
                         self.finish(fx, StatusEvent::JobFailed);
                     }
-                    Phase::Braking { .. } => self.enter_faulted(fx),
+                    // No brake: halted where the plan stops.
+                    Phase::Braking { then, .. } => self.halt(fx, then),
                     // No way up: the arm stays where it stopped.
                     Phase::Retreating { .. } => {
                         self.fault = fault;
@@ -339,26 +356,26 @@ impl Job {
     /// One decision from the worker. A stale one (an earlier job's or object's, or one the
     /// machine stopped waiting for) changes nothing.
     pub fn decision_response(&mut self, d: DecisionResponse, now: u64, fx: &mut impl Effects) {
-        let awaited = self.job_id != 0
-            && d.job_id == self.job_id
-            && self.deciding.is_some_and(|(i, _)| i == d.index as usize)
-            && self.index == d.index as usize;
+        let Some(r) = &mut self.run else { return };
+        let index = r.progress.index;
+        let awaited = d.job_id == r.job_id
+            && r.deciding.is_some_and(|(i, _)| i == d.index as usize)
+            && index == d.index as usize;
         if !awaited {
             return;
         }
-        self.deciding = None;
+        r.deciding = None;
         match d.outcome {
             Ok(pose) => {
-                self.placement = Some(Placement {
-                    index: self.index as u16,
+                r.placement = Some(Placement {
+                    index: index as u16,
                     pose,
                     release_q: None,
                 });
-                self.decision_ns = d.decision_ns;
+                r.decision_ns = d.decision_ns;
                 // An object already announced (its place was planned before a fault or a
                 // restart) is not announced again: its `Placed` carries the pose.
-                if !self.announced {
-                    self.announced = true;
+                if !std::mem::replace(&mut r.announced, true) {
                     self.emit(
                         fx,
                         StatusEvent::Decided,
@@ -368,7 +385,7 @@ impl Job {
                     );
                 }
                 if let Phase::AwaitDecision { since } = self.phase {
-                    self.wait_ns += now.saturating_sub(since);
+                    self.add_wait(now, since);
                     self.request_place(fx, now);
                 }
             }
@@ -376,14 +393,14 @@ impl Job {
             // until the fresh-heightmap timeout (from when the object began waiting) says it
             // is a fault.
             Err(Fault::HeightmapTimeout) => {
-                if now.saturating_sub(self.decide_since) > self.p.timeouts.fresh_heightmap_ns {
-                    self.decide_since = now;
+                if now.saturating_sub(r.decide_since) > self.p.timeouts.fresh_heightmap_ns {
+                    r.decide_since = now;
                     self.raise(fx, Fault::HeightmapTimeout);
                 } else {
-                    self.decide_due = true;
+                    r.decide_due = true;
                 }
             }
-            Err(f) => self.decision_failed = Some(f),
+            Err(f) => r.decision_failed = Some(f),
         }
     }
 
@@ -443,7 +460,8 @@ impl Job {
             | Phase::Braking { .. }
             | Phase::Faulted { .. }
             | Phase::Recovering { .. }
-            | Phase::Abandoning => {}
+            | Phase::Abandoning
+            | Phase::Stopped { .. } => {}
             _ => {
                 if let Some(f) = self.stale_input(now) {
                     self.raise(fx, f);

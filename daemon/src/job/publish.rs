@@ -11,9 +11,11 @@ impl Job {
         self.status_of(event, NO_OBJECT, [0.0; 4], 0)
     }
 
-    /// The state between jobs, when the machine is idle with both buffers home (else `None`).
+    /// The state between jobs, when no job runs and both buffers are home (else `None`).
     pub fn snapshot(&self) -> Option<JobSnapshot> {
-        if self.phase != Phase::Idle || self.active.is_none() || self.spare.is_none() {
+        let between =
+            matches!(self.phase, Phase::Idle | Phase::Stopped { .. }) && self.run.is_none();
+        if !between || self.active.is_none() || self.spare.is_none() {
             return None;
         }
         Some(JobSnapshot {
@@ -22,7 +24,7 @@ impl Job {
             job: self.record(),
             release_stamp: self.release_stamp,
             fault: self.fault,
-            stopping: self.stopping,
+            stopping: self.stopping(),
         })
     }
 
@@ -31,37 +33,38 @@ impl Job {
     pub fn restore(&mut self, s: &JobSnapshot) {
         self.inputs = s.inputs;
         self.out = s.commands;
-        self.set_phase(Phase::Idle);
+        self.set_phase(if s.stopping {
+            Phase::Stopped { recovered: false }
+        } else {
+            Phase::Idle
+        });
         let r = &s.job;
-        self.job_id = r.job_id;
-        self.count = (r.count as usize).min(MAX_JOB_OBJECTS);
-        self.objects = r.objects;
-        self.ordered = r.ordered;
-        self.order = r.order;
-        self.index = r.index as usize;
-        self.done = r.done as usize;
+        self.run = None;
+        let count = (r.count as usize).min(MAX_JOB_OBJECTS);
+        self.last = Progress {
+            objects: r.objects,
+            ordered: r.ordered,
+            order: r.order,
+            count,
+            index: r.index as usize,
+            done: r.done as usize,
+            ..Progress::NONE
+        };
         self.holding = r.holding;
         self.flip = r.flip;
-        self.placement = r.placement;
-        self.forget_decision();
         self.release_stamp = s.release_stamp;
         self.fault = s.fault;
-        self.cancelling = false;
-        self.stopping = s.stopping;
-        self.announced = false;
-        self.missed = 0;
-        self.confirm_picks = r.confirm_picks;
-        self.confirmed = false;
         self.excess = None;
     }
 
     /// The job as the machine holds it, whatever its phase (between jobs: the last job's
-    /// objects, order and counts, `job_id` 0); the placement only if it is the current
-    /// object's. The order is the machine's even before the job is ordered: statuses name the
-    /// current object from it.
+    /// objects, order and counts, `job_id` 0, no placement); the placement only if it is the
+    /// current object's. The order is the machine's even before the job is ordered: statuses
+    /// name the current object from it.
     pub(super) fn record(&self) -> JobRecord {
         let phase = match self.phase {
             Phase::Idle => ObjectPhase::Idle,
+            Phase::Stopped { .. } if self.run.is_none() => ObjectPhase::Idle,
             Phase::Ordering => ObjectPhase::Ordering,
             Phase::Starting | Phase::Planning | Phase::AwaitDecision { .. } if self.holding => {
                 ObjectPhase::Carrying
@@ -82,25 +85,30 @@ impl Job {
             Phase::Braking { .. }
             | Phase::Faulted { .. }
             | Phase::Recovering { .. }
-            | Phase::Abandoning => ObjectPhase::Halted,
+            | Phase::Abandoning
+            | Phase::Stopped { .. } => ObjectPhase::Halted,
         };
+        let p = self.progress();
         // Past the job's objects the machine reads nothing: kept as zeros.
         let (mut objects, mut order) = ([0; MAX_JOB_OBJECTS], [0; MAX_JOB_OBJECTS]);
-        objects[..self.count].copy_from_slice(&self.objects[..self.count]);
-        order[..self.count].copy_from_slice(&self.order[..self.count]);
+        objects[..p.count].copy_from_slice(&p.objects[..p.count]);
+        order[..p.count].copy_from_slice(&p.order[..p.count]);
         JobRecord {
-            job_id: self.job_id,
-            count: self.count as u16,
+            job_id: self.job_id(),
+            count: p.count as u16,
             objects,
-            ordered: self.ordered,
+            ordered: p.ordered,
             order,
-            index: self.index as u16,
-            done: self.done as u16,
+            index: p.index as u16,
+            done: p.done as u16,
             holding: self.holding,
             flip: self.flip,
             phase,
-            placement: self.placement.filter(|p| p.index as usize == self.index),
-            confirm_picks: self.confirm_picks,
+            placement: self
+                .run
+                .and_then(|r| r.placement)
+                .filter(|pl| pl.index as usize == p.index),
+            confirm_picks: self.run.is_some_and(|r| r.confirm_picks),
         }
     }
 
@@ -109,8 +117,7 @@ impl Job {
     /// ordered, its order is the objects as submitted. Allocates nothing; the loop compares it
     /// with the last one it handed to the writer.
     pub fn journal(&self) -> JobRecord {
-        if self.job_id == 0
-            || self.cancelling
+        if self.run.is_none_or(|r| r.cancelled)
             || matches!(self.phase, Phase::Idle | Phase::Retreating { .. })
         {
             return JobRecord::NONE;
@@ -126,7 +133,7 @@ impl Job {
         if self.commanding() {
             // Faulted, nothing moves the arm: the robot holds by itself, and the next command
             // is planned from the state measured when the job resumes.
-            let halted = matches!(self.phase, Phase::Faulted { .. });
+            let halted = matches!(self.phase, Phase::Faulted { .. } | Phase::Stopped { .. });
             let q = self.out.cmd.position;
             // Inside the limits, or between them and where the arm stood when the job started
             // or resumed (the way back in from a sag past a limit).
@@ -145,13 +152,13 @@ impl Job {
             if self.out.grip_due || now.saturating_sub(self.out.grip_sent_at) >= GRIPPER_REPEAT_NS {
                 self.out.grip_due = false;
                 self.out.grip_sent_at = now;
-                fx.gripper(self.job_id, self.out.grip_cmd, self.out.grip_object);
+                fx.gripper(self.job_id(), self.out.grip_cmd, self.out.grip_object);
             }
         }
         if now.saturating_sub(self.out.last_heartbeat) >= HEARTBEAT_PERIOD_NS {
             self.out.last_heartbeat = now;
             // Between jobs, a heartbeat's fault says why a job would be refused now.
-            if self.phase == Phase::Idle {
+            if self.run.is_none() {
                 self.fault = self.not_ready(now).unwrap_or(Fault::None);
                 if matches!(self.fault, Fault::OutsideLimits | Fault::BeyondArmLimits) {
                     self.excess = self.measured_excess().map(|(_, e)| e);
@@ -174,17 +181,18 @@ impl Job {
             StatusEvent::JobCancelled => JobState::Cancelled,
             _ => self.state(),
         };
+        let p = self.progress();
         let mut s = Status {
             header: Header::at(0, 0),
-            job_id: self.job_id,
+            job_id: self.job_id(),
             event: event as u32,
             state: state as u32,
             fault: self.fault as u32,
-            objects_total: self.count as u32,
-            objects_done: self.done.min(self.count) as u32,
-            object_index: self.index as u32,
+            objects_total: p.count as u32,
+            objects_done: p.done.min(p.count) as u32,
+            object_index: p.index as u32,
             object_type,
-            decision_wait_ms: (self.wait_ns / 1_000_000).min(u32::MAX as u64) as u32,
+            decision_wait_ms: (p.wait_ns / 1_000_000).min(u32::MAX as u64) as u32,
             pose,
             decision_ns: dns,
             cycles: 0,
@@ -195,7 +203,7 @@ impl Job {
             limit_joint: NO_JOINT,
             limit_position_rad: 0.0,
             limit_bound_rad: 0.0,
-            attempt: self.missed,
+            attempt: p.missed,
         };
         if matches!(self.fault, Fault::OutsideLimits | Fault::BeyondArmLimits)
             && let Some(e) = self.excess

@@ -22,25 +22,28 @@ impl Job {
     /// and resumes from the measured state (see the module's "Restart"). With `resume` false,
     /// the first tick reports the fault and ends the job, failed, instead.
     pub fn recover(&mut self, r: &JobRecord, resume: bool) {
-        self.job_id = r.job_id;
-        self.count = (r.count as usize).min(MAX_JOB_OBJECTS);
-        self.objects = r.objects;
-        self.ordered = r.ordered;
-        // Until the planner answers, statuses name the current object from the submitted list.
-        self.order = if r.ordered { r.order } else { r.objects };
-        self.index = (r.index as usize).min(self.count);
-        self.done = (r.done as usize).min(self.index);
+        let count = (r.count as usize).min(MAX_JOB_OBJECTS);
+        let index = (r.index as usize).min(count);
+        let progress = Progress {
+            objects: r.objects,
+            ordered: r.ordered,
+            // Until the planner answers, statuses name the current object from the submitted
+            // list.
+            order: if r.ordered { r.order } else { r.objects },
+            count,
+            index,
+            done: (r.done as usize).min(index),
+            ..Progress::NONE
+        };
+        let mut run = Run::new(r.job_id, progress, r.confirm_picks);
+        run.placement = r.placement;
+        // A placement in the journal was announced before the crash.
+        run.announced = r.placement.is_some_and(|p| p.index as usize == index);
+        self.run = Some(run);
         self.holding = r.holding;
         self.flip = r.flip;
-        self.placement = r.placement;
-        self.forget_decision();
-        // A placement in the journal was announced before the crash.
-        self.announced = r.placement.is_some_and(|p| p.index as usize == self.index);
         self.release_stamp = 0;
         self.fault = Fault::Restarted;
-        self.cancelling = false;
-        self.confirm_picks = r.confirm_picks;
-        self.confirmed = false;
         self.set_phase(if resume {
             Phase::Recovering { asked: false }
         } else {
@@ -48,16 +51,28 @@ impl Job {
         });
     }
 
-    /// A fault: report, brake if moving and the arm is seen, hold.
+    /// A fault: report, brake if moving and the arm is seen, hold (stopped, when the daemon
+    /// stops: it is only reported).
     pub(super) fn raise(&mut self, fx: &mut impl Effects, fault: Fault) {
         self.fault = fault;
         self.emit(fx, StatusEvent::Fault, self.current_type(), [0.0; 4], 0);
+        if matches!(self.phase, Phase::Stopped { .. }) {
+            return;
+        }
+        // What the brake leads to: the stop's end, a cancelled job's retreat, or the hold.
+        let then = if self.stopping() {
+            AfterBrake::Stop
+        } else if self.cancelled() {
+            AfterBrake::Retreat
+        } else {
+            AfterBrake::Hold
+        };
         if fault.arm_unseen() {
             // No joint state: the adapter passes no command on; a brake streamed now would
             // only be a setpoint planned before the interruption.
-            self.enter_faulted(fx);
+            self.halt(fx, then);
         } else {
-            self.begin_brake(fx);
+            self.begin_brake(fx, then);
         }
     }
 
@@ -67,7 +82,9 @@ impl Job {
             || self.out.cmd.acceleration.iter().any(|a| *a != 0.0)
     }
 
-    pub(super) fn begin_brake(&mut self, fx: &mut impl Effects) {
+    /// Brakes a moving arm (a Ruckig brake from the last command), `then` what follows; an arm
+    /// at rest (or no buffer home) is halted at once.
+    pub(super) fn begin_brake(&mut self, fx: &mut impl Effects, then: AfterBrake) {
         let moving = self.moving();
         let (seg, cursor) = match self.phase {
             Phase::Streaming { seg, cursor } => (seg, cursor),
@@ -83,6 +100,7 @@ impl Job {
                         cursor: None,
                         seg,
                         active_cursor: cursor,
+                        then,
                     });
                     return;
                 }
@@ -90,28 +108,48 @@ impl Job {
                 Err(_) => {}
             }
         }
-        self.enter_faulted(fx);
+        self.halt(fx, then);
     }
 
-    pub(super) fn enter_faulted(&mut self, fx: &mut impl Effects) {
+    /// The arm at rest, nothing streamed: `Stopped` for the stop, else `Faulted` (holding until
+    /// the inputs are fresh; a cancelled job then ends where it stands).
+    pub(super) fn halt(&mut self, fx: &mut impl Effects, then: AfterBrake) {
         self.out.cmd.velocity = [0.0; DOF];
         self.out.cmd.acceleration = [0.0; DOF];
-        self.set_phase(Phase::Faulted {
-            healthy_since: None,
-            recovered: self.recovered(),
+        let recovered = self.recovered();
+        self.set_phase(match then {
+            AfterBrake::Stop => Phase::Stopped { recovered },
+            AfterBrake::Hold | AfterBrake::Retreat => Phase::Faulted {
+                healthy_since: None,
+                recovered,
+            },
         });
         self.emit(fx, StatusEvent::Braked, self.current_type(), [0.0; 4], 0);
     }
 
+    /// The daemon stops: a moving arm brakes, then stops; a brake under way ends the stop; a
+    /// job halted elsewhere is stopped where it is.
     pub(super) fn begin_stop(&mut self, fx: &mut impl Effects) {
         match self.phase {
             Phase::Streaming { .. } => {
                 self.fault = Fault::Stop;
-                self.begin_brake(fx);
+                self.begin_brake(fx, AfterBrake::Stop);
             }
+            Phase::Braking {
+                cursor,
+                seg,
+                active_cursor,
+                ..
+            } => self.set_phase(Phase::Braking {
+                cursor,
+                seg,
+                active_cursor,
+                then: AfterBrake::Stop,
+            }),
             // Nothing runs: nothing to halt (the shutdown reports the idle state).
-            Phase::Braking { .. } | Phase::Idle => {}
-            _ => self.enter_faulted(fx),
+            Phase::Idle => self.set_phase(Phase::Stopped { recovered: false }),
+            Phase::Stopped { .. } => {}
+            _ => self.halt(fx, AfterBrake::Stop),
         }
     }
 
@@ -121,6 +159,7 @@ impl Job {
         cursor: Option<usize>,
         seg: usize,
         active_cursor: usize,
+        then: AfterBrake,
     ) {
         match cursor {
             None => {
@@ -136,6 +175,7 @@ impl Job {
                         cursor: None,
                         seg,
                         active_cursor: active_cursor + 1,
+                        then,
                     });
                 } else {
                     self.out.cmd.velocity = [0.0; DOF];
@@ -154,19 +194,20 @@ impl Job {
                             cursor: Some(k + 1),
                             seg,
                             active_cursor,
+                            then,
                         });
                     }
                     None => {
                         if let Some(b) = self.brake.take() {
                             self.recycle(b);
                         }
-                        if self.cancelling && !self.stopping {
+                        if then == AfterBrake::Retreat {
                             self.out.cmd.velocity = [0.0; DOF];
                             self.out.cmd.acceleration = [0.0; DOF];
                             self.emit(fx, StatusEvent::Braked, self.current_type(), [0.0; 4], 0);
                             self.retreat(fx);
                         } else {
-                            self.enter_faulted(fx);
+                            self.halt(fx, then);
                         }
                     }
                 }
@@ -185,7 +226,7 @@ impl Job {
         let held = self.inputs.gs.is_some_and(|g| g.holding == 1);
         self.emit(fx, StatusEvent::Resumed, self.current_type(), [0.0; 4], 0);
         self.resume_from_measured(fx, now, recovered, held);
-        if self.phase != Phase::Idle {
+        if self.run.is_some() {
             // The arm sagged past a limit while halted: named now, brought back in by the
             // first motion.
             self.say_outside_limits(fx);
@@ -203,7 +244,7 @@ impl Job {
         if recovered && !self.take_up_measured_state(fx, held, now) {
             return;
         }
-        if self.index >= self.count {
+        if self.progress().index >= self.progress().count {
             self.finish(fx, StatusEvent::JobDone);
             return;
         }
@@ -228,7 +269,7 @@ impl Job {
         } else {
             NO_OBJECT
         };
-        if self.decision_failed.is_some() {
+        if self.decision_failed().is_some() {
             // Its decision failed while the job was halted: nothing more to do.
             self.await_decision(fx, now);
         } else if self.holding {
@@ -248,7 +289,7 @@ impl Job {
             // Not decided yet: decided on a heightmap taken after the resume (a decision
             // still out is answered first, on an older one: its answer is kept).
             self.release_stamp = self.release_stamp.max(now);
-            if self.deciding.is_none() {
+            if self.run.is_some_and(|r| r.deciding.is_none()) {
                 self.begin_object(fx, now);
             } else {
                 self.set_phase(Phase::Starting);
@@ -265,7 +306,11 @@ impl Job {
         held: bool,
         now: u64,
     ) -> bool {
-        let placement = self.placement.filter(|p| p.index as usize == self.index);
+        let index = self.progress().index;
+        let placement = self
+            .run
+            .and_then(|r| r.placement)
+            .filter(|p| p.index as usize == index);
         let at_release = |p: &Placement| {
             self.inputs.js.is_some_and(|j| {
                 p.release_q.is_some_and(|release| {
@@ -281,11 +326,15 @@ impl Job {
             Some(p) if self.holding && !held && at_release(&p) => {
                 self.holding = false;
                 self.release_stamp = now;
-                self.done += 1;
+                if let Some(r) = &mut self.run {
+                    r.progress.done += 1;
+                }
                 self.emit(fx, StatusEvent::Placed, self.current_type(), p.pose, 0);
-                self.index += 1;
-                self.announced = false;
-                self.placement = None;
+                if let Some(r) = &mut self.run {
+                    r.progress.index += 1;
+                    r.announced = false;
+                    r.placement = None;
+                }
             }
             // In the gripper (perhaps closed just before the crash): placed where decided, or,
             // picked before its decision came, held until it is decided (on a heightmap taken

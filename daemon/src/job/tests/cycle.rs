@@ -118,7 +118,7 @@ fn a_decision_before_the_lift_costs_no_wait() {
     assert_eq!((done.objects_done, done.decision_wait_ms), (3, 0));
     // The place is asked for at the lift, with the decision already in: one planning round
     // trip, not a wait.
-    assert!(!waited || r.job.wait_ns < 5 * PERIOD);
+    assert!(!waited || r.job.progress().wait_ns < 5 * PERIOD);
     // Every object: decided once, picked, then placed where decided.
     let placed: Vec<_> = r
         .statuses()
@@ -447,7 +447,7 @@ fn open_reports_placed_and_the_release_stamp_gates_the_next_plan() {
     // The release is when the open gripper was observed, not when it was reported.
     assert_eq!(r.job.release_stamp, r.now - 2 * MS);
     assert!(!r.job.holding);
-    assert_eq!(r.job.index, 1);
+    assert_eq!(r.job.progress().index, 1);
 }
 
 #[test]
@@ -620,7 +620,7 @@ fn a_job_fed_by_hand_waits_above_the_station_for_each_confirmation() {
     };
     assert_eq!(closes(&r), 0);
     let confirm = |r: &mut Rig, index: u32, attempt: u32| {
-        let c = ConfirmPickRequest::new(r.job.job_id, index, attempt);
+        let c = ConfirmPickRequest::new(r.job.job_id(), index, attempt);
         r.job.confirm_request(&c, &mut r.fx);
         match r.fx.out.last() {
             Some(Out::ConfirmReply { reason, .. }) => *reason,

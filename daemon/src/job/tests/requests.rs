@@ -220,7 +220,7 @@ fn ordered_for_another_job_is_ignored() {
     });
     r.ticks(3);
     assert_eq!(r.phase(), Phase::Ordering);
-    assert_eq!(r.job.order[0], 0);
+    assert_eq!(r.job.progress().order[0], 0);
 }
 
 #[test]
