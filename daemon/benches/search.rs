@@ -9,13 +9,14 @@
 //! second, and what matters is the tail over many states, not a mean over repeats of one.
 
 use hdrhistogram::Histogram;
+use herb_core::boxed::{list_sessions, load_session};
+use herb_core::paths::{self, MeshSource};
+use herb_core::{Catalog, SharedCatalog};
 use herb_daemon::config::{Config, DecisionMethod};
 use herb_daemon::decision::DecisionCore;
 use herb_daemon::plan::DecisionRequest;
 use herb_ipc::{HeightmapFrame, MAX_JOB_OBJECTS};
-use herb_sim::boxed::{list_sessions, load_session};
-use herb_sim::paths::{self, MeshSource};
-use herb_sim::{Catalog, PackingWorld, SharedCatalog, WorldConfig};
+use herb_search::{PackingWorld, WorldConfig};
 use std::sync::Arc;
 use std::time::Instant;
 

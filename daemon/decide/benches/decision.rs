@@ -1,6 +1,6 @@
 //! Decision latency, on one core, timed exactly as herbd times it: one
 //! `herb_decide::Decider::decide` call (heightmap check and copy, observation when the policy
-//! reads one, policy inference, action check, z estimate; `sim/decide/src/decider.rs`), for
+//! reads one, policy inference, action check, z estimate; `daemon/decide/src/decider.rs`), for
 //! each ONNX network in `$HERB_BENCH_MODELS` (default `target/onnx-bench`, written by
 //! `python3 training/make_fixtures.py --bench target/onnx-bench`; candidate-contract policies
 //! include the placement lattice and features in their decision), after the shipped policies
@@ -13,9 +13,10 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use hdrhistogram::Histogram;
+use herb_core::{Catalog, SharedCatalog, TypeIdx};
 use herb_decide::policy::{DecisionInput, PlanarPose, Policy};
 use herb_decide::{Blbf, CandidatePolicy, Decider, OnnxPolicy};
-use herb_sim::{Catalog, PackingWorld, SharedCatalog, TypeIdx, WorldConfig};
+use herb_world::{PackingWorld, WorldConfig};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -106,8 +107,8 @@ fn bench_policy(
 }
 
 fn benches(c: &mut Criterion) {
-    let root = herb_sim::paths::boxed_root(None);
-    let meshes = herb_sim::paths::mesh_source(None, root.as_deref());
+    let root = herb_core::paths::boxed_root(None);
+    let meshes = herb_core::paths::mesh_source(None, root.as_deref());
     let catalog: SharedCatalog = Arc::new(Catalog::builtin(&meshes).expect("catalog"));
     let dir = std::env::var_os("HERB_BENCH_MODELS")
         .map(PathBuf::from)

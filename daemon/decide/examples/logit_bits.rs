@@ -2,9 +2,9 @@
 //! to compare tract's kernels (e.g. `TRACT_CPU_ISA=-avx512f`) or machines bit for bit:
 //! `cargo run --release -p herb-decide --example logit_bits -- models/policy-cs06.onnx`.
 
+use herb_core::features::{CANDIDATE_LEN, CONTEXT_LEN};
+use herb_core::lattice::MAX_CANDIDATES;
 use herb_decide::CandidatePolicy;
-use herb_sim::features::{CANDIDATE_LEN, CONTEXT_LEN};
-use herb_sim::lattice::MAX_CANDIDATES;
 use std::path::PathBuf;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -18,7 +18,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
         .collect();
-    let catalog = herb_sim::Catalog::builtin(&herb_sim::paths::MeshSource::None("bits".into()))?;
+    let catalog = herb_core::Catalog::builtin(&herb_core::paths::MeshSource::None("bits".into()))?;
     let mut p = CandidatePolicy::load(&onnx, &catalog)?;
     let per = CONTEXT_LEN + MAX_CANDIDATES * CANDIDATE_LEN + MAX_CANDIDATES;
     for x in data.chunks_exact(per) {

@@ -5,9 +5,9 @@
 //!
 //! `cargo run --release -p herb-decide --example order_sizes` (from the repo root; BoxED at
 //! `../shared/boxed` or `HERB_BOXED`).
+use herb_core::Catalog;
 use herb_decide::order::Order;
 use herb_decide::sequence::SequenceModel;
-use herb_sim::Catalog;
 use std::path::Path;
 
 /// Spearman's rank correlation between position and volume rank (equal volumes ranked by
@@ -30,12 +30,12 @@ fn spearman(vols: &[f32]) -> f64 {
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let root = herb_sim::paths::boxed_root(None)
+    let root = herb_core::paths::boxed_root(None)
         .ok_or("BoxED not found: set HERB_BOXED or put it at ../shared/boxed")?;
-    let meshes = herb_sim::paths::mesh_source(None, Some(&root));
+    let meshes = herb_core::paths::mesh_source(None, Some(&root));
     let catalog = Catalog::builtin(&meshes)?;
     let model = SequenceModel::load(Path::new("models/sequence.json"), &catalog)?;
-    let (sessions, _) = herb_sim::boxed::load_all(&root, &catalog)?;
+    let (sessions, _) = herb_core::boxed::load_all(&root, &catalog)?;
     for o in Order::ALL {
         let (mut rho, mut firstvol, mut n) = (0.0, 0.0, 0.0);
         for s in &sessions {

@@ -2,8 +2,8 @@
 //! depth-camera bridges): the ports an arm adapter and a camera adapter open, validation of
 //! every command herbd sends before the hardware sees it (within the limits, widened only to an
 //! arm that sagged past them: [`command_range`]), the jump guard, the counters an adapter
-//! reports and its log lines. An adapter combines this crate with its hardware's own side (a simulation, a ROS
-//! connection) and, where it needs the arm's model, `herb-robot`.
+//! reports and its log lines. An adapter combines this crate with its hardware's own side (a
+//! simulation, a ROS connection) and, where it needs the arm's model, `herb-robot`.
 
 #![warn(missing_docs)]
 

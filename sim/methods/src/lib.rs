@@ -4,9 +4,10 @@
 //! [`Method::placer`] builds any of them from one [`MethodSettings`] as a
 //! [`herb_sim::eval::Placer`] of the one episode loop ([`herb_sim::eval::run_episode`]).
 //!
-//! This crate joins the two halves that never meet otherwise: the decision core
-//! (`herb-decide`: the policies herbd ships, without a physics engine) and the physics world
-//! with its research rules and the search (`herb-sim`).
+//! This crate joins what herbd ships to decide (`herb-decide`: the policies and the `Decider`;
+//! `herb-search`: the search, a policy of that `Decider`) with the evaluation's world and its
+//! research rules (`herb-sim`): Table I's policies and search run through the `Decider`, as in
+//! herbd.
 
 #![warn(missing_docs)]
 

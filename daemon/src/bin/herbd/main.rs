@@ -81,8 +81,8 @@ enum Tool {
         events: Option<PathBuf>,
     },
     /// Why object N (1-based, as `herbctl pack` numbers them) went where it did: the
-    /// heightmap it was decided on and the next one (PNGs), the policy's action, the z
-    /// estimate, the placement, the outcome.
+    /// heightmap it was decided on and the next one (PNGs), the method (a search's candidates
+    /// and their returns), the placement and its z estimate, the outcome.
     Explain {
         /// A segment file.
         log: PathBuf,
