@@ -1,6 +1,9 @@
 //! herbd's decision with the search, timed as herbd times it (one `DecisionCore::decide` call:
-//! the heightmap checked and copied, the twin built from it, the rollouts, the z estimate), on
-//! one thread, for a count of rollouts (what tables use) and for herbd's time budget.
+//! the heightmap checked and copied, the twin built from it, the rollouts, the z estimate), for
+//! a count of rollouts (what tables use) and for herbd's time budget on one thread; then, with
+//! every lattice candidate allowed (k = 64, so that the budget and not k ends the decision),
+//! herbd's time budget on one thread and on two, in one run: the rollouts finished per
+//! decision and their ratio.
 //!
 //! `cargo bench -p herb-daemon --bench search` (BoxED needed: mid-pack heightmaps of the first
 //! sessions, their humans' placements after a quarter, half and three quarters of the episode,
@@ -74,12 +77,17 @@ fn main() {
         states.iter().map(|s| s.1.len()).min().unwrap_or(0),
         states.iter().map(|s| s.1.len()).max().unwrap_or(0)
     );
-    for (label, budget_s, allowed) in [
-        ("8 rollouts of 8 candidates", 30.0, Some(8)),
-        ("herbd's default budget, 1.0 s", 1.0, None),
+    let mut per_thread = Vec::new();
+    for (label, budget_s, allowed, k, threads) in [
+        ("8 rollouts of 8 candidates", 30.0, Some(8), 8, 1),
+        ("herbd's default budget, 1.0 s", 1.0, None, 8, 1),
+        ("1.0 s, k = 64", 1.0, None, 64, 1),
+        ("1.0 s, k = 64", 1.0, None, 64, 2),
     ] {
         cfg.decision.budget_s = budget_s;
         cfg.decision.timeout_s = budget_s + 10.0;
+        cfg.decision.k = k;
+        cfg.decision.threads = threads;
         let mut core = DecisionCore::new(&cfg, catalog.clone()).expect("decision core");
         let mut h = Histogram::<u64>::new_with_bounds(1, 60_000_000_000, 3).expect("histogram");
         let mut rollouts = 0u64;
@@ -100,14 +108,24 @@ fn main() {
             rollouts += d.allowed as u64;
         }
         let ms = |q: f64| h.value_at_quantile(q) as f64 / 1e6;
+        let per = rollouts as f64 / h.len().max(1) as f64;
         println!(
-            "search, {label}, one thread: n {} p50 {:.0} ms p95 {:.0} ms p99 {:.0} ms max {:.0} ms; {:.1} rollouts finished per decision",
+            "search, {label}, {threads} thread{}: n {} p50 {:.0} ms p95 {:.0} ms p99 {:.0} ms max {:.0} ms; {per:.1} rollouts finished per decision",
+            if threads == 1 { "" } else { "s" },
             h.len(),
             ms(0.5),
             ms(0.95),
             ms(0.99),
             h.max() as f64 / 1e6,
-            rollouts as f64 / h.len().max(1) as f64
+        );
+        if k == 64 {
+            per_thread.push(per);
+        }
+    }
+    if let [one, two] = per_thread[..] {
+        println!(
+            "search, 1.0 s, k = 64: two threads finish {:.2} x the rollouts of one",
+            two / one.max(f64::MIN_POSITIVE)
         );
     }
 }

@@ -186,6 +186,10 @@ pub struct DecisionConfig {
     pub horizon: usize,
     /// The world the search's rollouts run in.
     pub twin: DecisionTwin,
+    /// Threads the search's rollouts run on (0 to 64; 0: the cores herbd's loop and planner
+    /// leave, at least one, [`DecisionConfig::search_threads`]). A searched run replays bit
+    /// for bit whatever the count.
+    pub threads: usize,
     /// A decision not back this long after it was asked for (s) faults the job (`Decision`):
     /// a hung worker never holds the arm.
     pub timeout_s: f64,
@@ -199,7 +203,21 @@ impl Default for DecisionConfig {
             k: 8,
             horizon: 0,
             twin: DecisionTwin::Job,
+            threads: 0,
             timeout_s: 10.0,
+        }
+    }
+}
+
+impl DecisionConfig {
+    /// The search's threads: `threads`, or with 0 the machine's cores less the two of herbd's
+    /// loop and planner, at least one.
+    pub fn search_threads(&self) -> usize {
+        match self.threads {
+            0 => std::thread::available_parallelism()
+                .map_or(1, |n| n.get().saturating_sub(2))
+                .max(1),
+            n => n,
         }
     }
 }
@@ -422,6 +440,9 @@ impl ConfigFile for Config {
         if !(1..=64).contains(&d.k) {
             return Err(format!("decision.k {} outside 1..=64", d.k).into());
         }
+        if d.threads > 64 {
+            return Err(format!("decision.threads {} outside 0..=64", d.threads).into());
+        }
         if d.horizon > herb_ipc::MAX_JOB_OBJECTS {
             return Err(format!(
                 "decision.horizon {} above the {} objects of a job",
@@ -521,12 +542,17 @@ mod tests {
         let c =
             Config::from_toml("[decision]\nmethod = \"search\"\nbudget_s = 0.0\n", "x").unwrap();
         assert_eq!(c.decision.method, DecisionMethod::Search);
+        // The search's threads: the cores left by default (at least one), or as many as given.
+        assert!(c.decision.threads == 0 && c.decision.search_threads() >= 1);
+        let two = Config::from_toml("[decision]\nthreads = 2\n", "x").unwrap();
+        assert_eq!(two.decision.search_threads(), 2);
         for (toml, name) in [
             ("[decision]\nmethod = \"rollout\"\n", "method"),
             ("[decision]\nbudget_s = -1.0\n", "decision.budget_s"),
             ("[decision]\nbudget_s = nan\n", "decision.budget_s"),
             ("[decision]\nk = 0\n", "decision.k"),
             ("[decision]\nk = 65\n", "decision.k"),
+            ("[decision]\nthreads = 65\n", "decision.threads"),
             ("[decision]\ntwin = \"exact\"\n", "twin"),
             (
                 "[recovery]\noutside_limits = \"ignore\"\n",

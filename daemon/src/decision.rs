@@ -89,6 +89,7 @@ impl DecisionCore {
                         DecisionTwin::Heightmap => TwinKind::Heightmap,
                         DecisionTwin::Job => TwinKind::Job,
                     },
+                    threads: d.search_threads(),
                     ..SearchSettings::default()
                 };
                 // The twins release where the arm does: the same clearance.

@@ -251,11 +251,82 @@ fn memory(s: &Setup) {
 /// lookahead teacher's) and in the twin built from that world's heightmap alone
 /// ([`PackingWorld::twin`]). A clone or twin is made (untimed) for each pass; each placement
 /// (z estimate, release, settle, checks) is timed.
+///
+/// With `HERB_WORLD_B=KEY=VALUE,...` (settings of [`WorldConfig::set`]) the same is timed again
+/// under those settings, in the same run, and the ratio of the rates printed, with how far the
+/// outcomes agree ([`agreement`]): every speed-up is a ratio measured in one run.
 fn bench_rollout_worlds(c: &mut Criterion, s: &Setup) {
+    let a = bench_rollout_worlds_with(c, s, "", &WorldConfig::default());
+    let Ok(list) = std::env::var("HERB_WORLD_B") else {
+        return;
+    };
+    let mut cfg = WorldConfig::default();
+    cfg.set_all(&list)
+        .expect("HERB_WORLD_B: world settings KEY=VALUE,...");
+    let b = bench_rollout_worlds_with(c, s, "-b", &cfg);
+    for (kind, (ra, rb)) in ["exact", "twin"].iter().zip(a.iter().zip(&b)) {
+        eprintln!(
+            "rollout-{kind}/{}: settings B ({list}) place {:.2} x as many objects per second as today's",
+            s.label,
+            rb / ra
+        );
+    }
+    agreement(s, &cfg, &list);
+}
+
+/// How far the rollouts' outcomes under `cfg` agree with today's settings': the second half of
+/// each of the first 10 episodes on its first half, each placed object's inside and stable
+/// flags compared while both runs go on, and the final compactness.
+fn agreement(s: &Setup, cfg: &WorldConfig, list: &str) {
+    let run = |cfg: &WorldConfig| -> Vec<Vec<(bool, bool, f32)>> {
+        s.episodes
+            .iter()
+            .take(10)
+            .map(|ep| {
+                let mut w = PackingWorld::new(s.catalog.clone(), cfg.clone()).expect("world");
+                let mut out = Vec::new();
+                for &(t, x, y, th) in ep {
+                    let o = w.place(t, x, y, th).expect("place");
+                    out.push((o.inside, o.stable, o.compactness));
+                    if !o.inside {
+                        break;
+                    }
+                }
+                out
+            })
+            .collect()
+    };
+    let (a, b) = (run(&WorldConfig::default()), run(cfg));
+    let (mut same, mut n, mut dc, mut ended_same) = (0, 0, 0.0f64, 0);
+    for (ea, eb) in a.iter().zip(&b) {
+        ended_same +=
+            (ea.len() == eb.len() && ea.last().map(|o| o.0) == eb.last().map(|o| o.0)) as usize;
+        for (oa, ob) in ea.iter().zip(eb) {
+            n += 1;
+            same += (oa.0 == ob.0 && oa.1 == ob.1) as usize;
+            dc += (oa.2 - ob.2).abs() as f64;
+        }
+    }
+    eprintln!(
+        "agreement/{} ({list}): {same} of {n} placements with the same inside and stable flags, mean |dC| {:.4}; {ended_same} of {} episodes ended alike",
+        s.label,
+        dc / n.max(1) as f64,
+        a.len()
+    );
+}
+
+/// [`bench_rollout_worlds`] under `cfg` (benches named with `suffix`): the placements per
+/// second per core in the exact clone and in the twin.
+fn bench_rollout_worlds_with(
+    c: &mut Criterion,
+    s: &Setup,
+    suffix: &str,
+    cfg: &WorldConfig,
+) -> Vec<f64> {
     let mut starts = Vec::new();
     for ep in s.episodes.iter().take(10) {
         let half = ep.len() / 2;
-        let mut w = PackingWorld::new(s.catalog.clone(), WorldConfig::default()).expect("world");
+        let mut w = PackingWorld::new(s.catalog.clone(), cfg.clone()).expect("world");
         if ep[..half]
             .iter()
             .all(|&(t, x, y, th)| w.place(t, x, y, th).expect("place").inside)
@@ -269,7 +340,7 @@ fn bench_rollout_worlds(c: &mut Criterion, s: &Setup) {
         let mut h = hist();
         let mut steps = 0u64;
         let mut k = 0usize;
-        c.bench_function(&format!("rollout-{kind}/{}", s.label), |b| {
+        c.bench_function(&format!("rollout-{kind}{suffix}/{}", s.label), |b| {
             b.iter_custom(|iters| {
                 let mut total = Duration::ZERO;
                 let mut done = 0;
@@ -278,12 +349,8 @@ fn bench_rollout_worlds(c: &mut Criterion, s: &Setup) {
                     k += 1;
                     let mut w = match kind {
                         "exact" => start.clone(),
-                        _ => PackingWorld::twin(
-                            s.catalog.clone(),
-                            WorldConfig::default(),
-                            start.heightmap(),
-                        )
-                        .expect("twin"),
+                        _ => PackingWorld::twin(s.catalog.clone(), cfg.clone(), start.heightmap())
+                            .expect("twin"),
                     };
                     for &(t, x, y, th) in rest.iter() {
                         if done == iters {
@@ -304,23 +371,27 @@ fn bench_rollout_worlds(c: &mut Criterion, s: &Setup) {
                 total
             })
         });
-        report(&format!("rollout-{kind}/{} (one core)", s.label), &h);
+        report(
+            &format!("rollout-{kind}{suffix}/{} (one core)", s.label),
+            &h,
+        );
         if h.is_empty() {
-            return;
+            return rates;
         }
         let rate = 1e9 / h.mean();
         eprintln!(
-            "rollout-{kind}/{}: {rate:.0} placements/s per core, {:.1} settle steps per placement",
+            "rollout-{kind}{suffix}/{}: {rate:.0} placements/s per core, {:.1} settle steps per placement",
             s.label,
             steps as f64 / h.len().max(1) as f64
         );
         rates.push(rate);
     }
     eprintln!(
-        "rollout/{}: the twin places {:.2} x as many objects per second as the exact clone",
+        "rollout{suffix}/{}: the twin places {:.2} x as many objects per second as the exact clone",
         s.label,
         rates[1] / rates[0]
     );
+    rates
 }
 
 fn benches(c: &mut Criterion) {

@@ -133,6 +133,22 @@ fn bad_inputs_are_errors_not_panics() {
     )
     .unwrap_err();
     assert!(e.to_string().contains("'dt'"), "{e}");
+    // World settings by name (`herb-sim eval --world-set`): each bad one named, and the
+    // configuration left as it was.
+    let mut cfg = WorldConfig::default();
+    cfg.set_all("solver_iterations=4, dt=0.025").unwrap();
+    assert_eq!((cfg.solver_iterations, cfg.dt), (4, 0.025));
+    for (bad, says) in [
+        ("solver_iterations=0", "solver_iterations"),
+        ("dt=fast", "not a number"),
+        ("length_unit_m=2", "length_unit_m"),
+        ("gravity=1", "unknown world setting"),
+        ("dt", "KEY=VALUE"),
+    ] {
+        let e = cfg.set_all(bad).unwrap_err().to_string();
+        assert!(e.contains(says), "{bad}: {e}");
+    }
+    assert_eq!((cfg.solver_iterations, cfg.dt), (4, 0.025));
     assert!(RewardMode::cs(-0.1).is_err());
     // A bad catalog names what is wrong.
     let e = herb_sim::Catalog::from_toml(

@@ -126,6 +126,10 @@ pub struct SearchSettings {
     /// Rollouts under a gripper's release error (`None`: each candidate rolled out once, every
     /// object released where it was placed).
     pub robust: Option<RobustRollouts>,
+    /// Threads the rollouts run on (at least 1): the candidates are handed out in the prior's
+    /// order, and a decision keeps the longest run of finished candidates from the first, so
+    /// that what a deadline allowed is a count that a replay runs again, on any thread count.
+    pub threads: usize,
 }
 
 impl Default for SearchSettings {
@@ -138,6 +142,7 @@ impl Default for SearchSettings {
             // herbd's default, and the CLI's and the bindings': one default everywhere.
             twin: TwinKind::Job,
             robust: None,
+            threads: 1,
         }
     }
 }
@@ -165,7 +170,8 @@ pub struct SearchReport {
     /// Each finished rollout, in the prior's order (candidate index in the lattice's list
     /// and its outcome).
     pub finished: Vec<(usize, CandidateOutcome)>,
-    /// Rollouts started but cut by the deadline.
+    /// Rollouts started but not counted: cut by the deadline, or finished (on another thread)
+    /// after an earlier candidate was cut.
     pub cut: usize,
     /// The chosen candidate's index in the lattice's list.
     pub chosen: Option<usize>,
@@ -173,6 +179,8 @@ pub struct SearchReport {
     pub elapsed: Duration,
     /// With [`TwinKind::Job`]: how the job's twin compared with the heightmap.
     pub job: Option<JobAgreement>,
+    /// Threads the rollouts ran on.
+    pub threads: usize,
     /// With [`TwinKind::Job`]: where the job's twin will replay the chosen placement's release
     /// at the next decision (the one release pose, [`release_pose_on`]: the z estimate on this
     /// heightmap plus the world's clearance, herbd's `[models] clearance_m`).
@@ -213,7 +221,8 @@ pub struct Search {
     catalog: SharedCatalog,
     cfg: WorldConfig,
     lattice: Lattice,
-    rollout: Lattice,
+    /// One scratch lattice per rollout thread.
+    rollouts: Vec<Lattice>,
     report: SearchReport,
     job: Option<JobTwin>,
     zscratch: ZScratch,
@@ -224,7 +233,9 @@ impl Search {
     pub fn new(catalog: SharedCatalog, cfg: WorldConfig, settings: SearchSettings) -> Self {
         Self {
             lattice: Lattice::new(&catalog),
-            rollout: Lattice::new(&catalog),
+            rollouts: (0..settings.threads.max(1))
+                .map(|_| Lattice::new(&catalog))
+                .collect(),
             zscratch: ZScratch::for_catalog(&catalog, cfg.heightmap_cell_m),
             settings,
             catalog,
@@ -312,23 +323,29 @@ impl Search {
             let end = remaining
                 .len()
                 .min(self.settings.horizon.unwrap_or(usize::MAX).max(1));
-            for c in 0..k {
-                if deadline.is_some_and(|d| Instant::now() >= d) {
-                    break;
-                }
-                let first = self.lattice.candidates()[c];
-                match evaluate(
-                    &mut self.rollout,
-                    &self.settings,
-                    world,
-                    &remaining[..end],
-                    first,
-                    deadline,
-                )? {
-                    Some(o) => self.report.finished.push((c, o)),
-                    None => self.report.cut += 1,
+            let firsts = &self.lattice.candidates()[..k];
+            let outcomes = roll_out(
+                &mut self.rollouts,
+                &self.settings,
+                world,
+                &remaining[..end],
+                firsts,
+                deadline,
+            )?;
+            // The finished candidates from the first on, up to the first that did not finish:
+            // a count, which a replay's budget of that many rollouts runs again.
+            let prefix = outcomes
+                .iter()
+                .take_while(|o| matches!(o, Some(Some(_))))
+                .count();
+            for (c, o) in outcomes.iter().enumerate() {
+                match o {
+                    Some(Some(o)) if c < prefix => self.report.finished.push((c, *o)),
+                    Some(_) => self.report.cut += 1,
+                    None => {}
                 }
             }
+            self.report.threads = self.rollouts.len().min(k);
         }
         // The best finished return, ties to the prior's order; else the prior's first.
         let best = self
@@ -409,6 +426,80 @@ impl Search {
         self.report.job = Some(agreement);
         Ok(agreement.used)
     }
+}
+
+/// One candidate's rollout: `None` never started (the deadline came first), `Some(None)` cut by
+/// the deadline, else its outcome.
+type Rolled = Option<Option<CandidateOutcome>>;
+
+/// The rollout of each of `firsts` ([`evaluate`]), in order, on as many threads as `lattices`
+/// (one scratch lattice each). The candidates are handed out in order; each rollout is the same
+/// whichever thread runs it.
+fn roll_out(
+    lattices: &mut [Lattice],
+    settings: &SearchSettings,
+    world: &PackingWorld,
+    remaining: &[TypeIdx],
+    firsts: &[Placement],
+    deadline: Option<Instant>,
+) -> Result<Vec<Rolled>> {
+    let expired = || deadline.is_some_and(|d| Instant::now() >= d);
+    let threads = lattices.len().clamp(1, firsts.len().max(1));
+    if threads == 1 {
+        let mut out = Vec::with_capacity(firsts.len());
+        for &first in firsts {
+            if expired() {
+                break;
+            }
+            let o = evaluate(
+                &mut lattices[0],
+                settings,
+                world,
+                remaining,
+                first,
+                deadline,
+            )?;
+            let cut = o.is_none();
+            out.push(Some(o));
+            if cut {
+                break;
+            }
+        }
+        out.resize(firsts.len(), None);
+        return Ok(out);
+    }
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    type Mine = Result<Vec<(usize, Option<CandidateOutcome>)>>;
+    let results: Vec<Mine> = std::thread::scope(|s| {
+        let workers: Vec<_> = lattices[..threads]
+            .iter_mut()
+            .map(|lattice| {
+                let next = &next;
+                s.spawn(move || {
+                    let mut mine = Vec::new();
+                    loop {
+                        let c = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        if c >= firsts.len() || expired() {
+                            return Ok(mine);
+                        }
+                        let o = evaluate(lattice, settings, world, remaining, firsts[c], deadline)?;
+                        mine.push((c, o));
+                    }
+                })
+            })
+            .collect();
+        workers
+            .into_iter()
+            .map(|w| w.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .collect()
+    });
+    let mut out = vec![None; firsts.len()];
+    for r in results {
+        for (c, o) in r? {
+            out[c] = Some(o);
+        }
+    }
+    Ok(out)
 }
 
 /// `first`'s rollout of `remaining` in `world` by the settings: once, or, robust, the mean of

@@ -78,6 +78,7 @@ fn the_search_is_anytime_and_never_worse_than_its_prior_on_its_own_rollouts() {
         reward: RewardMode::cs(0.6).unwrap(),
         twin: TwinKind::Heightmap,
         robust: None,
+        threads: 1,
     };
     let mut s = Search::new(
         c.clone(),
@@ -99,7 +100,8 @@ fn the_search_is_anytime_and_never_worse_than_its_prior_on_its_own_rollouts() {
     let (_, o) = r.finished.iter().find(|(i, _)| *i == chosen).unwrap();
     assert_eq!(o.ret, best, "the best finished return is chosen");
     assert_eq!(o.placement, p);
-    // Deterministic with a count of rollouts.
+    // Deterministic with a count of rollouts, on one thread or two: the same outcomes of the
+    // same candidates, the same choice.
     let mut again = Search::new(
         c.clone(),
         WorldConfig::default(),
@@ -108,6 +110,42 @@ fn the_search_is_anytime_and_never_worse_than_its_prior_on_its_own_rollouts() {
     assert_eq!(
         again.decide(world.heightmap(), &remaining, None).unwrap(),
         Some(p)
+    );
+    let mut two = Search::new(
+        c.clone(),
+        WorldConfig::default(),
+        SearchSettings {
+            threads: 2,
+            ..settings(Budget::Rollouts(4))
+        },
+    );
+    assert_eq!(
+        two.decide(world.heightmap(), &remaining, None).unwrap(),
+        Some(p)
+    );
+    assert_eq!(two.report().finished, r.finished);
+    assert_eq!((two.report().chosen, two.report().threads), (r.chosen, 2));
+    // On two threads with a deadline, the candidates kept run from the first without a gap,
+    // so that a replay's count of rollouts decides alike.
+    let mut timed = Search::new(
+        c.clone(),
+        WorldConfig::default(),
+        SearchSettings {
+            threads: 2,
+            ..settings(Budget::Time(std::time::Duration::from_millis(30)))
+        },
+    );
+    let q = timed.decide(world.heightmap(), &remaining, None).unwrap();
+    let kept: Vec<usize> = timed.report().finished.iter().map(|(i, _)| *i).collect();
+    assert_eq!(kept, (0..kept.len()).collect::<Vec<_>>());
+    let mut replay = Search::new(
+        c.clone(),
+        WorldConfig::default(),
+        settings(Budget::Rollouts(kept.len())),
+    );
+    assert_eq!(
+        replay.decide(world.heightmap(), &remaining, None).unwrap(),
+        q
     );
     // A budget of zero rollouts returns the prior's first (lattice BLBF's), said so.
     let mut none = Search::new(
@@ -190,6 +228,7 @@ fn pack_with(
         reward: RewardMode::cs(0.6).unwrap(),
         twin,
         robust: None,
+        threads: 1,
     };
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
     let mut out = Vec::new();
@@ -240,6 +279,7 @@ fn the_jobs_twin_replays_its_decisions_and_falls_back_where_the_heightmap_disagr
         reward: RewardMode::cs(0.6).unwrap(),
         twin,
         robust: None,
+        threads: 1,
     };
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings(TwinKind::Job));
     let p = s.decide(world.heightmap(), &remaining, None).unwrap();
@@ -273,6 +313,7 @@ fn the_jobs_twin_leaves_out_an_object_never_released_and_forgets_a_finished_job(
         reward: RewardMode::cs(0.6).unwrap(),
         twin: TwinKind::Job,
         robust: None,
+        threads: 1,
     };
     let empty = PackingWorld::new(c.clone(), WorldConfig::default()).unwrap();
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
@@ -316,6 +357,7 @@ fn the_robust_search_ranks_by_noisy_rollouts_that_a_replay_draws_again() {
             reward: RewardMode::cs(0.6).unwrap(),
             twin: TwinKind::Heightmap,
             robust,
+            threads: 1,
         };
         let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
         let p = s.decide(world.heightmap(), &remaining, None).unwrap();

@@ -57,6 +57,8 @@ pub fn header_for(
     };
     let mut c = cfg.clone();
     c.record.dir = None;
+    // The search's threads as they ran (0 says "the cores left", which differ by machine).
+    c.decision.threads = cfg.decision.search_threads();
     c.models.sequence = abs(&cfg.models.sequence)?;
     let policy = match cfg.models.policy_file() {
         None => 0,

@@ -68,6 +68,14 @@ pub struct WorldConfig {
     pub early_out_m: f32,
     /// Fastest speed at which the solver pushes overlapping bodies apart (m/s).
     pub max_corrective_speed_mps: f32,
+    /// Solver substeps per physics step (rapier's `num_solver_iterations`).
+    pub solver_iterations: u32,
+    /// Contacts are computed for pairs closer than this (m; rapier's prediction distance).
+    pub prediction_distance_m: f32,
+    /// rapier's length unit (m): it scales the margin the broad phase keeps around every
+    /// collider (4 cm at 1 m), so smaller values pair fewer objects. Every distance and speed of
+    /// this configuration stays in metres whatever it is.
+    pub length_unit_m: f32,
     /// Release noise of the evaluation: standard deviation (m) of the x and y offsets by which
     /// the evaluation's environment (`herb_sim::PackingEnv`) releases each object off the pose
     /// it was given, as a real gripper does (0: exactly there). The world's own calls ([`PackingWorld::place_pose`]) and the
@@ -91,6 +99,9 @@ impl Default for WorldConfig {
             stability_tilt_deg: 10.0,
             early_out_m: 0.05,
             max_corrective_speed_mps: 3.0,
+            solver_iterations: 8,
+            prediction_distance_m: 0.02,
+            length_unit_m: 1.0,
             release_noise_m: 0.0,
             release_noise_deg: 0.0,
         }
@@ -105,6 +116,67 @@ impl WorldConfig {
             sigma_m: self.release_noise_m,
             sigma_deg: self.release_noise_deg,
         }
+    }
+
+    /// The settings [`WorldConfig::set`] knows, by name.
+    pub const SETTABLE: [&'static str; 12] = [
+        "dt",
+        "settle_cap_s",
+        "time_until_sleep_s",
+        "sleep_speed_mps",
+        "friction",
+        "max_corrective_speed_mps",
+        "solver_iterations",
+        "prediction_distance_m",
+        "length_unit_m",
+        "clearance_m",
+        "early_out_m",
+        "inside_tolerance_m",
+    ];
+
+    /// Sets the field `key` (one of [`WorldConfig::SETTABLE`]) from its text, then checks the
+    /// whole configuration ([`WorldConfig::validate`]); the error names what was wrong and
+    /// leaves the configuration as it was.
+    pub fn set(&mut self, key: &str, value: &str) -> Result<()> {
+        let mut next = self.clone();
+        let bad = || SimError::Config(format!("world setting {key} = {value:?}: not a number"));
+        let num = || value.trim().parse::<f32>().map_err(|_| bad());
+        match key {
+            "dt" => next.dt = num()?,
+            "settle_cap_s" => next.settle_cap_s = num()?,
+            "time_until_sleep_s" => next.time_until_sleep_s = num()?,
+            "sleep_speed_mps" => next.sleep_speed_mps = num()?,
+            "friction" => next.friction = num()?,
+            "max_corrective_speed_mps" => next.max_corrective_speed_mps = num()?,
+            "solver_iterations" => {
+                next.solver_iterations = value.trim().parse().map_err(|_| bad())?
+            }
+            "prediction_distance_m" => next.prediction_distance_m = num()?,
+            "length_unit_m" => next.length_unit_m = num()?,
+            "clearance_m" => next.clearance_m = num()?,
+            "early_out_m" => next.early_out_m = num()?,
+            "inside_tolerance_m" => next.inside_tolerance_m = num()?,
+            _ => {
+                return Err(SimError::Config(format!(
+                    "unknown world setting {key:?} (expected one of {})",
+                    Self::SETTABLE.join(", ")
+                )));
+            }
+        }
+        next.validate()?;
+        *self = next;
+        Ok(())
+    }
+
+    /// [`WorldConfig::set`] for each `KEY=VALUE` of `list` (comma-separated), in order.
+    pub fn set_all(&mut self, list: &str) -> Result<()> {
+        for item in list.split(',').map(str::trim).filter(|i| !i.is_empty()) {
+            let (k, v) = item.split_once('=').ok_or_else(|| {
+                SimError::Config(format!("world setting {item:?}: expected KEY=VALUE"))
+            })?;
+            self.set(k.trim(), v)?;
+        }
+        Ok(())
     }
 
     /// Checks every value; the error names the field.
@@ -134,6 +206,19 @@ impl WorldConfig {
             0.01,
             10.0,
         )?;
+        if !(1..=64).contains(&self.solver_iterations) {
+            return Err(SimError::Config(format!(
+                "'solver_iterations' = {} outside 1..=64",
+                self.solver_iterations
+            )));
+        }
+        check(
+            "prediction_distance_m",
+            self.prediction_distance_m,
+            1e-4,
+            0.1,
+        )?;
+        check("length_unit_m", self.length_unit_m, 0.01, 1.0)?;
         check("release_noise_m", self.release_noise_m, 0.0, 0.05)?;
         check("release_noise_deg", self.release_noise_deg, 0.0, 45.0)?;
         Ok(())
@@ -389,14 +474,18 @@ impl PackingWorld {
     fn empty_physics(cfg: &WorldConfig) -> PhysicsWorld {
         let mut phys = PhysicsWorld::new();
         phys.gravity = Vector::new(0.0, 0.0, -9.81);
-        phys.integration_parameters.dt = cfg.dt;
+        let ip = &mut phys.integration_parameters;
+        ip.dt = cfg.dt;
+        // rapier's "normalized" values are multiplied by its length unit: given in metres here.
+        let unit = cfg.length_unit_m;
+        ip.length_unit = unit;
         // 1 mm allowed penetration (default 5 mm is coarse for objects a few cm tall).
-        phys.integration_parameters.normalized_allowed_linear_error = 0.001;
+        ip.normalized_allowed_linear_error = 0.001 / unit;
         // Speed at which overlaps are resolved (rapier default 3 m/s; lower values let bodies sink).
-        phys.integration_parameters
-            .normalized_max_corrective_velocity = cfg.max_corrective_speed_mps;
-        phys.integration_parameters.contact_recycling = false;
-        phys.integration_parameters.num_solver_iterations = 8;
+        ip.normalized_max_corrective_velocity = cfg.max_corrective_speed_mps / unit;
+        ip.normalized_prediction_distance = cfg.prediction_distance_m / unit;
+        ip.contact_recycling = false;
+        ip.num_solver_iterations = cfg.solver_iterations as usize;
         let t = BOX_WALL_THICKNESS;
         let (hx, hy, h) = (BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT);
         let body = phys.insert_body(RigidBodyBuilder::fixed());
@@ -603,7 +692,7 @@ impl PackingWorld {
         let (handle, _) = self.phys.insert(body, collider);
         {
             let act = self.phys.bodies[handle].activation_mut();
-            act.normalized_linear_threshold = self.cfg.sleep_speed_mps;
+            act.normalized_linear_threshold = self.cfg.sleep_speed_mps / self.cfg.length_unit_m;
             act.time_until_sleep = self.cfg.time_until_sleep_s;
         }
         self.placed.push(PlacedObject { ty, body: handle });

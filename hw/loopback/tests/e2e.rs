@@ -271,10 +271,10 @@ fn pack_shortest_episode_with(tag: &str, policy: &Path) {
 }
 
 /// With the search deciding in the job's twin (herbd's default method and twin, a short
-/// budget): the episode is packed with every decision made while the arm picks, the run log
-/// replays bit for bit (each search re-run with the rollouts its budget allowed, the job's
-/// twin rebuilt from the recorded decisions and heightmaps), and `herbd explain` lists the
-/// candidates the search tried.
+/// budget, its rollouts on two threads): the episode is packed with every decision made while
+/// the arm picks, the run log replays bit for bit (each search re-run with the rollouts its
+/// budget allowed, the job's twin rebuilt from the recorded decisions and heightmaps), and
+/// `herbd explain` lists the candidates the search tried and the threads they ran on.
 #[test]
 fn packs_an_episode_with_the_search_and_replays_it_bit_for_bit() {
     let Some(root) = herb_sim::paths::boxed_root_for_tests() else {
@@ -283,7 +283,8 @@ fn packs_an_episode_with_the_search_and_replays_it_bit_for_bit() {
     let (session, n) = shortest_session(&root);
     let (dir, prefix, cfg) = setup("search");
     let mut text = std::fs::read_to_string(&cfg).unwrap();
-    text.push_str("\n[decision]\nmethod = \"search\"\nbudget_s = 0.3\nk = 4\n");
+    // The rollouts on two threads: what the budget allowed replays alike whatever the timing.
+    text.push_str("\n[decision]\nmethod = \"search\"\nbudget_s = 0.3\nk = 4\nthreads = 2\n");
     std::fs::write(&cfg, text).unwrap();
     let (cfg_s, boxed) = (cfg.to_str().unwrap(), root.to_str().unwrap());
     let runs = dir.join("runs");
@@ -358,6 +359,7 @@ fn packs_an_episode_with_the_search_and_replays_it_bit_for_bit() {
         "method: search",
         "feasible candidates",
         "rollout",
+        "on 2 threads",
         "placement",
     ] {
         assert!(out.contains(want), "{want}: {out}");

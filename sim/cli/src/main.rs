@@ -148,6 +148,10 @@ struct EvalArgs {
     /// Candidates the search considers at most, in lattice BLBF's order.
     #[arg(long, default_value_t = 8)]
     search_k: usize,
+    /// Threads each search decision's rollouts run on (episodes already run in parallel on
+    /// `--threads`): the rows are the same whatever the count with a budget of rollouts.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=64))]
+    search_threads: u64,
     /// Objects per search rollout, the candidate's included (to the job's end when absent).
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     search_horizon: Option<u64>,
@@ -163,6 +167,13 @@ struct EvalArgs {
     /// not told: with noise the world is no longer the model it rolls out in.
     #[arg(long, value_parser = parse_noise)]
     release_noise: Option<(f32, f32)>,
+    /// Physics settings of the world (the evaluation's and the search's twins), as
+    /// `KEY=VALUE[,KEY=VALUE...]`, e.g. `solver_iterations=4,dt=0.0333`; repeatable. Keys: dt,
+    /// settle_cap_s, time_until_sleep_s, sleep_speed_mps, friction, max_corrective_speed_mps,
+    /// solver_iterations, prediction_distance_m, length_unit_m, clearance_m, early_out_m,
+    /// inside_tolerance_m.
+    #[arg(long)]
+    world_set: Vec<String>,
     /// Base seed (episode i uses seed + i).
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -389,6 +400,9 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
         cfg.release_noise_deg = deg;
         cfg.validate()?;
     }
+    for list in &a.world_set {
+        cfg.set_all(list)?;
+    }
     let mut rows = Vec::new();
     let mut all_results = Vec::new();
     let mut csv_text = String::from(
@@ -418,6 +432,7 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
             reward: lookahead_reward,
             twin: a.search_world,
             robust: None,
+            threads: a.search_threads as usize,
         },
         world: cfg.clone(),
     };

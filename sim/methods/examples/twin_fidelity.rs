@@ -193,6 +193,7 @@ fn probe(
         reward: REWARD,
         twin,
         robust,
+        threads: 1,
     };
     let kind = match mode {
         Mode::Twin | Mode::Blbf => TwinKind::Heightmap,

@@ -674,10 +674,11 @@ impl VecEnv {
     /// search (`herb_search`): the first `k` lattice candidates in lattice BLBF's order,
     /// each rolled out (`rollouts`, default `k`), in the job's own twin (`twin="job"`, herbd's
     /// and the default), a twin built from the heightmap (`twin="heightmap"`) or a clone of the
-    /// environment's world (`twin="exact"`).
+    /// environment's world (`twin="exact"`), on `search_threads` threads per environment (the
+    /// environments themselves run in parallel already).
     /// Returns as [`VecEnv::step`].
     #[allow(clippy::type_complexity, clippy::too_many_arguments)]
-    #[pyo3(signature = (rule, k=8, active=None, horizon=None, rollouts=None, twin="job"))]
+    #[pyo3(signature = (rule, k=8, active=None, horizon=None, rollouts=None, twin="job", search_threads=1))]
     fn step_rule<'py>(
         &mut self,
         py: Python<'py>,
@@ -687,6 +688,7 @@ impl VecEnv {
         horizon: Option<usize>,
         rollouts: Option<usize>,
         twin: &str,
+        search_threads: usize,
     ) -> PyResult<(
         Bound<'py, PyArray4<f32>>,
         Bound<'py, PyArray1<f32>>,
@@ -700,6 +702,11 @@ impl VecEnv {
             return Err(value_err("horizon 0: need at least 1 object"));
         }
         let twin = TwinKind::parse(twin).map_err(value_err)?;
+        if !(1..=64).contains(&search_threads) {
+            return Err(value_err(format!(
+                "search_threads {search_threads} outside 1..=64"
+            )));
+        }
         let search_settings = SearchSettings {
             k,
             budget: Budget::Rollouts(rollouts.unwrap_or(k)),
@@ -710,6 +717,7 @@ impl VecEnv {
                 .map_or(RewardMode::Simple, |s| s.env.reward_mode()),
             twin,
             robust: None,
+            threads: search_threads,
         };
         let horizon = horizon.unwrap_or(usize::MAX);
         let method = match rule.parse::<Method>() {

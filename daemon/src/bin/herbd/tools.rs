@@ -176,9 +176,15 @@ pub(crate) fn explain(
     if let Some(rep) = &e.search {
         let allowed = e.response.allowed;
         println!(
-            "search: {} feasible candidates on the lattice; the budget allowed {allowed} rollout{} (replayed as that count){}",
+            "search: {} feasible candidates on the lattice; the budget allowed {allowed} rollout{} on {} thread{} (replayed as that count){}",
             rep.candidates,
             if allowed == 1 { "" } else { "s" },
+            cfg.decision.search_threads(),
+            if cfg.decision.search_threads() == 1 {
+                ""
+            } else {
+                "s"
+            },
             if allowed == 0 {
                 ": none finished, so the prior's first (lattice BLBF's) was taken"
             } else {
