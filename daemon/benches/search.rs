@@ -81,6 +81,8 @@ fn main() {
     for (label, budget_s, allowed, k, threads) in [
         ("8 rollouts of 8 candidates", 30.0, Some(8), 8, 1),
         ("herbd's default budget, 1.0 s", 1.0, None, 8, 1),
+        ("16 rollouts of 16 candidates", 30.0, Some(16), 16, 1),
+        ("16 rollouts of 16 candidates", 30.0, Some(16), 16, 2),
         ("1.0 s, k = 64", 1.0, None, 64, 1),
         ("1.0 s, k = 64", 1.0, None, 64, 2),
     ] {
@@ -90,7 +92,9 @@ fn main() {
         cfg.decision.threads = threads;
         let mut core = DecisionCore::new(&cfg, catalog.clone()).expect("decision core");
         let mut h = Histogram::<u64>::new_with_bounds(1, 60_000_000_000, 3).expect("histogram");
-        let mut rollouts = 0u64;
+        let (mut rollouts, mut feasible, mut bound, mut cut) = (0u64, 0u64, 0u64, 0u64);
+        // Per state: rollouts finished, and whether the budget ended the decision.
+        let mut each = Vec::new();
         for (f, rest) in &states {
             let mut order = [0u16; MAX_JOB_OBJECTS];
             order[..rest.len()].copy_from_slice(rest);
@@ -106,26 +110,43 @@ fn main() {
             h.record(t0.elapsed().as_nanos() as u64).ok();
             assert!(d.outcome.is_ok(), "{d:?}");
             rollouts += d.allowed as u64;
+            if let Some(r) = core.search_report() {
+                feasible += r.candidates.min(k) as u64;
+                cut += r.cut as u64;
+                // The budget, not the candidates, ended it.
+                let ended = r.finished.len() < r.candidates.min(k);
+                bound += ended as u64;
+                each.push((r.finished.len(), ended));
+            }
         }
         let ms = |q: f64| h.value_at_quantile(q) as f64 / 1e6;
         let per = rollouts as f64 / h.len().max(1) as f64;
         println!(
-            "search, {label}, {threads} thread{}: n {} p50 {:.0} ms p95 {:.0} ms p99 {:.0} ms max {:.0} ms; {per:.1} rollouts finished per decision",
+            "search, {label}, {threads} thread{}: n {} p50 {:.0} ms p95 {:.0} ms p99 {:.0} ms max {:.0} ms mean {:.0} ms; {per:.1} rollouts finished per decision of {:.1} candidates ({bound} decisions ended by the budget; {cut} rollouts cut or not counted)",
             if threads == 1 { "" } else { "s" },
             h.len(),
             ms(0.5),
             ms(0.95),
             ms(0.99),
             h.max() as f64 / 1e6,
+            h.mean() / 1e6,
+            feasible as f64 / h.len().max(1) as f64,
         );
         if k == 64 {
-            per_thread.push(per);
+            per_thread.push(each);
         }
     }
-    if let [one, two] = per_thread[..] {
+    if let [one, two] = &per_thread[..] {
+        let sum = |v: &[(usize, bool)]| v.iter().map(|e| e.0).sum::<usize>() as f64;
+        // Where the budget ended the decision on both thread counts: what it bought, not
+        // what the candidates allowed.
+        let both: Vec<_> = one.iter().zip(two).filter(|(a, b)| a.1 && b.1).collect();
+        let (a, b): (Vec<_>, Vec<_>) = both.iter().map(|(a, b)| (**a, **b)).unzip();
         println!(
-            "search, 1.0 s, k = 64: two threads finish {:.2} x the rollouts of one",
-            two / one.max(f64::MIN_POSITIVE)
+            "search, 1.0 s, k = 64: two threads finish {:.2} x the rollouts of one over every decision, {:.2} x over the {} the budget ended on both",
+            sum(two) / sum(one).max(f64::MIN_POSITIVE),
+            sum(&b) / sum(&a).max(f64::MIN_POSITIVE),
+            both.len()
         );
     }
 }
