@@ -218,7 +218,8 @@ impl<P: Policy + ?Sized> Decider<P> {
             })
             .and_then(|p| check_placement(self.policy.name(), p))?;
         let PlanarPose { x, y, theta } = placement;
-        // Yaw within (-pi, pi] as the arm plans it; one already there is kept bit for bit.
+        // Yaw within [-pi, pi] as the arm plans it (a network's action reaches both ends); one
+        // already there is kept bit for bit, one outside wrapped into (-pi, pi].
         let theta = if (-std::f32::consts::PI..=std::f32::consts::PI).contains(&theta) {
             theta
         } else {
