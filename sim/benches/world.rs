@@ -45,6 +45,10 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static ALLOC: Counting = Counting;
 
+/// Episodes whose second halves the rollout benches replay on their first halves (and whose
+/// outcomes the A/B compares): enough that one chaotic settle does not decide a ratio.
+const BENCH_EPISODES: usize = 20;
+
 /// A placement to replay: type and planar pose.
 type Step = (TypeIdx, f32, f32, f32);
 
@@ -275,13 +279,13 @@ fn bench_rollout_worlds(c: &mut Criterion, s: &Setup) {
 }
 
 /// How far the rollouts' outcomes under `cfg` agree with today's settings': the second half of
-/// each of the first 10 episodes on its first half, each placed object's inside and stable
+/// each of the first [`BENCH_EPISODES`] episodes on its first half, each placed object's inside and stable
 /// flags compared while both runs go on, and the final compactness.
 fn agreement(s: &Setup, cfg: &WorldConfig, list: &str) {
     let run = |cfg: &WorldConfig| -> Vec<Vec<(bool, bool, f32)>> {
         s.episodes
             .iter()
-            .take(10)
+            .take(BENCH_EPISODES)
             .map(|ep| {
                 let mut w = PackingWorld::new(s.catalog.clone(), cfg.clone()).expect("world");
                 let mut out = Vec::new();
@@ -324,7 +328,7 @@ fn bench_rollout_worlds_with(
     cfg: &WorldConfig,
 ) -> Vec<f64> {
     let mut starts = Vec::new();
-    for ep in s.episodes.iter().take(10) {
+    for ep in s.episodes.iter().take(BENCH_EPISODES) {
         let half = ep.len() / 2;
         let mut w = PackingWorld::new(s.catalog.clone(), cfg.clone()).expect("world");
         if ep[..half]
@@ -339,6 +343,8 @@ fn bench_rollout_worlds_with(
     for kind in ["exact", "twin"] {
         let mut h = hist();
         let mut steps = 0u64;
+        let mut step_hist = hist();
+        let mut capped = 0u64;
         let mut k = 0usize;
         c.bench_function(&format!("rollout-{kind}{suffix}/{}", s.label), |b| {
             b.iter_custom(|iters| {
@@ -363,6 +369,8 @@ fn bench_rollout_worlds_with(
                         done += 1;
                         h.record(dt.as_nanos() as u64).ok();
                         steps += o.settle_steps as u64;
+                        step_hist.record(o.settle_steps as u64).ok();
+                        capped += !o.settled as u64;
                         if !o.inside {
                             break;
                         }
@@ -380,9 +388,12 @@ fn bench_rollout_worlds_with(
         }
         let rate = 1e9 / h.mean();
         eprintln!(
-            "rollout-{kind}{suffix}/{}: {rate:.0} placements/s per core, {:.1} settle steps per placement",
+            "rollout-{kind}{suffix}/{}: {rate:.0} placements/s per core, {:.1} settle steps per placement (p50 {}, p90 {}, {:.1} % at the time cap)",
             s.label,
-            steps as f64 / h.len().max(1) as f64
+            steps as f64 / h.len().max(1) as f64,
+            step_hist.value_at_quantile(0.5),
+            step_hist.value_at_quantile(0.9),
+            100.0 * capped as f64 / h.len().max(1) as f64
         );
         rates.push(rate);
     }

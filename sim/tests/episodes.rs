@@ -138,8 +138,25 @@ fn bad_inputs_are_errors_not_panics() {
     let mut cfg = WorldConfig::default();
     cfg.set_all("solver_iterations=4, dt=0.025").unwrap();
     assert_eq!((cfg.solver_iterations, cfg.dt), (4, 0.025));
+    cfg.set_all(
+        "rest_speed_mps=0.01,contact_recycle_m=0.001,out_past_walls=true,out_check_steps=1",
+    )
+    .unwrap();
+    assert_eq!(
+        (
+            cfg.rest_speed_mps,
+            cfg.contact_recycle_m,
+            cfg.out_past_walls,
+            cfg.out_check_steps
+        ),
+        (0.01, 0.001, true, 1)
+    );
     for (bad, says) in [
         ("solver_iterations=0", "solver_iterations"),
+        ("out_past_walls=maybe", "true or false"),
+        ("out_check_steps=0", "out_check_steps"),
+        ("rest_speed_mps=-1", "rest_speed_mps"),
+        ("contact_recycle_m=1", "contact_recycle_m"),
         ("dt=fast", "not a number"),
         ("length_unit_m=2", "length_unit_m"),
         ("gravity=1", "unknown world setting"),
@@ -149,6 +166,7 @@ fn bad_inputs_are_errors_not_panics() {
         assert!(e.contains(says), "{bad}: {e}");
     }
     assert_eq!((cfg.solver_iterations, cfg.dt), (4, 0.025));
+    assert_eq!((cfg.out_past_walls, cfg.out_check_steps), (true, 1));
     assert!(RewardMode::cs(-0.1).is_err());
     // A bad catalog names what is wrong.
     let e = herb_sim::Catalog::from_toml(

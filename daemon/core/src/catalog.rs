@@ -17,6 +17,7 @@
 use crate::error::{Result, SimError};
 use crate::hull::{HullError, hull_volume, quad_faced_hull, sphere_directions};
 use crate::paths::MeshSource;
+use parry3d::mass_properties::MassProperties;
 use parry3d::math::{Rotation, Vector};
 use parry3d::shape::SharedShape;
 use serde::Deserialize;
@@ -106,6 +107,9 @@ pub struct ObjectShape {
     pub aabb_max: Vector,
     /// The rapier/parry collision shape (shared, cheap to clone).
     pub collider: SharedShape,
+    /// The collision shape's mass properties at a density of 1 kg/m^3, computed once (a
+    /// world scales them to the object's mass for every body it inserts).
+    pub unit_mass: MassProperties,
     /// Where it came from.
     pub source: ShapeSource,
 }
@@ -341,6 +345,7 @@ impl ObjectShape {
             |(lo, hi), &v| (lo.min(v), hi.max(v)),
         );
         let collider = SharedShape::new(poly);
+        let unit_mass = collider.mass_properties(1.0);
         Ok(Self {
             vertices,
             triangles,
@@ -348,6 +353,7 @@ impl ObjectShape {
             aabb_min,
             aabb_max,
             collider,
+            unit_mass,
             source,
         })
     }

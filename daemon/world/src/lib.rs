@@ -58,6 +58,11 @@ pub struct WorldConfig {
     pub time_until_sleep_s: f32,
     /// Sleep threshold on a body's farthest-point speed (m/s).
     pub sleep_speed_mps: f32,
+    /// A settle also ends once every placed object's farthest point has moved slower than
+    /// this for `time_until_sleep_s` (m/s), without waiting for rapier to put each island to
+    /// sleep (which waits for islands to split and restarts a whole pile's timer when one body
+    /// moves). 0: a settle ends only when rapier has put every body to sleep.
+    pub rest_speed_mps: f32,
     /// Friction coefficient of every surface.
     pub friction: f32,
     /// Widening of the success volume for contact penetration (m).
@@ -66,6 +71,11 @@ pub struct WorldConfig {
     pub stability_tilt_deg: f32,
     /// Stop settling early once an object is this far outside the success volume (m).
     pub early_out_m: f32,
+    /// Also stop settling once an object's origin is below the rim and past a wall's outer
+    /// face, from where it cannot come back in.
+    pub out_past_walls: bool,
+    /// Steps between two checks for an object out of the box.
+    pub out_check_steps: u32,
     /// Fastest speed at which the solver pushes overlapping bodies apart (m/s).
     pub max_corrective_speed_mps: f32,
     /// Solver substeps per physics step (rapier's `num_solver_iterations`).
@@ -76,6 +86,10 @@ pub struct WorldConfig {
     /// collider (4 cm at 1 m), so smaller values pair fewer objects. Every distance and speed of
     /// this configuration stays in metres whatever it is.
     pub length_unit_m: f32,
+    /// A contact pair whose bodies moved relative to each other by less than this since its
+    /// last full update keeps its contact points instead of being computed again (m; rapier's
+    /// contact recycling). 0: every pair is computed every step.
+    pub contact_recycle_m: f32,
     /// Release noise of the evaluation: standard deviation (m) of the x and y offsets by which
     /// the evaluation's environment (`herb_sim::PackingEnv`) releases each object off the pose
     /// it was given, as a real gripper does (0: exactly there). The world's own calls ([`PackingWorld::place_pose`]) and the
@@ -94,14 +108,18 @@ impl Default for WorldConfig {
             settle_cap_s: 3.0,
             time_until_sleep_s: 0.2,
             sleep_speed_mps: 0.01,
+            rest_speed_mps: 0.0,
             friction: 0.6,
             inside_tolerance_m: INSIDE_TOLERANCE_M,
             stability_tilt_deg: 10.0,
             early_out_m: 0.05,
+            out_past_walls: false,
+            out_check_steps: 8,
             max_corrective_speed_mps: 3.0,
             solver_iterations: 8,
             prediction_distance_m: 0.02,
             length_unit_m: 1.0,
+            contact_recycle_m: 0.0,
             release_noise_m: 0.0,
             release_noise_deg: 0.0,
         }
@@ -119,18 +137,22 @@ impl WorldConfig {
     }
 
     /// The settings [`WorldConfig::set`] knows, by name.
-    pub const SETTABLE: [&'static str; 12] = [
+    pub const SETTABLE: [&'static str; 16] = [
         "dt",
         "settle_cap_s",
         "time_until_sleep_s",
         "sleep_speed_mps",
+        "rest_speed_mps",
         "friction",
         "max_corrective_speed_mps",
         "solver_iterations",
         "prediction_distance_m",
         "length_unit_m",
+        "contact_recycle_m",
         "clearance_m",
         "early_out_m",
+        "out_past_walls",
+        "out_check_steps",
         "inside_tolerance_m",
     ];
 
@@ -146,6 +168,7 @@ impl WorldConfig {
             "settle_cap_s" => next.settle_cap_s = num()?,
             "time_until_sleep_s" => next.time_until_sleep_s = num()?,
             "sleep_speed_mps" => next.sleep_speed_mps = num()?,
+            "rest_speed_mps" => next.rest_speed_mps = num()?,
             "friction" => next.friction = num()?,
             "max_corrective_speed_mps" => next.max_corrective_speed_mps = num()?,
             "solver_iterations" => {
@@ -153,8 +176,21 @@ impl WorldConfig {
             }
             "prediction_distance_m" => next.prediction_distance_m = num()?,
             "length_unit_m" => next.length_unit_m = num()?,
+            "contact_recycle_m" => next.contact_recycle_m = num()?,
             "clearance_m" => next.clearance_m = num()?,
             "early_out_m" => next.early_out_m = num()?,
+            "out_past_walls" => {
+                next.out_past_walls = match value.trim() {
+                    "true" | "1" => true,
+                    "false" | "0" => false,
+                    _ => {
+                        return Err(SimError::Config(format!(
+                            "world setting {key} = {value:?}: expected true or false"
+                        )));
+                    }
+                }
+            }
+            "out_check_steps" => next.out_check_steps = value.trim().parse().map_err(|_| bad())?,
             "inside_tolerance_m" => next.inside_tolerance_m = num()?,
             _ => {
                 return Err(SimError::Config(format!(
@@ -196,10 +232,17 @@ impl WorldConfig {
         check("settle_cap_s", self.settle_cap_s, self.dt, 60.0)?;
         check("time_until_sleep_s", self.time_until_sleep_s, 0.0, 5.0)?;
         check("sleep_speed_mps", self.sleep_speed_mps, 0.0, 1.0)?;
+        check("rest_speed_mps", self.rest_speed_mps, 0.0, 1.0)?;
         check("friction", self.friction, 0.0, 2.0)?;
         check("inside_tolerance_m", self.inside_tolerance_m, 0.0, 0.05)?;
         check("stability_tilt_deg", self.stability_tilt_deg, 0.0, 90.0)?;
         check("early_out_m", self.early_out_m, 0.0, 10.0)?;
+        if !(1..=1000).contains(&self.out_check_steps) {
+            return Err(SimError::Config(format!(
+                "'out_check_steps' = {} outside 1..=1000",
+                self.out_check_steps
+            )));
+        }
         check(
             "max_corrective_speed_mps",
             self.max_corrective_speed_mps,
@@ -219,6 +262,7 @@ impl WorldConfig {
             0.1,
         )?;
         check("length_unit_m", self.length_unit_m, 0.01, 1.0)?;
+        check("contact_recycle_m", self.contact_recycle_m, 0.0, 0.05)?;
         check("release_noise_m", self.release_noise_m, 0.0, 0.05)?;
         check("release_noise_deg", self.release_noise_deg, 0.0, 45.0)?;
         Ok(())
@@ -484,7 +528,8 @@ impl PackingWorld {
         // Speed at which overlaps are resolved (rapier default 3 m/s; lower values let bodies sink).
         ip.normalized_max_corrective_velocity = cfg.max_corrective_speed_mps / unit;
         ip.normalized_prediction_distance = cfg.prediction_distance_m / unit;
-        ip.contact_recycling = false;
+        ip.contact_recycling = cfg.contact_recycle_m > 0.0;
+        ip.normalized_contact_recycle_distance = cfg.contact_recycle_m / unit;
         ip.num_solver_iterations = cfg.solver_iterations as usize;
         let t = BOX_WALL_THICKNESS;
         let (hx, hy, h) = (BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT);
@@ -684,8 +729,11 @@ impl PackingWorld {
         }
         let spec = self.catalog.spec(ty);
         let shape = self.catalog.shape(ty);
+        // As `ColliderBuilder::mass` computes them, from the catalog's unit-density properties.
+        let mut mass = shape.unit_mass;
+        mass.set_mass(spec.mass_kg, true);
         let collider = ColliderBuilder::new(shape.collider.clone())
-            .mass(spec.mass_kg)
+            .mass_properties(mass)
             .friction(self.cfg.friction)
             .restitution(0.0);
         let body = RigidBodyBuilder::dynamic().pose(pose).build();
@@ -721,9 +769,14 @@ impl PackingWorld {
         }
     }
 
-    /// Steps until every placed body sleeps, an object is far out, or the time cap.
+    /// Steps until every placed body sleeps (or, with [`WorldConfig::rest_speed_mps`], has
+    /// been that slow for [`WorldConfig::time_until_sleep_s`]), an object is far out, or the
+    /// time cap.
     fn settle(&mut self) -> (u32, bool) {
         let max_steps = (self.cfg.settle_cap_s / self.cfg.dt).ceil() as u32;
+        let rest = self.cfg.rest_speed_mps;
+        let rest_steps = (self.cfg.time_until_sleep_s / self.cfg.dt).ceil().max(1.0) as u32;
+        let mut slow_for = 0u32;
         for step in 1..=max_steps {
             self.phys.step();
             if self
@@ -733,18 +786,50 @@ impl PackingWorld {
             {
                 return (step, true);
             }
-            if step % 8 == 0 && self.any_far_out() {
+            if rest > 0.0 {
+                slow_for = if self.all_slower_than(rest) {
+                    slow_for + 1
+                } else {
+                    0
+                };
+                if slow_for >= rest_steps {
+                    return (step, true);
+                }
+            }
+            if step % self.cfg.out_check_steps == 0 && self.any_far_out() {
                 return (step, true);
             }
         }
         (max_steps, false)
     }
 
+    /// True if every placed object's farthest point (its hull's bounding radius about the
+    /// body's origin) moves slower than `speed` (m/s).
+    fn all_slower_than(&self, speed: f32) -> bool {
+        self.placed.iter().all(|p| {
+            let b = &self.phys.bodies[p.body];
+            if b.is_sleeping() {
+                return true;
+            }
+            let s = self.catalog.shape(p.ty);
+            let r = s.aabb_min.length().max(s.aabb_max.length());
+            b.linvel().length() + b.angvel().length() * r < speed
+        })
+    }
+
     fn any_far_out(&self) -> bool {
         let m = self.cfg.early_out_m;
+        let walls = self.cfg.out_past_walls;
+        let (ox, oy) = (
+            BOX_HALF_X + BOX_WALL_THICKNESS,
+            BOX_HALF_Y + BOX_WALL_THICKNESS,
+        );
         self.placed.iter().any(|p| {
             let t = self.phys.bodies[p.body].translation();
-            t.x.abs() > BOX_HALF_X + m || t.y.abs() > BOX_HALF_Y + m || t.z < -m
+            t.x.abs() > BOX_HALF_X + m
+                || t.y.abs() > BOX_HALF_Y + m
+                || t.z < -m
+                || (walls && t.z < BOX_HEIGHT && (t.x.abs() > ox || t.y.abs() > oy))
         })
     }
 

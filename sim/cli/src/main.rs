@@ -17,6 +17,7 @@ mod plot;
 
 use herb_decide::{Order, PolicySpec, SequenceModel};
 use herb_methods::{Method, MethodSettings};
+use herb_picture::{PictureObject, write_pack_picture};
 use herb_search::{Budget, SearchSettings, TwinKind};
 
 /// The replays `herb-sim pack` shows.
@@ -169,8 +170,8 @@ struct EvalArgs {
     release_noise: Option<(f32, f32)>,
     /// Physics settings of the world (the evaluation's and the search's twins), as
     /// `KEY=VALUE[,KEY=VALUE...]`, e.g. `solver_iterations=4,dt=0.0333`; repeatable. Keys: dt,
-    /// settle_cap_s, time_until_sleep_s, sleep_speed_mps, friction, max_corrective_speed_mps,
-    /// solver_iterations, prediction_distance_m, length_unit_m, clearance_m, early_out_m,
+    /// settle_cap_s, time_until_sleep_s, sleep_speed_mps, rest_speed_mps, friction, max_corrective_speed_mps,
+    /// solver_iterations, prediction_distance_m, length_unit_m, contact_recycle_m, clearance_m, early_out_m, out_past_walls, out_check_steps,
     /// inside_tolerance_m.
     #[arg(long)]
     world_set: Vec<String>,
@@ -184,7 +185,10 @@ struct EvalArgs {
     /// Only the first N episodes.
     #[arg(long)]
     limit: Option<usize>,
-    /// Write the final heightmap of this episode (session name) as a PNG ...
+    /// Write a picture of this episode (session name) for every row, as a PNG ...: the final
+    /// heightmap of the humans' replays; for the other methods the pack where the episode ended
+    /// (top and side views, an object outside in red), run again with the row's method, order,
+    /// seed and world.
     #[arg(long)]
     png_episode: Option<String>,
     /// ... to this path.
@@ -519,27 +523,28 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
         csv_text.push_str(&csv_rows(&name, seq_name, &results));
         rows.push(eval::summarize(&label, &results));
         all_results.push((label.clone(), results));
-        if let (Some(ep_name), Some(sm)) = (
-            &a.png_episode,
-            m.replay().filter(|_| m != Method::HumanRecorded),
-        ) {
-            let ep = episodes
+        if let Some(ep_name) = a
+            .png_episode
+            .as_ref()
+            .filter(|_| m != Method::HumanRecorded)
+        {
+            let i = episodes
                 .iter()
-                .find(|e| &e.name == ep_name)
+                .position(|e| &e.name == ep_name)
                 .ok_or_else(|| format!("no episode {ep_name:?}"))?;
-            let path = a
-                .png
-                .with_file_name(format!(
-                    "{}-{}-{}",
-                    a.png
-                        .file_stem()
-                        .and_then(|s| s.to_str())
-                        .unwrap_or("final"),
-                    m.name(),
-                    ep_name
-                ))
-                .with_extension("png");
-            pack_quiet(&catalog, ep, sm, a.seed, &path)?;
+            let path = a.png.with_file_name(format!(
+                "{}-{}-{}.png",
+                a.png
+                    .file_stem()
+                    .and_then(|s| s.to_str())
+                    .unwrap_or("final"),
+                name.replace(' ', "-"),
+                ep_name
+            ));
+            match m.replay() {
+                Some(sm) => pack_quiet(&catalog, &episodes[i], sm, a.seed, &path)?,
+                None => run.picture(m, order, &settings, i, &label, &path)?,
+            }
             eprintln!("wrote {}", path.display());
         }
     }
@@ -738,6 +743,52 @@ impl EvalRun<'_> {
             self.threads,
             make,
         )?)
+    }
+}
+
+impl EvalRun<'_> {
+    /// Runs episode `i` once more with method `m` as [`EvalRun::method`] runs it (same order,
+    /// seed and world) and writes the pack where it ended to `path` (top and side views).
+    fn picture(
+        &self,
+        m: Method,
+        order: Option<Order>,
+        settings: &MethodSettings,
+        i: usize,
+        label: &str,
+        path: &Path,
+    ) -> AnyResult<()> {
+        let ep = &self.episodes[i];
+        let s = self.seed.wrapping_add(i as u64);
+        let objects = match order {
+            Some(o) => o.order(self.catalog, self.model, &ep.objects, s)?,
+            None => ep.objects.clone(),
+        };
+        let mut env = PackingEnv::new(self.catalog.clone(), self.cfg.clone(), RewardMode::Simple)?;
+        let mut placer = m.placer(self.catalog, settings)?;
+        let r = eval::run_episode(&mut env, ep, &objects, placer.as_mut(), s)
+            .map_err(|e| e.to_string())?;
+        let objects: Vec<PictureObject> = env
+            .world_mut()
+            .report()
+            .iter()
+            .enumerate()
+            .map(|(k, o)| PictureObject {
+                label: format!("{} {}", k + 1, self.catalog.spec(o.ty).id),
+                lo: o.lo,
+                hi: o.hi,
+                outside: o.violation.map(|(b, by)| (b.to_string(), by)),
+            })
+            .collect();
+        let verdict = format!(
+            "{}: {label}, {} ({} of {} packed)",
+            ep.name,
+            if r.success { "success" } else { "FAILED" },
+            r.packed,
+            r.objects
+        );
+        write_pack_picture(path, &verdict, env.world().heightmap(), &objects)?;
+        Ok(())
     }
 }
 
