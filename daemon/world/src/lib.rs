@@ -59,9 +59,11 @@ pub struct WorldConfig {
     /// Sleep threshold on a body's farthest-point speed (m/s).
     pub sleep_speed_mps: f32,
     /// A settle also ends once every placed object's farthest point has moved slower than
-    /// this for `time_until_sleep_s` (m/s), without waiting for rapier to put each island to
-    /// sleep (which waits for islands to split and restarts a whole pile's timer when one body
-    /// moves). 0: a settle ends only when rapier has put every body to sleep.
+    /// this for `time_until_sleep_s` (m/s) and every object is inside the success volume,
+    /// without waiting for rapier to put each island to sleep (which waits for islands to split
+    /// and restarts a whole pile's timer when one body moves). An object slow on a rim goes on
+    /// until rapier's sleep or the cap. 0: a settle ends only when rapier has put every body to
+    /// sleep.
     pub rest_speed_mps: f32,
     /// Friction coefficient of every surface.
     pub friction: f32,
@@ -793,7 +795,12 @@ impl PackingWorld {
                     0
                 };
                 if slow_for >= rest_steps {
-                    return (step, true);
+                    // Only a pile wholly inside the success volume is taken as at rest: an
+                    // object slow on a rim may still go in or out, which rapier's sleep decides.
+                    if self.scan(false).first_outside.is_none() {
+                        return (step, true);
+                    }
+                    slow_for = 0;
                 }
             }
             if step % self.cfg.out_check_steps == 0 && self.any_far_out() {
