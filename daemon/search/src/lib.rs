@@ -35,6 +35,7 @@ use herb_world::rollout::rollout_until;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rapier3d::math::{Pose, Rotation};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 /// What the search may spend on one decision.
@@ -443,56 +444,34 @@ fn roll_out(
     firsts: &[Placement],
     deadline: Option<Instant>,
 ) -> Result<Vec<Rolled>> {
-    let expired = || deadline.is_some_and(|d| Instant::now() >= d);
-    let threads = lattices.len().clamp(1, firsts.len().max(1));
-    if threads == 1 {
-        let mut out = Vec::with_capacity(firsts.len());
-        for &first in firsts {
-            if expired() {
-                break;
+    let next = AtomicUsize::new(0);
+    // One thread's share: the next candidate not yet taken, until none is left or the deadline.
+    let work = |lattice: &mut Lattice| -> Result<Vec<(usize, Option<CandidateOutcome>)>> {
+        let mut mine = Vec::new();
+        loop {
+            let c = next.fetch_add(1, Ordering::Relaxed);
+            if c >= firsts.len() || deadline.is_some_and(|d| Instant::now() >= d) {
+                return Ok(mine);
             }
-            let o = evaluate(
-                &mut lattices[0],
-                settings,
-                world,
-                remaining,
-                first,
-                deadline,
-            )?;
-            let cut = o.is_none();
-            out.push(Some(o));
-            if cut {
-                break;
-            }
+            let o = evaluate(lattice, settings, world, remaining, firsts[c], deadline)?;
+            mine.push((c, o));
         }
-        out.resize(firsts.len(), None);
-        return Ok(out);
-    }
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    type Mine = Result<Vec<(usize, Option<CandidateOutcome>)>>;
-    let results: Vec<Mine> = std::thread::scope(|s| {
-        let workers: Vec<_> = lattices[..threads]
-            .iter_mut()
-            .map(|lattice| {
-                let next = &next;
-                s.spawn(move || {
-                    let mut mine = Vec::new();
-                    loop {
-                        let c = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        if c >= firsts.len() || expired() {
-                            return Ok(mine);
-                        }
-                        let o = evaluate(lattice, settings, world, remaining, firsts[c], deadline)?;
-                        mine.push((c, o));
-                    }
-                })
-            })
-            .collect();
-        workers
-            .into_iter()
-            .map(|w| w.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
-            .collect()
-    });
+    };
+    let threads = lattices.len().clamp(1, firsts.len().max(1));
+    let results: Vec<Result<_>> = if threads == 1 {
+        vec![work(&mut lattices[0])]
+    } else {
+        std::thread::scope(|s| {
+            let workers: Vec<_> = lattices[..threads]
+                .iter_mut()
+                .map(|lattice| s.spawn(|| work(lattice)))
+                .collect();
+            workers
+                .into_iter()
+                .map(|w| w.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+                .collect()
+        })
+    };
     let mut out = vec![None; firsts.len()];
     for r in results {
         for (c, o) in r? {

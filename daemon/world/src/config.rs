@@ -128,6 +128,7 @@ impl WorldConfig {
         let mut next = self.clone();
         let bad = || SimError::Config(format!("world setting {key} = {value:?}: not a number"));
         let num = || value.trim().parse::<f32>().map_err(|_| bad());
+        let int = || value.trim().parse::<u32>().map_err(|_| bad());
         match key {
             "dt" => next.dt = num()?,
             "settle_cap_s" => next.settle_cap_s = num()?,
@@ -136,9 +137,7 @@ impl WorldConfig {
             "rest_speed_mps" => next.rest_speed_mps = num()?,
             "friction" => next.friction = num()?,
             "max_corrective_speed_mps" => next.max_corrective_speed_mps = num()?,
-            "solver_iterations" => {
-                next.solver_iterations = value.trim().parse().map_err(|_| bad())?
-            }
+            "solver_iterations" => next.solver_iterations = int()?,
             "prediction_distance_m" => next.prediction_distance_m = num()?,
             "length_unit_m" => next.length_unit_m = num()?,
             "contact_recycle_m" => next.contact_recycle_m = num()?,
@@ -155,7 +154,7 @@ impl WorldConfig {
                     }
                 }
             }
-            "out_check_steps" => next.out_check_steps = value.trim().parse().map_err(|_| bad())?,
+            "out_check_steps" => next.out_check_steps = int()?,
             "inside_tolerance_m" => next.inside_tolerance_m = num()?,
             _ => {
                 return Err(SimError::Config(format!(
@@ -191,6 +190,13 @@ impl WorldConfig {
                 )))
             }
         };
+        let count = |name: &str, v: u32, hi: u32| {
+            if (1..=hi).contains(&v) {
+                Ok(())
+            } else {
+                Err(SimError::Config(format!("'{name}' = {v} outside 1..={hi}")))
+            }
+        };
         check("heightmap_cell_m", self.heightmap_cell_m, 0.0005, 0.02)?;
         check("clearance_m", self.clearance_m, 0.0, 0.05)?;
         check("dt", self.dt, 1e-4, 0.05)?;
@@ -202,24 +208,14 @@ impl WorldConfig {
         check("inside_tolerance_m", self.inside_tolerance_m, 0.0, 0.05)?;
         check("stability_tilt_deg", self.stability_tilt_deg, 0.0, 90.0)?;
         check("early_out_m", self.early_out_m, 0.0, 10.0)?;
-        if !(1..=1000).contains(&self.out_check_steps) {
-            return Err(SimError::Config(format!(
-                "'out_check_steps' = {} outside 1..=1000",
-                self.out_check_steps
-            )));
-        }
+        count("out_check_steps", self.out_check_steps, 1000)?;
         check(
             "max_corrective_speed_mps",
             self.max_corrective_speed_mps,
             0.01,
             10.0,
         )?;
-        if !(1..=64).contains(&self.solver_iterations) {
-            return Err(SimError::Config(format!(
-                "'solver_iterations' = {} outside 1..=64",
-                self.solver_iterations
-            )));
-        }
+        count("solver_iterations", self.solver_iterations, 64)?;
         check(
             "prediction_distance_m",
             self.prediction_distance_m,

@@ -175,16 +175,13 @@ pub(crate) fn explain(
     println!("method: {}", e.method);
     if let Some(rep) = &e.search {
         let allowed = e.response.allowed;
+        let threads = cfg.decision.search_threads();
         println!(
             "search: {} feasible candidates on the lattice; the budget allowed {allowed} rollout{} on {} thread{} (replayed as that count){}",
             rep.candidates,
             if allowed == 1 { "" } else { "s" },
-            cfg.decision.search_threads(),
-            if cfg.decision.search_threads() == 1 {
-                ""
-            } else {
-                "s"
-            },
+            threads,
+            if threads == 1 { "" } else { "s" },
             if allowed == 0 {
                 ": none finished, so the prior's first (lattice BLBF's) was taken"
             } else {
