@@ -259,3 +259,18 @@ impl PackingEnv {
         &self.obs
     }
 }
+
+/// The objects of an episode of the training distribution (the HERB paper's): a count drawn
+/// uniformly from `count`, then each object's type uniformly from the catalog's `catalog_len`
+/// types, in the order drawn. The training environments (the bindings' `VecEnv`) and the
+/// sampled episode sets of a sweep draw through this.
+pub fn sample_objects(
+    rng: &mut impl rand::Rng,
+    catalog_len: usize,
+    count: std::ops::RangeInclusive<usize>,
+) -> Vec<crate::TypeIdx> {
+    let n = rng.random_range(count);
+    (0..n)
+        .map(|_| crate::TypeIdx(rng.random_range(0..catalog_len as u16)))
+        .collect()
+}

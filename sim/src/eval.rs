@@ -46,8 +46,9 @@ impl Replay {
     }
 }
 
-/// The result of one episode.
-#[derive(Debug, Clone, PartialEq)]
+/// The result of one episode (serialisable: a sweep's tasks send it from the worker that ran it
+/// to the one that writes the tables).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EpisodeResult {
     /// Session name.
     pub name: String,
@@ -77,7 +78,7 @@ pub struct EpisodeResult {
 pub const NO_FEASIBLE_PLACEMENT: &str = "no feasible placement";
 
 /// The cause of a failed episode.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Failure {
     /// The bound of the success volume crossed most (see `PlacementOutcome::violation`).
     pub bound: &'static str,
@@ -85,6 +86,40 @@ pub struct Failure {
     pub by_m: f32,
     /// The object outside was placed before the last placement (knocked out or pushed).
     pub earlier_object: bool,
+}
+
+/// A [`Failure`] as read back (its bound any text until checked).
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FailureText {
+    bound: String,
+    by_m: f32,
+    earlier_object: bool,
+}
+
+impl<'de> serde::Deserialize<'de> for Failure {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        Failure::try_from(FailureText::deserialize(d)?).map_err(serde::de::Error::custom)
+    }
+}
+
+impl TryFrom<FailureText> for Failure {
+    type Error = String;
+
+    /// Takes the bound back as one of the names the world reports ([`SuccessVolume::BOUNDS`],
+    /// [`NO_FEASIBLE_PLACEMENT`]).
+    fn try_from(f: FailureText) -> std::result::Result<Self, String> {
+        let bound = SuccessVolume::BOUNDS
+            .into_iter()
+            .chain([NO_FEASIBLE_PLACEMENT])
+            .find(|b| *b == f.bound)
+            .ok_or_else(|| format!("unknown failure bound {:?}", f.bound))?;
+        Ok(Failure {
+            bound,
+            by_m: f.by_m,
+            earlier_object: f.earlier_object,
+        })
+    }
 }
 
 impl Failure {
@@ -551,6 +586,22 @@ pub fn mean_std(v: impl IntoIterator<Item = f64>) -> (f64, f64) {
         m,
         (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / n).sqrt(),
     )
+}
+
+/// The 95 % interval of a success rate of `successes` out of `n` (Wilson's score interval,
+/// as fractions in `[0, 1]`; `(0, 1)` for `n = 0`): unlike the normal approximation it stays
+/// inside `[0, 1]` and is honest near 0 % and 100 %, where the rows of Table I sit.
+pub fn success_interval(successes: usize, n: usize) -> (f64, f64) {
+    if n == 0 {
+        return (0.0, 1.0);
+    }
+    const Z: f64 = 1.959_963_984_540_054;
+    let (k, n) = (successes.min(n) as f64, n as f64);
+    let p = k / n;
+    let z2 = Z * Z;
+    let centre = (p + z2 / (2.0 * n)) / (1.0 + z2 / n);
+    let half = Z / (1.0 + z2 / n) * (p * (1.0 - p) / n + z2 / (4.0 * n * n)).sqrt();
+    ((centre - half).max(0.0), (centre + half).min(1.0))
 }
 
 /// The summary row of one method.

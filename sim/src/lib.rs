@@ -31,7 +31,7 @@ pub use herb_core::{
 
 pub use catalog::{Catalog, ObjectShape, ObjectSpec, SharedCatalog, TypeIdx};
 
-pub use env::{PackingEnv, RewardMode, StepInfo, StepResult};
+pub use env::{PackingEnv, RewardMode, StepInfo, StepResult, sample_objects};
 pub use error::{Result, SimError};
 pub use heightmap::{GridSpec, Heightmap};
 pub use observation::ObsLayout;

@@ -409,3 +409,39 @@ fn release_noise_moves_releases_reproducibly_and_none_changes_nothing() {
     .unwrap_err();
     assert!(e.to_string().contains("'release_noise_m'"), "{e}");
 }
+
+/// Wilson's interval at known values, and its ends inside [0, 1].
+#[test]
+fn the_success_interval_is_wilsons() {
+    use herb_sim::eval::success_interval;
+    let (lo, hi) = success_interval(0, 10);
+    assert_eq!(lo, 0.0);
+    assert!((hi - 0.27753).abs() < 1e-4, "{hi}");
+    let (lo, hi) = success_interval(5, 10);
+    assert!((lo - 0.23659).abs() < 1e-4 && (hi - 0.76341).abs() < 1e-4, "{lo} {hi}");
+    let (lo, hi) = success_interval(263, 263);
+    assert!(hi > 1.0 - 1e-12 && hi <= 1.0 && (lo - 0.98560).abs() < 1e-4, "{lo} {hi}");
+    assert_eq!(success_interval(0, 0), (0.0, 1.0));
+}
+
+/// An episode's result goes through JSON unchanged (a sweep's tasks send it so), and a failure
+/// whose bound the world does not name is refused.
+#[test]
+fn an_episode_result_reads_back_as_written() {
+    use herb_sim::eval::{EpisodeResult, Failure};
+    let mut r = EpisodeResult::new("p1_s1", 3);
+    r.placements = 2;
+    r.compactness_per_step = vec![0.25, 0.5];
+    r.decision_ns = vec![1_000, 2_000];
+    r.failure = Some(Failure {
+        bound: "+y wall",
+        by_m: 0.012,
+        earlier_object: true,
+    });
+    let text = serde_json::to_string(&r).unwrap();
+    let back: EpisodeResult = serde_json::from_str(&text).unwrap();
+    assert_eq!(back, r);
+    let bad = text.replace("+y wall", "ceiling");
+    let err = serde_json::from_str::<EpisodeResult>(&bad).unwrap_err();
+    assert!(err.to_string().contains("unknown failure bound \"ceiling\""), "{err}");
+}

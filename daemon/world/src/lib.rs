@@ -741,6 +741,10 @@ pub struct SuccessVolume {
 }
 
 impl SuccessVolume {
+    /// The names of the volume's bounds, as [`SuccessVolume::violation`] reports them.
+    pub const BOUNDS: [&'static str; 6] =
+        ["-x wall", "+x wall", "-y wall", "+y wall", "floor", "top"];
+
     /// The volume widened by `tolerance_m` on every side.
     pub fn new(tolerance_m: f32) -> Self {
         let tol = tolerance_m;
@@ -757,14 +761,17 @@ impl SuccessVolume {
             return None;
         }
         let over = [
-            ("-x wall", self.lo.x - lo.x),
-            ("+x wall", hi.x - self.hi.x),
-            ("-y wall", self.lo.y - lo.y),
-            ("+y wall", hi.y - self.hi.y),
-            ("floor", self.lo.z - lo.z),
-            ("top", hi.z - self.hi.z),
+            self.lo.x - lo.x,
+            hi.x - self.hi.x,
+            self.lo.y - lo.y,
+            hi.y - self.hi.y,
+            self.lo.z - lo.z,
+            hi.z - self.hi.z,
         ];
-        over.into_iter().max_by(|a, b| a.1.total_cmp(&b.1))
+        Self::BOUNDS
+            .into_iter()
+            .zip(over)
+            .max_by(|a, b| a.1.total_cmp(&b.1))
     }
 }
 

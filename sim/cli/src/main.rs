@@ -4,21 +4,22 @@ use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, Parser, Subcommand};
 use herb_sim::boxed::{self, Episode};
 use herb_sim::catalog::Catalog;
-use herb_sim::eval::{self, EpisodeOutcome, EvalError, Replay, ReplayPlacer};
+use herb_sim::eval::{self, Replay, ReplayPlacer};
 use herb_sim::hull::fit_canonical;
 use herb_sim::paths::{self, MeshSource};
 use herb_sim::{PackingEnv, RewardMode, SharedCatalog, WorldConfig};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 mod plot;
 
 use herb_decide::{Order, PolicySpec, SequenceModel};
-use herb_methods::{Method, MethodSettings};
+use herb_methods::evaluation;
+use herb_methods::{EvalRun, EvalSettings, Method, MethodSettings, Row};
 use herb_picture::{PictureObject, write_pack_picture};
-use herb_search::{Budget, SearchSettings, TwinKind};
+use herb_search::TwinKind;
 
 /// The replays `herb-sim pack` shows.
 const REPLAYS: [Method; 3] = [Method::Human, Method::HumanPose, Method::Random];
@@ -38,25 +39,6 @@ fn order_parser() -> impl clap::builder::TypedValueParser<Value = Order> {
         .into_iter()
         .chain(Order::ALIASES.map(|(alias, _)| alias));
     PossibleValuesParser::new(names).map(|s| s.parse::<Order>().expect("a listed name"))
-}
-
-/// One row of `herb-sim eval`: a method and, when given as `METHOD@ORDER`, its object order.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Row {
-    method: Method,
-    order: Option<Order>,
-}
-
-/// Parses `METHOD` or `METHOD@ORDER`.
-fn parse_row(s: &str) -> Result<Row, herb_decide::NameError> {
-    let (method, order) = match s.split_once('@') {
-        Some((m, o)) => (m, Some(o.parse::<Order>()?)),
-        None => (s, None),
-    };
-    Ok(Row {
-        method: method.parse()?,
-        order,
-    })
 }
 
 #[derive(Parser)]
@@ -111,7 +93,7 @@ struct EvalArgs {
     /// repeat for several rows. Methods: herb, blbf, human, human-pose, random,
     /// human-recorded, packit-so3, bc-mse, bc-mdn, lattice-blbf, lookahead, lattice-reserve,
     /// geo-lookahead.
-    #[arg(long, value_parser = parse_row)]
+    #[arg(long)]
     method: Vec<Row>,
     /// Object order of the rows without `@ORDER` (defaults: HERB's, `beam3`, for herb and the
     /// lookahead rules, largest for the BLBF rules); the replays use the human order. The old
@@ -249,7 +231,7 @@ fn main() -> ExitCode {
     }
 }
 
-type AnyResult<T> = Result<T, Box<dyn std::error::Error>>;
+type AnyResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
 fn load_catalog(d: &DataArgs) -> AnyResult<(SharedCatalog, Option<PathBuf>)> {
     let root = paths::boxed_root(d.boxed.as_deref());
@@ -376,7 +358,27 @@ fn pack_cmd(data: &DataArgs, a: PackArgs) -> AnyResult<()> {
 /// `herb-sim eval`: methods over the BoxED episodes, the Table I metrics (Markdown, CSV, plots).
 fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
     check_eval_args(&a)?;
-    let lookahead_reward = RewardMode::parse(&a.lookahead_reward)?;
+    let settings = a.settings();
+    settings.validate()?;
+    // One run per (row, policy): herb once per policy, the others once.
+    let rows: Vec<Row> = a
+        .method
+        .iter()
+        .flat_map(|r| match r.method {
+            Method::Herb => a
+                .policy
+                .iter()
+                .map(|p| Row {
+                    policy: Some(p.clone()),
+                    ..r.clone()
+                })
+                .collect(),
+            _ => vec![r.clone()],
+        })
+        .collect();
+    for r in &rows {
+        settings.check_row(r)?;
+    }
     let (catalog, root) = load_catalog(data)?;
     let root = need_root(root)?;
     let (sessions, bad) = boxed::load_all(&root, &catalog)?;
@@ -388,124 +390,37 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
         episodes.truncate(n);
     }
     // The sequence model, when any row orders its objects by Beam-3.
-    let model = if a.method.iter().any(|r| {
-        r.method
-            .order(r.order.or(a.order))
-            .is_some_and(|o| o.uses_sequence_model())
-    }) {
-        Some(SequenceModel::load(&a.sequence_model, &catalog)?)
+    let model = if rows.iter().any(|r| settings.needs_sequence_model(r)) {
+        Some(SequenceModel::load(&settings.sequence_model, &catalog)?)
     } else {
         None
     };
     let target = eval::mean_std(episodes.iter().map(|e| e.objects.len() as f64));
-    let mut cfg = WorldConfig::default();
-    if let Some((mm, deg)) = a.release_noise {
-        cfg.release_noise_m = mm * 1e-3;
-        cfg.release_noise_deg = deg;
-        cfg.validate()?;
-    }
-    for list in &a.world_set {
-        cfg.set_all(list)?;
-    }
-    let mut rows = Vec::new();
+    let cfg = settings.world()?;
+    let base = settings.method_settings(&cfg)?;
     let mut all_results = Vec::new();
-    let mut csv_text = String::from(
-        "method,sequence,episode,objects,packed,success,placements,stable,final_compactness,physics_steps,latency_mean_ms\n",
-    );
+    let mut csv_text = String::from(evaluation::CSV_HEADER);
     let run = EvalRun {
         catalog: &catalog,
         cfg: &cfg,
         episodes: &episodes,
+        first: 0,
         model: model.as_ref(),
-        seed: a.seed,
+        seed: settings.seed,
         threads: a.threads,
     };
-    let base = MethodSettings {
-        policy: None,
-        bc_models: a.bc_models.clone(),
-        lookahead_k: a.lookahead_k,
-        lookahead_reward,
-        lookahead_horizon: a.lookahead_horizon.map(|h| h as usize),
-        search: SearchSettings {
-            k: a.search_k,
-            budget: match a.search_time_s {
-                Some(s) => Budget::Time(Duration::from_secs_f64(s)),
-                None => Budget::Rollouts(a.search_rollouts),
-            },
-            horizon: a.search_horizon.map(|h| h as usize),
-            reward: lookahead_reward,
-            twin: a.search_world,
-            robust: None,
-            threads: a.search_threads as usize,
-        },
-        world: cfg.clone(),
-    };
-    // One run per (row, policy): herb once per policy, the others once.
     let models_dir = Path::new(PolicySpec::DEFAULT_MODELS_DIR);
-    let runs: Vec<(Row, Option<PathBuf>)> = a
-        .method
-        .iter()
-        .flat_map(|&r| match r.method {
-            Method::Herb => a
-                .policy
-                .iter()
-                .map(|p| match p.resolved(models_dir) {
-                    PolicySpec::Onnx(path) => (r, Some(path)),
-                    _ => (r, None),
-                })
-                .collect(),
-            _ => vec![(r, None)],
-        })
-        .collect();
-    for (row, policy) in runs {
+    for row in rows {
         let m = row.method;
         let t = Instant::now();
-        let name = match &policy {
-            Some(p) => format!(
-                "{} {}",
-                m.name(),
-                p.file_stem().and_then(|s| s.to_str()).unwrap_or("policy")
-            ),
-            None => m.name().to_string(),
-        };
-        if let Some(p) = &policy {
+        let row_settings = settings.row_settings(&row, &base, models_dir);
+        if let Some(PolicySpec::Onnx(p)) = &row_settings.policy {
             let bytes = std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
             eprintln!("policy {}: {:.2} MB", p.display(), bytes as f64 / 1e6);
         }
-        // The tables' label: the humans' rows say what they are (replay or recorded poses),
-        // the teacher names its k.
-        let shown = match (m, &policy) {
-            (_, Some(_)) => name.clone(),
-            (Method::Search, _) => {
-                let budget = match a.search_time_s {
-                    Some(s) => format!("{s} s"),
-                    None => format!("{} rollouts", a.search_rollouts),
-                };
-                format!(
-                    "search ({budget}, k = {}, {})",
-                    a.search_k,
-                    a.search_world.name()
-                )
-            }
-            (Method::Lookahead, _) => {
-                let horizon = a
-                    .lookahead_horizon
-                    .map(|h| format!(", horizon {h}"))
-                    .unwrap_or_default();
-                format!("lookahead (teacher, k = {}{horizon})", a.lookahead_k)
-            }
-            _ => m.label().to_string(),
-        };
-        let order = m.order(row.order.or(a.order));
-        let settings = MethodSettings {
-            policy: policy.clone().map(PolicySpec::Onnx),
-            ..base.clone()
-        };
-        let results = run.method(m, order, &settings)?;
-        let (label, seq_name) = match order {
-            Some(o) => (format!("{shown} ({})", o.name()), o.name()),
-            None => (shown, "human"),
-        };
+        let names = settings.row_names(&row, &row_settings);
+        let order = settings.order_of(&row);
+        let results = run.method(m, order, &row_settings)?;
         let secs = t.elapsed().as_secs_f64();
         let placements: usize = results
             .iter()
@@ -513,16 +428,22 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
             .map(|r| r.placements)
             .sum();
         eprintln!(
-            "{label}: {} episodes, {} placements in {:.1} s ({:.0} placements/s on {} threads)",
+            "{}: {} episodes, {} placements in {:.1} s ({:.0} placements/s on {} threads)",
+            names.label,
             results.len(),
             placements,
             secs,
             placements as f64 / secs,
             a.threads
         );
-        csv_text.push_str(&csv_rows(&name, seq_name, &results));
-        rows.push(eval::summarize(&label, &results));
-        all_results.push((label.clone(), results));
+        for e in results.iter().filter_map(|r| r.as_ref().err()) {
+            eprintln!("episode failed: {e}");
+        }
+        csv_text.push_str(&evaluation::csv_rows(
+            &names.name,
+            &names.sequence,
+            &results,
+        ));
         if let Some(ep_name) = a
             .png_episode
             .as_ref()
@@ -538,45 +459,24 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
                     .file_stem()
                     .and_then(|s| s.to_str())
                     .unwrap_or("final"),
-                name.replace(' ', "-"),
+                names.name.replace(' ', "-"),
                 ep_name
             ));
             match m.replay() {
-                Some(sm) => pack_quiet(&catalog, &episodes[i], sm, a.seed, &path)?,
-                None => run.picture(m, order, &settings, i, &label, &path)?,
+                Some(sm) => pack_quiet(&catalog, &episodes[i], sm, settings.seed, &path)?,
+                None => picture(&run, m, order, &row_settings, i, &names.label, &path)?,
             }
             eprintln!("wrote {}", path.display());
         }
+        all_results.push((names.label, results));
     }
-    let mut table = eval::format_table(&rows, target, episodes.len());
-    table.push('\n');
-    for r in &rows {
-        let causes: Vec<String> = r
-            .failures
-            .iter()
-            .map(|(k, n)| format!("{k}: {n}"))
-            .collect();
-        table.push_str(&format!(
-            "- {} failures by cause: {}\n",
-            r.method,
-            causes.join(", ")
-        ));
-        if let Some([p50, p95, p99]) = r.latency_quantiles_ms {
-            table.push_str(&format!(
-                "- {} decision time p50 / p95 / p99: {p50:.3} / {p95:.3} / {p99:.3} ms\n",
-                r.method
-            ));
-        }
-    }
-    if let Some((mm, deg)) = a.release_noise {
-        table.push_str(&format!(
-            "- release noise (every row): each object released off its decided pose by normal \
-             noise, sd {mm} mm in x and y, {deg} deg in yaw\n"
-        ));
+    let mut notes = Vec::new();
+    if let Some(noise) = settings.release_noise {
+        notes.push(evaluation::release_noise_note(noise));
     }
     if !bad.is_empty() {
-        table.push_str(&format!(
-            "- sessions skipped at load (every row): {}: {}\n",
+        notes.push(format!(
+            "sessions skipped at load (every row): {}: {}",
             bad.len(),
             bad.iter()
                 .map(|e| e.to_string())
@@ -584,20 +484,7 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
                 .join("; ")
         ));
     }
-    for (label, results) in &all_results {
-        let errors: Vec<String> = results
-            .iter()
-            .filter_map(|r| r.as_ref().err())
-            .map(ToString::to_string)
-            .collect();
-        if !errors.is_empty() {
-            table.push_str(&format!(
-                "- {label}: {} episodes skipped: {}\n",
-                errors.len(),
-                errors.join("; ")
-            ));
-        }
-    }
+    let table = evaluation::report(&all_results, target, episodes.len(), &notes);
     println!("{table}");
     write_file(&a.out, &table)?;
     write_file(&a.csv, &csv_text)?;
@@ -614,6 +501,30 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
     Ok(())
 }
 
+impl EvalArgs {
+    /// The settings every row shares, as the library names them (one conversion; a sweep's
+    /// configuration gives the same settings by the same names).
+    fn settings(&self) -> EvalSettings {
+        EvalSettings {
+            order: self.order,
+            bc_models: self.bc_models.clone(),
+            sequence_model: self.sequence_model.clone(),
+            lookahead_k: self.lookahead_k,
+            lookahead_reward: self.lookahead_reward.clone(),
+            lookahead_horizon: self.lookahead_horizon.map(|h| h as usize),
+            search_rollouts: self.search_rollouts,
+            search_time_s: self.search_time_s,
+            search_k: self.search_k,
+            search_threads: self.search_threads as usize,
+            search_horizon: self.search_horizon.map(|h| h as usize),
+            search_world: self.search_world.name().into(),
+            release_noise: self.release_noise,
+            world_set: self.world_set.clone(),
+            seed: self.seed,
+        }
+    }
+}
+
 /// The argument checks of `herb-sim eval` that need no data.
 fn check_eval_args(a: &EvalArgs) -> AnyResult<()> {
     if a.method.is_empty() {
@@ -626,170 +537,51 @@ fn check_eval_args(a: &EvalArgs) -> AnyResult<()> {
     if !a.policy.is_empty() && !has(Method::Herb) {
         return Err("--policy is used by --method herb only".into());
     }
-    let replay_with_order = a
-        .method
-        .iter()
-        .find(|r| r.method.replay().is_some() && (r.order.is_some() || a.order.is_some()));
-    if let Some(r) = replay_with_order {
-        return Err(format!(
-            "{}: a replay keeps the human order (--order and @ORDER apply to the deciding methods only)",
-            r.method
-        )
-        .into());
-    }
-    if !(1..=herb_sim::lattice::MAX_CANDIDATES).contains(&a.lookahead_k) {
-        return Err(format!(
-            "--lookahead-k {}: need 1 to {}",
-            a.lookahead_k,
-            herb_sim::lattice::MAX_CANDIDATES
-        )
-        .into());
-    }
     Ok(())
 }
 
-/// The per-episode CSV rows of one method.
-fn csv_rows(name: &str, seq_name: &str, results: &[EpisodeOutcome]) -> String {
-    let mut text = String::new();
-    for r in results {
-        match r {
-            Ok(r) => {
-                let lat = eval::mean_std(r.decision_ns.iter().map(|&n| n as f64 / 1e6)).0;
-                text.push_str(&format!(
-                    "{},{},{},{},{},{},{},{},{:.4},{},{}\n",
-                    name,
-                    seq_name,
-                    r.name,
-                    r.objects,
-                    r.packed,
-                    r.success,
-                    r.placements,
-                    r.stable,
-                    r.final_compactness(),
-                    r.physics_steps,
-                    if lat.is_nan() {
-                        String::new()
-                    } else {
-                        format!("{lat:.4}")
-                    }
-                ));
-            }
-            Err(e) => eprintln!("episode failed: {e}"),
-        }
-    }
-    text
-}
-
-/// What every row of one `herb-sim eval` run shares.
-struct EvalRun<'a> {
-    catalog: &'a SharedCatalog,
-    cfg: &'a WorldConfig,
-    episodes: &'a [Episode],
-    model: Option<&'a SequenceModel>,
-    seed: u64,
-    threads: usize,
-}
-
-impl EvalRun<'_> {
-    /// Runs method `m` over the episodes, each ordered by `order` (the human order when
-    /// `None`), one placer per worker thread, through the one episode loop
-    /// ([`eval::run_episode`]); the humans' recorded poses are scored without physics.
-    fn method(
-        &self,
-        m: Method,
-        order: Option<Order>,
-        settings: &MethodSettings,
-    ) -> AnyResult<Vec<EpisodeOutcome>> {
-        let (catalog, cfg, model, seed) = (self.catalog, self.cfg, self.model, self.seed);
-        if m == Method::HumanRecorded {
-            let (tol, tilt) = (cfg.inside_tolerance_m, cfg.stability_tilt_deg);
-            return Ok(eval::run_all_with(
-                catalog,
-                cfg,
-                self.episodes,
-                self.threads,
-                || {
-                    Ok(move |_: &mut PackingEnv, ep: &Episode, _| {
-                        Ok(eval::recorded_episode(catalog, ep, tol, tilt)?)
-                    })
-                },
-            )?);
-        }
-        // Built once up front: a bad model is one clear error, not one per episode.
-        m.placer(catalog, settings)
-            .map_err(|e| match m.bc_models(&settings.bc_models) {
-                Some(_) => format!("{e} (train with training/bc.py)"),
-                None => e.to_string(),
-            })?;
-        let make = || -> Result<_, EvalError> {
-            let mut placer = m
-                .placer(catalog, settings)
-                .map_err(|e| EvalError::Placer(e.into()))?;
-            Ok(move |env: &mut PackingEnv, ep: &Episode, i: usize| {
-                let s = seed.wrapping_add(i as u64);
-                let objects = match order {
-                    Some(o) => o
-                        .order(catalog, model, &ep.objects, s)
-                        .map_err(|e| EvalError::Placer(e.into()))?,
-                    None => ep.objects.clone(),
-                };
-                eval::run_episode(env, ep, &objects, placer.as_mut(), s)
-            })
-        };
-        Ok(eval::run_all_with(
-            catalog,
-            cfg,
-            self.episodes,
-            self.threads,
-            make,
-        )?)
-    }
-}
-
-impl EvalRun<'_> {
-    /// Runs episode `i` once more with method `m` as [`EvalRun::method`] runs it (same order,
-    /// seed and world) and writes the pack where it ended to `path` (top and side views).
-    fn picture(
-        &self,
-        m: Method,
-        order: Option<Order>,
-        settings: &MethodSettings,
-        i: usize,
-        label: &str,
-        path: &Path,
-    ) -> AnyResult<()> {
-        let ep = &self.episodes[i];
-        let s = self.seed.wrapping_add(i as u64);
-        let objects = match order {
-            Some(o) => o.order(self.catalog, self.model, &ep.objects, s)?,
-            None => ep.objects.clone(),
-        };
-        let mut env = PackingEnv::new(self.catalog.clone(), self.cfg.clone(), RewardMode::Simple)?;
-        let mut placer = m.placer(self.catalog, settings)?;
-        let r = eval::run_episode(&mut env, ep, &objects, placer.as_mut(), s)
-            .map_err(|e| e.to_string())?;
-        let objects: Vec<PictureObject> = env
-            .world_mut()
-            .report()
-            .iter()
-            .enumerate()
-            .map(|(k, o)| PictureObject {
-                label: format!("{} {}", k + 1, self.catalog.spec(o.ty).id),
-                lo: o.lo,
-                hi: o.hi,
-                outside: o.violation.map(|(b, by)| (b.to_string(), by)),
-            })
-            .collect();
-        let verdict = format!(
-            "{}: {label}, {} ({} of {} packed)",
-            ep.name,
-            if r.success { "success" } else { "FAILED" },
-            r.packed,
-            r.objects
-        );
-        write_pack_picture(path, &verdict, env.world().heightmap(), &objects)?;
-        Ok(())
-    }
+/// Runs episode `i` once more with method `m` as [`EvalRun::method`] runs it (same order, seed
+/// and world) and writes the pack where it ended to `path` (top and side views).
+fn picture(
+    run: &EvalRun<'_>,
+    m: Method,
+    order: Option<Order>,
+    settings: &MethodSettings,
+    i: usize,
+    label: &str,
+    path: &Path,
+) -> AnyResult<()> {
+    let ep = &run.episodes[i];
+    let s = run.episode_seed(i);
+    let objects = match order {
+        Some(o) => o.order(run.catalog, run.model, &ep.objects, s)?,
+        None => ep.objects.clone(),
+    };
+    let mut env = PackingEnv::new(run.catalog.clone(), run.cfg.clone(), RewardMode::Simple)?;
+    let mut placer = m.placer(run.catalog, settings)?;
+    let r =
+        eval::run_episode(&mut env, ep, &objects, placer.as_mut(), s).map_err(|e| e.to_string())?;
+    let objects: Vec<PictureObject> = env
+        .world_mut()
+        .report()
+        .iter()
+        .enumerate()
+        .map(|(k, o)| PictureObject {
+            label: format!("{} {}", k + 1, run.catalog.spec(o.ty).id),
+            lo: o.lo,
+            hi: o.hi,
+            outside: o.violation.map(|(b, by)| (b.to_string(), by)),
+        })
+        .collect();
+    let verdict = format!(
+        "{}: {label}, {} ({} of {} packed)",
+        ep.name,
+        if r.success { "success" } else { "FAILED" },
+        r.packed,
+        r.objects
+    );
+    write_pack_picture(path, &verdict, env.world().heightmap(), &objects)?;
+    Ok(())
 }
 
 fn write_file(p: &Path, text: &str) -> AnyResult<()> {
@@ -896,4 +688,20 @@ fn parse_noise(s: &str) -> Result<(f32, f32), String> {
         }
     };
     Ok((num(mm, "MM")?, num(deg, "DEG")?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `herb-sim eval`'s flags default to what a sweep's configuration defaults to: the
+    /// library's `EvalSettings::default()`.
+    #[test]
+    fn the_flags_default_to_the_library_settings() {
+        let cli = Cli::try_parse_from(["herb-sim", "eval", "--method", "blbf"]).unwrap();
+        let Cmd::Eval(a) = cli.cmd else {
+            panic!("not eval")
+        };
+        assert_eq!(a.settings(), EvalSettings::default());
+    }
 }

@@ -11,8 +11,10 @@
 
 #![warn(missing_docs)]
 
+pub mod evaluation;
 pub mod method;
 pub mod placer;
 
+pub use evaluation::{EvalRun, EvalSettings, Row};
 pub use method::Method;
 pub use placer::{DeciderPlacer, HeldOutPlacer, MethodSettings, PackitPlacer};

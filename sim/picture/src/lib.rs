@@ -8,6 +8,10 @@
 
 #![warn(missing_docs)]
 
+pub mod chart;
+
+pub use chart::{IntervalRow, write_interval_chart};
+
 use herb_core::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, SUCCESS_TOP_Z};
 use herb_core::heightmap::Heightmap;
 use plotters::prelude::*;

@@ -39,6 +39,7 @@ use rayon::prelude::*;
 use std::path::Path;
 use std::sync::Arc;
 
+mod evaluation;
 mod functions;
 use functions::{half_turn_candidates, half_turn_context, human_demonstrations};
 
@@ -57,10 +58,11 @@ struct Sampler {
 
 impl Sampler {
     fn episode(&self, rng: &mut ChaCha8Rng) -> Vec<TypeIdx> {
-        let n = rng.random_range(self.min_objects..=self.max_objects);
-        let mut v: Vec<TypeIdx> = (0..n)
-            .map(|_| TypeIdx(rng.random_range(0..self.catalog_len)))
-            .collect();
+        let mut v = herb_sim::sample_objects(
+            rng,
+            self.catalog_len as usize,
+            self.min_objects..=self.max_objects,
+        );
         match (self.order.beam_search(), &self.model) {
             (Some(search), Some(m)) => search(m, &v).unwrap_or(v),
             _ => {
@@ -893,6 +895,13 @@ impl VecEnv {
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<VecEnv>()?;
+    m.add_class::<evaluation::Evaluation>()?;
+    m.add_function(wrap_pyfunction!(evaluation::csv_rows, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluation::report, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluation::release_noise_note, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluation::summary, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluation::interval_chart, m)?)?;
+    m.add("CSV_HEADER", herb_methods::evaluation::CSV_HEADER)?;
     m.add_function(wrap_pyfunction!(half_turn_candidates, m)?)?;
     m.add_function(wrap_pyfunction!(half_turn_context, m)?)?;
     m.add_function(wrap_pyfunction!(human_demonstrations, m)?)?;
