@@ -3,7 +3,8 @@
 # workspace, then the Python tests (pytest): the training bindings (sim/py), the client
 # (clients/python, against the herbd and herb-loopback that cargo test built) and its live view
 # (Rerun; in headless Chromium when installed: .ci/run installs it), with maturin, numpy,
-# gymnasium, pytest, iceoryx2 and rerun-sdk in a virtualenv (.venv, or $HERB_VENV).
+# gymnasium, pytest, ray and tqdm (the sweep runner, on a local Ray runtime of 2 CPUs), iceoryx2
+# and rerun-sdk in a virtualenv (.venv, or $HERB_VENV).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
@@ -12,7 +13,7 @@ scripts/check-units.sh
 cargo test --workspace
 VENV=${HERB_VENV:-$ROOT/.venv}
 [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
-"$VENV/bin/pip" install -q --disable-pip-version-check maturin numpy gymnasium pytest
+"$VENV/bin/pip" install -q --disable-pip-version-check maturin numpy gymnasium pytest ray tqdm
 "$VENV/bin/pip" install -q --disable-pip-version-check -e "clients/python[view]"
 (cd sim/py && VIRTUAL_ENV="$VENV" PATH="$VENV/bin:$PATH" maturin develop -q)
 "$VENV/bin/python" -m pytest -q sim/py/tests clients/python/tests
