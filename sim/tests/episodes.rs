@@ -418,9 +418,15 @@ fn the_success_interval_is_wilsons() {
     assert_eq!(lo, 0.0);
     assert!((hi - 0.27753).abs() < 1e-4, "{hi}");
     let (lo, hi) = success_interval(5, 10);
-    assert!((lo - 0.23659).abs() < 1e-4 && (hi - 0.76341).abs() < 1e-4, "{lo} {hi}");
+    assert!(
+        (lo - 0.23659).abs() < 1e-4 && (hi - 0.76341).abs() < 1e-4,
+        "{lo} {hi}"
+    );
     let (lo, hi) = success_interval(263, 263);
-    assert!(hi > 1.0 - 1e-12 && hi <= 1.0 && (lo - 0.98560).abs() < 1e-4, "{lo} {hi}");
+    assert!(
+        hi > 1.0 - 1e-12 && hi <= 1.0 && (lo - 0.98560).abs() < 1e-4,
+        "{lo} {hi}"
+    );
     assert_eq!(success_interval(0, 0), (0.0, 1.0));
 }
 
@@ -443,5 +449,9 @@ fn an_episode_result_reads_back_as_written() {
     assert_eq!(back, r);
     let bad = text.replace("+y wall", "ceiling");
     let err = serde_json::from_str::<EpisodeResult>(&bad).unwrap_err();
-    assert!(err.to_string().contains("unknown failure bound \"ceiling\""), "{err}");
+    assert!(
+        err.to_string()
+            .contains("unknown failure bound \"ceiling\""),
+        "{err}"
+    );
 }

@@ -188,6 +188,20 @@ impl Evaluation {
         })
     }
 
+    /// The BoxED folder this evaluation reads, made absolute (`None` when none was found): a
+    /// sweep passes it to its workers, which may run elsewhere.
+    #[getter]
+    fn boxed_root(&self) -> Option<String> {
+        let root = self.root.as_ref()?;
+        Some(
+            root.canonicalize()
+                .or_else(|_| std::path::absolute(root))
+                .unwrap_or_else(|_| root.clone())
+                .display()
+                .to_string(),
+        )
+    }
+
     /// The episodes of a set (JSON: `{"set": "boxed", "limit": N}` or `{"set": "sample",
     /// "seed": S, "count": N, "min_objects": 10, "max_objects": 25}`): `(names, objects,
     /// skipped)`, the sessions that did not load in `skipped`.

@@ -217,8 +217,10 @@ def run_task(job: dict) -> dict:
         job["row"], json.dumps(job["settings"]), json.dumps(job["episodes"]),
         list(range(job["first"], job["first"] + job["count"])), policy=job["policy"], models=job["models"],
         threads=1)
+    import ray
+    node = ray.get_runtime_context().get_node_id() if ray.is_initialized() else None
     return {"name": name, "sequence": sequence, "label": label, "outcomes": outcomes,
-            "seconds": time.perf_counter() - t0, "host": socket.gethostname(), "pid": os.getpid()}
+            "seconds": time.perf_counter() - t0, "host": socket.gethostname(), "node": node, "pid": os.getpid()}
 
 
 # --- the driver -------------------------------------------------------------------------------
@@ -242,15 +244,16 @@ def _progress(total: int, enabled: bool):
 
 
 def plan(spec: dict, base: Path | None = None):
-    """The configurations, the episode sets' sizes and the tasks of a spec, checked before any
-    task runs (a bad row, setting or episode set is one clear error)."""
+    """The configurations, the tasks and the folders (``models``, ``boxed``) of a spec, checked
+    before any task runs (a bad row, setting or episode set is one clear error)."""
     configs = expand(spec, base)
     batch = spec.get("batch", 8)
     if not isinstance(batch, int) or batch < 1:
         raise SpecError(f"batch {batch!r}: expected a number of episodes >= 1")
     base = Path.cwd() if base is None else base
     models = _resolve(spec.get("models", "models"), base)
-    checker = _native.Evaluation(boxed=spec.get("boxed"), meshes=False)
+    boxed = spec.get("boxed")
+    checker = _native.Evaluation(boxed=_resolve(boxed, base), meshes=False)
     sizes = {}
     tasks = []
     for c in configs:
@@ -264,7 +267,9 @@ def plan(spec: dict, base: Path | None = None):
             raise SpecError(f"{c.describe()}: {e}") from None
         n = sizes[json.dumps(c.episodes, sort_keys=True)]
         tasks.extend(Task(c, first, min(batch, n - first)) for first in range(0, n, batch))
-    return configs, tasks, models
+    # The workers read the BoxED folder the driver found (HERB_BOXED, ../shared/boxed...), by
+    # its absolute path: the same path on every node of a cluster.
+    return configs, tasks, {"models": models, "boxed": checker.boxed_root}
 
 
 def run_sweep(spec: dict, out: str | Path | None = None, *, address: str | None = None,
@@ -276,7 +281,7 @@ def run_sweep(spec: dict, out: str | Path | None = None, *, address: str | None 
     ``tasks``, ``ran``, ``cached``, ``seconds``, and ``out``."""
     import ray
 
-    configs, tasks, models = plan(spec, base)
+    configs, tasks, paths = plan(spec, base)
     out = Path(out if out is not None else spec["out"])
     cache = out / "cache"
     todo = [t for t in tasks if not (cache / t.cache_file).is_file()]
@@ -290,8 +295,8 @@ def run_sweep(spec: dict, out: str | Path | None = None, *, address: str | None 
         pending = {}
         for t in todo:
             job = {"row": t.config.row, "policy": t.config.policy, "settings": t.config.settings,
-                   "episodes": t.config.episodes, "first": t.first, "count": t.count, "models": models,
-                   "boxed": spec.get("boxed"), "meshes": spec.get("meshes", True), "fault_marker": fault_marker}
+                   "episodes": t.config.episodes, "first": t.first, "count": t.count, "models": paths["models"],
+                   "boxed": paths["boxed"], "meshes": spec.get("meshes", True), "fault_marker": fault_marker}
             cpus = max(1, int(t.config.settings.get("search_threads", 1)))
             pending[remote.options(num_cpus=cpus, max_retries=3).remote(job)] = t
         bar = _progress(len(todo), progress)
@@ -356,7 +361,7 @@ def write_results(out: Path, configs: list[Config], tasks: list[Task]) -> None:
         c0 = rows[0][0]
         notes = [f"sweep run {run}: episodes {_episodes_text(c0.episodes)}; settings {_settings_text(c0.settings)}"]
         noise = c0.settings.get("release_noise")
-        if noise:
+        if noise and any(noise):
             notes.append(_native.release_noise_note(float(noise[0]), float(noise[1])))
         table = _native.report([(label, outcomes) for _, _, _, label, outcomes in rows], notes)
         csv = _native.CSV_HEADER + "".join(_native.csv_rows(n, s, o) for _, n, s, _, o in rows)
