@@ -1,10 +1,9 @@
 //! A chart of values with their intervals, one horizontal bar per labelled row (a sweep's
 //! configurations: success with its 95 % interval, objects packed...).
 
-use crate::{DrawResult, PictureError, register_font};
+use crate::{DrawResult, PictureError};
 use plotters::prelude::*;
 use std::path::Path;
-use std::sync::Arc;
 
 /// One bar: its label, its value and the interval drawn around it.
 #[derive(Debug, Clone, PartialEq)]
@@ -29,17 +28,7 @@ pub fn write_interval_chart(
     x_max: f64,
     rows: &[IntervalRow],
 ) -> Result<(), PictureError> {
-    register_font()?;
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|e| PictureError::Folder {
-            dir: dir.to_owned(),
-            source: Arc::new(e),
-        })?;
-    }
-    draw(path, title, x_label, x_max, rows).map_err(|e| PictureError::Draw {
-        path: path.to_owned(),
-        message: e.to_string(),
-    })
+    crate::write_with(path, |path| draw(path, title, x_label, x_max, rows))
 }
 
 fn draw(path: &Path, title: &str, x_label: &str, x_max: f64, rows: &[IntervalRow]) -> DrawResult {

@@ -123,6 +123,12 @@ pub fn write_pack_picture(
     hm: &Heightmap,
     objects: &[PictureObject],
 ) -> Result<(), PictureError> {
+    write_with(path, |path| draw(path, title, hm, objects))
+}
+
+/// Registers the font, makes `path`'s folder and draws the picture with `draw`, its errors
+/// named with the path: how every picture of this crate is written.
+fn write_with(path: &Path, draw: impl FnOnce(&Path) -> DrawResult) -> Result<(), PictureError> {
     register_font()?;
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| PictureError::Folder {
@@ -130,7 +136,7 @@ pub fn write_pack_picture(
             source: Arc::new(e),
         })?;
     }
-    draw(path, title, hm, objects).map_err(|e| PictureError::Draw {
+    draw(path).map_err(|e| PictureError::Draw {
         path: path.to_owned(),
         message: e.to_string(),
     })
