@@ -5,7 +5,8 @@
 //!
 //! A segment file starts with [`MAGIC`] and [`FORMAT`], then records of
 //! `kind: u8 | len: u32 | payload | crc32: u32` (little-endian; the CRC covers kind, length and
-//! payload).
+//! payload), and ends with an end record when the writer closed it: a segment without one was
+//! cut short (herbd killed, the disk full), wherever the cut fell.
 
 use super::error::SnapshotError;
 use crate::digest::Fnv;
@@ -25,7 +26,7 @@ pub const MAGIC: &[u8; 8] = b"HERBRUN\0";
 /// journal's encoding; 3: decisions come from their own worker, recorded apart from the
 /// planner's responses, and the frames are the decisions'; 4: pick confirmations, and the
 /// statuses' limit, attempt and request-count fields).
-pub const FORMAT: u32 = 4;
+pub const FORMAT: u32 = 5;
 /// A frame's header and grid: the bytes of a [`HeightmapFrame`] before its cells.
 pub const FRAME_META: usize = std::mem::offset_of!(HeightmapFrame, data);
 
@@ -262,6 +263,8 @@ pub(super) mod kind {
     pub const ARM: u8 = 14;
     pub const DECISION: u8 = 15;
     pub const CONFIRM: u8 = 16;
+    /// The segment was closed by its writer (empty payload; format 5 on).
+    pub const END: u8 = 17;
 }
 
 /// Little-endian encoding of record payloads.

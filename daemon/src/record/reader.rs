@@ -69,6 +69,7 @@ impl Log {
             incomplete: None,
         };
         let mut cycles = 0u64;
+        let mut ended = false;
         while at < data.len() {
             let (k, payload) = match read_record(&data[at..]) {
                 Framed::Record { kind, payload } => (kind, payload),
@@ -90,6 +91,10 @@ impl Log {
                 kind::SNAPSHOT => {
                     log.snapshot =
                         Some(decode_snapshot(payload).map_err(|e| bad(LogProblem::Snapshot(e)))?);
+                }
+                kind::END => {
+                    ended = true;
+                    break;
                 }
                 kind::GAP => {
                     let n = d.u64().unwrap_or(0);
@@ -117,6 +122,12 @@ impl Log {
                 }
                 other => return Err(bad(LogProblem::UnknownKind(other))),
             }
+        }
+        if !ended && log.incomplete.is_none() {
+            // Cut at a record's boundary: every record reads, but the writer never closed it.
+            log.incomplete = Some(format!(
+                "no end record after cycle {cycles} (herbd stopped without closing the log)"
+            ));
         }
         log.header = header.ok_or_else(|| bad(LogProblem::NoHeader))?;
         Ok(log)

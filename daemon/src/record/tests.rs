@@ -119,6 +119,13 @@ fn a_recording_reads_back_record_for_record_and_bit_for_bit() {
     std::fs::write(&torn, &data[..data.len() - 3]).unwrap();
     let log = Log::read(&torn).unwrap();
     assert!(log.incomplete.unwrap().contains("torn"));
+    // Cut at a record's boundary (herbd killed between two writes): every record reads, and
+    // the missing end record says the log is incomplete.
+    let end = super::format::FRAMING;
+    std::fs::write(&torn, &data[..data.len() - end]).unwrap();
+    let log = Log::read(&torn).unwrap();
+    assert_eq!(log.entries.len(), 152);
+    assert!(log.incomplete.unwrap().contains("no end record"));
     // A flipped bit: a CRC error.
     let mut bad = data.clone();
     let n = bad.len();

@@ -235,7 +235,9 @@ impl Segment {
         self.w.flush().map_err(|e| self.err(e))
     }
 
+    /// Ends the segment with its end record, then flushes and syncs it.
     fn close(&mut self) -> Result<(), RecordError> {
+        self.write(kind::END, &[])?;
         self.flush()?;
         self.w.get_ref().sync_all().map_err(|e| self.err(e))
     }
