@@ -280,6 +280,19 @@ impl Policy for CandidatePolicy {
     fn name(&self) -> &str {
         "candidates"
     }
+    fn fork(&self) -> Option<Box<dyn Policy + Send>> {
+        Some(Box::new(Self {
+            path: self.path.clone(),
+            // A clone of tract's state is a new session of the same optimised plan.
+            state: self.state.clone(),
+            inputs: self.inputs.each_ref().map(|t| Arc::new((**t).clone())),
+            lattice: self.lattice.clone(),
+            feats: self.feats.clone(),
+            logits: Vec::with_capacity(MAX_CANDIDATES),
+            fma: self.fma,
+            bytes: self.bytes,
+        }))
+    }
     fn begin_episode(&mut self, _seed: u64) {}
     fn needs_observation(&self) -> bool {
         false

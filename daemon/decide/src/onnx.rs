@@ -222,6 +222,16 @@ impl Policy for OnnxPolicy {
     fn name(&self) -> &str {
         "onnx"
     }
+    fn fork(&self) -> Option<Box<dyn Policy + Send>> {
+        Some(Box::new(Self {
+            path: self.path.clone(),
+            // A clone of tract's state is a new session of the same optimised plan.
+            state: self.state.clone(),
+            input: Arc::new((*self.input).clone()),
+            fma: self.fma,
+            bytes: self.bytes,
+        }))
+    }
     fn begin_episode(&mut self, _seed: u64) {}
     /// The network's action, checked and decoded once into the box
     /// (`herb_core::observation::action_to_placement`).

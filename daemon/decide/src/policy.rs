@@ -78,6 +78,13 @@ pub trait Policy {
     fn needs_observation(&self) -> bool {
         true
     }
+    /// A fresh copy of this policy for another episode loop, sharing what was loaded (an
+    /// optimised network) but with its own inference session and buffers, so it decides as a
+    /// policy loaded from the same file would; `None` for the policies that are cheap to make.
+    /// An evaluation loads a model file once per process through this.
+    fn fork(&self) -> Option<Box<dyn Policy + Send>> {
+        None
+    }
 }
 
 /// Checks an observation before a network sees it: its length and values in `[0, 1]` (the

@@ -17,4 +17,6 @@ pub mod placer;
 
 pub use evaluation::{EvalRun, EvalSettings, Row};
 pub use method::Method;
-pub use placer::{DeciderPlacer, HeldOutPlacer, MethodSettings, PackitPlacer};
+pub use placer::{
+    DeciderPlacer, HeldOutPlacer, MethodSettings, PackitPlacer, load_policy_once, policy_file_reads,
+};

@@ -203,8 +203,7 @@ impl Method {
             return Ok(Box::new(rule));
         }
         if let Some(files) = self.bc_models(&settings.bc_models) {
-            let [even, odd] =
-                files.map(|f| herb_decide::load_policy(&PolicySpec::Onnx(f), catalog));
+            let [even, odd] = files.map(|f| load_policy_once(&PolicySpec::Onnx(f), catalog));
             return Ok(Box::new(HeldOutPlacer {
                 deciders: [decider(even?), decider(odd?)],
                 active: 0,
@@ -216,7 +215,7 @@ impl Method {
                     method: self.name(),
                     message: "needs a policy (e.g. models/policy-cs06.onnx or cs06)".into(),
                 })?;
-                Box::new(decider(herb_decide::load_policy(spec, catalog)?))
+                Box::new(decider(load_policy_once(spec, catalog)?))
             }
             Self::Blbf => Box::new(decider(Box::new(herb_decide::Blbf::new()))),
             Self::PackitSo3 => Box::new(PackitPlacer(PackitSo3::new())),
@@ -236,4 +235,72 @@ impl Method {
             }
         })
     }
+}
+
+/// A policy loaded from a file in this process: the file as it was (size, time of change) and
+/// the catalog it was built for.
+struct Loaded {
+    path: PathBuf,
+    len: u64,
+    modified: Option<std::time::SystemTime>,
+    catalog: SharedCatalog,
+    policy: Box<dyn Policy + Send>,
+}
+
+/// The policies loaded from files in this process ([`load_policy_once`]).
+static LOADED: std::sync::Mutex<Vec<Loaded>> = std::sync::Mutex::new(Vec::new());
+
+/// The catalogs [`load_policy_once`] read a model file for, once per read.
+static READS: std::sync::Mutex<Vec<SharedCatalog>> = std::sync::Mutex::new(Vec::new());
+
+/// [`herb_decide::load_policy`], with each model file loaded once per process: a policy
+/// already loaded from the same file (same size and time of change) for the same catalog is
+/// forked ([`Policy::fork`]: the optimised network shared, a session of its own) instead of read
+/// and optimised again. Every placer of an evaluation's threads, and every task a sweep's
+/// worker runs, then shares one load.
+pub fn load_policy_once(spec: &PolicySpec, catalog: &SharedCatalog) -> Result<Box<dyn Policy>> {
+    let resolved = spec.resolved(std::path::Path::new(PolicySpec::DEFAULT_MODELS_DIR));
+    let PolicySpec::Onnx(path) = &resolved else {
+        return herb_decide::load_policy(&resolved, catalog);
+    };
+    let meta = std::fs::metadata(path).ok();
+    let len = meta.as_ref().map(|m| m.len());
+    let modified = meta.as_ref().and_then(|m| m.modified().ok());
+    // Held while loading: threads asking for the same file wait for the one load.
+    let mut loaded = LOADED.lock().unwrap_or_else(|p| p.into_inner());
+    let known = loaded.iter().find(|l| {
+        l.path == *path
+            && Some(l.len) == len
+            && l.modified == modified
+            && std::sync::Arc::ptr_eq(&l.catalog, catalog)
+    });
+    if let Some(p) = known.and_then(|l| l.policy.fork()) {
+        return Ok(p);
+    }
+    READS
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .push(catalog.clone());
+    let policy = herb_decide::load_policy(&resolved, catalog)?;
+    if let (Some(len), Some(kept)) = (len, policy.fork()) {
+        loaded.retain(|l| !(l.path == *path && std::sync::Arc::ptr_eq(&l.catalog, catalog)));
+        loaded.push(Loaded {
+            path: path.clone(),
+            len,
+            modified,
+            catalog: catalog.clone(),
+            policy: kept,
+        });
+    }
+    Ok(policy)
+}
+
+/// How many times [`load_policy_once`] has read a model file for `catalog` in this process.
+pub fn policy_file_reads(catalog: &SharedCatalog) -> usize {
+    READS
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .iter()
+        .filter(|c| std::sync::Arc::ptr_eq(c, catalog))
+        .count()
 }

@@ -102,3 +102,68 @@ fn a_method_that_cannot_be_built_is_a_clear_error() {
     // The order a method defaults to is named in the registry, one place.
     assert_eq!(Method::Blbf.order(None), Some(Order::Largest));
 }
+
+/// A policy file is loaded once per process and catalog: later placers fork it
+/// (`Policy::fork`), and a forked policy packs an episode exactly as one loaded from the file.
+#[test]
+fn a_model_file_is_loaded_once_and_its_forks_decide_as_it_does() {
+    let Some(root) = paths::boxed_root_for_tests() else {
+        return;
+    };
+    let catalog: SharedCatalog =
+        Arc::new(Catalog::builtin(&MeshSource::None("fork test".into())).unwrap());
+    let ep = herb_sim::boxed::load_session(&root, "p28_s2", &catalog)
+        .unwrap()
+        .episode(&catalog);
+    let settings = MethodSettings {
+        policy: Some(PolicySpec::Onnx(models().join("policy-cs06.onnx"))),
+        ..MethodSettings::default()
+    };
+    let first = run(Method::Herb, &catalog, &ep, &settings);
+    assert_eq!(
+        herb_methods::policy_file_reads(&catalog),
+        1,
+        "the first placer reads the file"
+    );
+    let second = run(Method::Herb, &catalog, &ep, &settings);
+    let third = run(Method::Herb, &catalog, &ep, &settings);
+    assert_eq!(
+        herb_methods::policy_file_reads(&catalog),
+        1,
+        "later placers fork"
+    );
+    // A policy loaded straight from the file, outside the cache.
+    let direct = {
+        let seq = SequenceModel::load(&models().join("sequence.json"), &catalog).unwrap();
+        let order = Order::HERB
+            .order(&catalog, Some(&seq), &ep.objects, 0)
+            .unwrap();
+        let p = herb_decide::load_policy(settings.policy.as_ref().unwrap(), &catalog).unwrap();
+        let mut placer = herb_methods::DeciderPlacer(herb_decide::Decider::new(
+            p,
+            catalog.clone(),
+            settings.world.clearance_m,
+        ));
+        let mut env =
+            PackingEnv::new(catalog.clone(), WorldConfig::default(), RewardMode::Simple).unwrap();
+        eval::run_episode(&mut env, &ep, &order, &mut placer, 0).unwrap()
+    };
+    let same = |a: &EpisodeResult, b: &EpisodeResult| {
+        (
+            a.packed,
+            a.placements,
+            &a.compactness_per_step,
+            a.physics_steps,
+        ) == (
+            b.packed,
+            b.placements,
+            &b.compactness_per_step,
+            b.physics_steps,
+        )
+    };
+    assert!(
+        same(&first, &second) && same(&first, &third),
+        "{first:?} {second:?}"
+    );
+    assert!(same(&first, &direct), "{first:?} {direct:?}");
+}
