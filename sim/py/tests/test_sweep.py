@@ -122,6 +122,10 @@ def test_a_bad_spec_is_refused_before_anything_runs(tmp_path):
         sweep.plan({**base, "rows": [{"method": "herb"}]}, REPO)
     with pytest.raises(sweep.SpecError, match="no such file"):
         sweep.plan({**base, "rows": [{"method": "herb", "policy": "nowhere/p.onnx"}]}, REPO)
+    with pytest.raises(sweep.SpecError, match=r"rows\[0\]\.settings: expected a table"):
+        sweep.plan({**base, "rows": [{"method": "blbf", "settings": 3}]}, REPO)
+    with pytest.raises(sweep.SpecError, match="no episodes"):
+        sweep.plan({**base, "episodes": [{"set": "boxed", "limit": 0}], "rows": [{"method": "blbf"}]}, REPO)
     with pytest.raises(sweep.SpecError, match="not TOML"):
         (tmp_path / "bad.toml").write_text("rows = [")
         sweep.load_spec(tmp_path / "bad.toml")

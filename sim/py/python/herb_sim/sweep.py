@@ -140,6 +140,11 @@ def expand(spec: dict, base: Path | None = None) -> list[Config]:
     sets = spec.get("episodes", [{"set": "boxed"}])
     if isinstance(sets, dict):
         sets = [sets]
+    for key in ("settings", "grid"):
+        if not isinstance(spec.get(key, {}), dict):
+            raise SpecError(f"{key}: expected a table of KEY = value")
+    if not isinstance(sets, list) or not all(isinstance(e, dict) for e in sets):
+        raise SpecError("episodes: expected [[episodes]] tables (set = \"boxed\" or \"sample\")")
     shared = dict(spec.get("settings", {}))
     for k in PATH_SETTINGS:
         if k in shared:
@@ -156,7 +161,11 @@ def expand(spec: dict, base: Path | None = None) -> list[Config]:
         unknown = set(row) - ROW_KEYS
         if unknown:
             raise SpecError(f"{where}: unknown key(s) {sorted(unknown)}; a row has {sorted(ROW_KEYS)}")
+        if not isinstance(row.get("settings", {}), dict):
+            raise SpecError(f"{where}.settings: expected a table of KEY = value")
         policy = row.get("policy")
+        if policy is not None and not isinstance(policy, str):
+            raise SpecError(f"{where}.policy: expected a name (cs06) or an ONNX file")
         if policy is not None and ("/" in policy or policy.endswith(".onnx")):
             policy = _resolve(policy, base)
         for row_point in _grid_points(row.get("grid", {}), f"{where}.grid"):
@@ -266,6 +275,8 @@ def plan(spec: dict, base: Path | None = None):
         except ValueError as e:
             raise SpecError(f"{c.describe()}: {e}") from None
         n = sizes[json.dumps(c.episodes, sort_keys=True)]
+        if n == 0:
+            raise SpecError(f"episode set {json.dumps(c.episodes, sort_keys=True)}: no episodes")
         tasks.extend(Task(c, first, min(batch, n - first)) for first in range(0, n, batch))
     # The workers read the BoxED folder the driver found (HERB_BOXED, ../shared/boxed...), by
     # its absolute path: the same path on every node of a cluster.
@@ -289,8 +300,12 @@ def run_sweep(spec: dict, out: str | Path | None = None, *, address: str | None 
     if todo:
         if not ray.is_initialized():
             import logging
-            ray.init(address=address, num_cpus=num_cpus, include_dashboard=False, logging_level=logging.WARNING,
-                     runtime_env={"env_vars": {"RAYON_NUM_THREADS": "1"}})
+            try:
+                ray.init(address=address, num_cpus=num_cpus, include_dashboard=False,
+                         logging_level=logging.WARNING, runtime_env={"env_vars": {"RAYON_NUM_THREADS": "1"}})
+            except (ConnectionError, ValueError, RuntimeError) as e:
+                where = f"the cluster at {address}" if address else "Ray on this machine"
+                raise RuntimeError(f"cannot start or join {where}: {e}") from None
         remote = ray.remote(run_task)
         pending = {}
         for t in todo:
