@@ -143,9 +143,9 @@ impl PackingEnv {
         self.step_with(
             |w, object| match offset {
                 None => w.place_rotated(object, x, y, rot),
-                Some((dx, dy, dyaw)) => {
+                Some(offset) => {
                     let pose = w.checked_release_pose(object, x, y, rot)?;
-                    w.place_pose(object, offset_pose(pose, dx, dy, dyaw))
+                    w.place_pose(object, moved(pose, offset))
                 }
             },
             (x, y, crate::frames::yaw_of(rot)),
@@ -158,17 +158,34 @@ impl PackingEnv {
     pub fn step_pose(&mut self, pose: Pose) -> Result<StepResult<'_>> {
         // The step reports the pose given; the world gets it moved by the noise.
         let (t, yaw) = (pose.translation, crate::frames::yaw_of(pose.rotation));
-        let released = self
-            .draw_noise()
-            .map_or(pose, |(dx, dy, dyaw)| offset_pose(pose, dx, dy, dyaw));
+        let released = self.draw_noise().map_or(pose, |o| moved(pose, o));
         self.step_with(|w, object| w.place_pose(object, released), (t.x, t.y, yaw))
     }
 
-    /// The next release's offset (x, y, yaw) by the world's release noise, `None` without
-    /// noise (nothing drawn).
-    fn draw_noise(&mut self) -> Option<(f32, f32, f32)> {
-        let n = self.world.config().release_noise();
-        (!n.is_zero()).then(|| n.draw(&mut self.noise_rng))
+    /// The next release's offset (x, y, yaw, height) by the world's release noise, `None`
+    /// without noise (nothing drawn). The height is drawn last and only when its noise is set,
+    /// never lower than touching (`clearance_m` under the decided release).
+    fn draw_noise(&mut self) -> Option<[f32; 4]> {
+        let cfg = self.world.config();
+        let (n, height_sd, floor) = (
+            cfg.release_noise(),
+            cfg.release_height_sd_m,
+            -cfg.clearance_m,
+        );
+        if n.is_zero() && height_sd == 0.0 {
+            return None;
+        }
+        let (dx, dy, dyaw) = if n.is_zero() {
+            (0.0, 0.0, 0.0)
+        } else {
+            n.draw(&mut self.noise_rng)
+        };
+        let dz = if height_sd > 0.0 {
+            (height_sd * crate::world::standard_normal(&mut self.noise_rng)).max(floor)
+        } else {
+            0.0
+        };
+        Some([dx, dy, dyaw, dz])
     }
 
     fn step_with(
@@ -258,6 +275,13 @@ impl PackingEnv {
     pub fn observation(&self) -> &[f32] {
         &self.obs
     }
+}
+
+/// `pose` moved by a release offset `[dx, dy, dyaw, dz]` (m, rad, m).
+fn moved(pose: Pose, [dx, dy, dyaw, dz]: [f32; 4]) -> Pose {
+    let mut p = offset_pose(pose, dx, dy, dyaw);
+    p.translation.z += dz;
+    p
 }
 
 /// The objects of an episode of the training distribution (the HERB paper's): a count drawn

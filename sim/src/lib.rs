@@ -16,6 +16,7 @@
 
 pub mod env;
 pub mod eval;
+pub mod field;
 pub mod reserve;
 pub mod teacher;
 

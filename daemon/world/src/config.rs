@@ -62,6 +62,11 @@ pub struct WorldConfig {
     pub release_noise_m: f32,
     /// Release noise about z: standard deviation of the yaw offset (degrees).
     pub release_noise_deg: f32,
+    /// Release noise in height: standard deviation (m) of the release's height off the one
+    /// decided, never lower than touching (the decided release is `clearance_m` above the
+    /// estimated contact). Drawn after x, y and yaw, and only when not 0, so that without it
+    /// every other draw is as before.
+    pub release_height_sd_m: f32,
 }
 
 impl Default for WorldConfig {
@@ -87,6 +92,7 @@ impl Default for WorldConfig {
             contact_recycle_m: 0.0,
             release_noise_m: 0.0,
             release_noise_deg: 0.0,
+            release_height_sd_m: 0.0,
         }
     }
 }
@@ -226,6 +232,7 @@ impl WorldConfig {
         check("contact_recycle_m", self.contact_recycle_m, 0.0, 0.05)?;
         check("release_noise_m", self.release_noise_m, 0.0, 0.05)?;
         check("release_noise_deg", self.release_noise_deg, 0.0, 45.0)?;
+        check("release_height_sd_m", self.release_height_sd_m, 0.0, 0.05)?;
         Ok(())
     }
 }

@@ -784,6 +784,13 @@ pub fn offset_pose(mut pose: Pose, dx: f32, dy: f32, dyaw: f32) -> Pose {
     pose
 }
 
+/// One draw of a standard normal variable from `rng` (Box-Muller, two uniform draws): the one
+/// normal draw of the world's noises.
+pub fn standard_normal(rng: &mut impl rand::Rng) -> f32 {
+    let (u1, u2): (f32, f32) = (rng.random(), rng.random());
+    (-2.0 * (1.0 - u1).ln()).sqrt() * (std::f32::consts::TAU * u2).cos()
+}
+
 /// A gripper's release error: each release off its decided pose by normal noise of these
 /// standard deviations in x and y and in yaw (the evaluation's release noise, the robust
 /// search's rollouts).
@@ -803,12 +810,11 @@ impl ReleaseNoise {
 
     /// One release's offset from `rng`: x, y (m) and yaw (rad), drawn in that order.
     pub fn draw(&self, rng: &mut impl rand::Rng) -> (f32, f32, f32) {
-        let mut normal = || {
-            let (u1, u2): (f32, f32) = (rng.random(), rng.random());
-            (-2.0 * (1.0 - u1).ln()).sqrt() * (std::f32::consts::TAU * u2).cos()
-        };
-        let (dx, dy) = (self.sigma_m * normal(), self.sigma_m * normal());
-        (dx, dy, self.sigma_deg.to_radians() * normal())
+        let (dx, dy) = (
+            self.sigma_m * standard_normal(rng),
+            self.sigma_m * standard_normal(rng),
+        );
+        (dx, dy, self.sigma_deg.to_radians() * standard_normal(rng))
     }
 
     /// `pose` moved by one offset drawn from `rng` ([`offset_pose`]).

@@ -144,6 +144,11 @@ struct EvalArgs {
     /// the evaluation's world: the twins' fidelity bound). Default `job`, herbd's.
     #[arg(long, default_value = "job", value_parser = TwinKind::parse)]
     search_world: TwinKind,
+    /// The evaluation's world: `ideal` (every object released where it was decided), `field`
+    /// (the shipped field model, models/field.toml: a real cell's release error, seeded per
+    /// episode, told to no twin or method) or a field model file.
+    #[arg(long, default_value = "ideal")]
+    world: String,
     /// Release noise of the evaluation's world, `MM,DEG`: each object is released off the pose
     /// its method decided by normal noise of these standard deviations in x and y (mm) and in
     /// yaw (degrees), as a real gripper does; seeded by the episode's seed. The search's twin is
@@ -471,6 +476,9 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
         all_results.push((names.label, results));
     }
     let mut notes = Vec::new();
+    if let Some(m) = settings.field_model()? {
+        notes.push(evaluation::field_note(&m, &settings.world));
+    }
     if let Some(noise) = settings.release_noise {
         notes.push(evaluation::release_noise_note(noise));
     }
@@ -518,6 +526,7 @@ impl EvalArgs {
             search_threads: self.search_threads as usize,
             search_horizon: self.search_horizon.map(|h| h as usize),
             search_world: self.search_world.name().into(),
+            world: self.world.clone(),
             release_noise: self.release_noise,
             world_set: self.world_set.clone(),
             seed: self.seed,

@@ -13,6 +13,7 @@ use herb_decide::{Order, PolicySpec, SequenceModel};
 use herb_search::{Budget, SearchSettings, TwinKind};
 use herb_sim::boxed::Episode;
 use herb_sim::eval::{self, EpisodeOutcome, EvalError, Summary};
+use herb_sim::field::FieldModel;
 use herb_sim::{PackingEnv, RewardMode, SharedCatalog, WorldConfig};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -84,6 +85,9 @@ pub struct EvalSettings {
     pub search_horizon: Option<usize>,
     /// The search's world: `heightmap`, `job` or `exact`.
     pub search_world: String,
+    /// The evaluation's world: `ideal` (no error), `field` (the shipped field model,
+    /// `models/field.toml`) or a field model file.
+    pub world: String,
     /// Release noise of the evaluation's world: sd in mm (x, y) and degrees (yaw).
     pub release_noise: Option<(f32, f32)>,
     /// Physics settings (`KEY=VALUE[,KEY=VALUE...]`), applied in turn.
@@ -108,6 +112,7 @@ impl Default for EvalSettings {
             search_threads: 1,
             search_horizon: None,
             search_world: TwinKind::Job.name().into(),
+            world: "ideal".into(),
             release_noise: None,
             world_set: Vec::new(),
             seed: 0,
@@ -167,9 +172,29 @@ impl EvalSettings {
         }
     }
 
-    /// The evaluation's world: today's defaults, the release noise, then each `world_set`.
+    /// The field model of the evaluation's world (`None` for `ideal`).
+    pub fn field_model(&self) -> Result<Option<FieldModel>, SetupError> {
+        Ok(match self.world.as_str() {
+            "ideal" => None,
+            "field" => Some(FieldModel::load(Path::new(herb_sim::field::SHIPPED))?),
+            file => Some(FieldModel::load(Path::new(file))?),
+        })
+    }
+
+    /// The evaluation's world: today's defaults, its field model, the release noise, then each
+    /// `world_set`.
     pub fn world(&self) -> Result<WorldConfig, SetupError> {
         let mut cfg = WorldConfig::default();
+        if let Some(m) = self.field_model()? {
+            if self.release_noise.is_some() {
+                return Err(format!(
+                    "world {} and release_noise both set the release error: give one",
+                    self.world
+                )
+                .into());
+            }
+            cfg = m.apply(&cfg)?;
+        }
         if let Some((mm, deg)) = self.release_noise {
             cfg.release_noise_m = mm * 1e-3;
             cfg.release_noise_deg = deg;
@@ -455,6 +480,20 @@ pub fn report(
         }
     }
     table
+}
+
+/// The note of a field model, for [`report`].
+pub fn field_note(m: &FieldModel, source: &str) -> String {
+    let r = m.release;
+    format!(
+        "world (every row): field model {} ({source}): each release off its decided pose by \
+         normal noise, sd {} mm in x and y, {} deg in yaw, {} mm in height (never lower than \
+         touching)",
+        m.name,
+        r.xy_sd_m * 1e3,
+        r.yaw_sd_deg,
+        r.height_sd_m * 1e3
+    )
 }
 
 /// The note of the release noise, for [`report`].

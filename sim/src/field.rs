@@ -1,0 +1,74 @@
+//! The field model: the errors of a real cell that the evaluation's world adds on top of the
+//! ideal world, read from one versioned file (`models/field.toml`). No twin and no method is
+//! told of them. Each figure is a standard deviation; with every figure 0 the world is the ideal
+//! one, bit for bit.
+//!
+//! `field-v0` holds the release error (x, y, yaw and height). Every key is required: a file
+//! with a missing, unknown, negative or non-finite figure is refused with the key named.
+
+use crate::error::{Result, SimError};
+use crate::world::WorldConfig;
+use std::path::Path;
+
+/// The shipped field model's file, relative to the checkout's root.
+pub const SHIPPED: &str = "models/field.toml";
+
+/// A field model (module docs).
+#[derive(Debug, Clone, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FieldModel {
+    /// Its name and version (`field-v0`).
+    pub name: String,
+    /// The gripper's release error.
+    pub release: ReleaseError,
+}
+
+/// The release error of the field model: standard deviations of each release off its decided
+/// pose.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReleaseError {
+    /// x and y (m).
+    pub xy_sd_m: f32,
+    /// Yaw (degrees).
+    pub yaw_sd_deg: f32,
+    /// Height (m), never lower than touching.
+    pub height_sd_m: f32,
+}
+
+impl FieldModel {
+    /// Reads a field model from TOML `text`; `origin` names it in errors.
+    pub fn parse(text: &str, origin: &str) -> Result<Self> {
+        let bad = |message: String| SimError::Config(format!("field model {origin}: {message}"));
+        let m: FieldModel = toml::from_str(text).map_err(|e| bad(e.message().to_string()))?;
+        let r = m.release;
+        // The world's own ranges (`WorldConfig::validate`), named by the file's keys.
+        for (key, v, max) in [
+            ("release.xy_sd_m", r.xy_sd_m, 0.05),
+            ("release.yaw_sd_deg", r.yaw_sd_deg, 45.0),
+            ("release.height_sd_m", r.height_sd_m, 0.05),
+        ] {
+            if !(v.is_finite() && (0.0..=max).contains(&v)) {
+                return Err(bad(format!("{key} = {v}: need a number from 0 to {max}")));
+            }
+        }
+        Ok(m)
+    }
+
+    /// Reads a field model file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| SimError::Config(format!("field model {}: {e}", path.display())))?;
+        Self::parse(&text, &path.display().to_string())
+    }
+
+    /// `cfg` with this model's errors, checked against the world's ranges.
+    pub fn apply(&self, cfg: &WorldConfig) -> Result<WorldConfig> {
+        let mut c = cfg.clone();
+        c.release_noise_m = self.release.xy_sd_m;
+        c.release_noise_deg = self.release.yaw_sd_deg;
+        c.release_height_sd_m = self.release.height_sd_m;
+        c.validate()?;
+        Ok(c)
+    }
+}
