@@ -57,14 +57,15 @@ def onnx_actor(path):
 
 
 def validate(act, episodes, seed, reward, boxed, rule=None, k=8, horizon=None, sequence=herb_sim.HERB_ORDER,
-             rollouts=None, twin="heightmap", threads=None):
+             rollouts=None, twin="heightmap", threads=None, world="ideal"):
     """Success rate and mean objects packed of ``act`` (a policy from ``onnx_actor``) or, with
     ``rule``, of a lattice rule stepped in Rust, on the validation episodes."""
     # One environment per episode; each counts its first episode only (autoreset keeps the
     # finished ones stepping, their later episodes are ignored), so short episodes are not
     # over-represented.
     extra = {} if threads is None else {"threads": threads}
-    env = herb_sim.HerbVectorEnv(episodes, reward=reward, sequence=sequence, seed=seed, boxed=boxed, **extra)
+    env = herb_sim.HerbVectorEnv(episodes, reward=reward, sequence=sequence, seed=seed, boxed=boxed, world=world,
+                                 **extra)
     obs = env.reset(seed=seed)[0]
     done = np.zeros(episodes, bool)
     packed = np.zeros(episodes, int)
@@ -112,6 +113,9 @@ def main():
                          "beam3-start: old name of beam3, kept for one release)")
     ap.add_argument("--boxed", default=None)
     ap.add_argument("--threads", type=int, default=None, help="worker threads (default: one per core)")
+    ap.add_argument("--world", default="ideal",
+                    help="the episodes' world: ideal, field (models/field.toml: a real cell's errors, told to no "
+                    "policy or rule) or a field model file")
     a = ap.parse_args()
     if not 1 <= a.episodes <= 4096:
         raise SystemExit(f"--episodes {a.episodes}: need 1 to 4096")
@@ -119,9 +123,9 @@ def main():
         raise SystemExit(f"--horizon {a.horizon}: need at least 1 object")
     if not a.policy and not a.rule:
         raise SystemExit("give at least one --policy or --rule")
-    print(f"{a.episodes} training-distribution episodes, seed {a.seed}, order {a.sequence}")
+    print(f"{a.episodes} training-distribution episodes, seed {a.seed}, order {a.sequence}, world {a.world}")
     for p in a.policy:
-        s, n = validate(onnx_actor(p), a.episodes, a.seed, a.reward, a.boxed, sequence=a.sequence)
+        s, n = validate(onnx_actor(p), a.episodes, a.seed, a.reward, a.boxed, sequence=a.sequence, world=a.world)
         print(f"{p}: success {100 * s:.2f} %, objects packed {n:.2f}", flush=True)
     for r in a.rule:
         t = time.perf_counter()
@@ -129,7 +133,7 @@ def main():
         s, n = validate(None, a.episodes, a.seed, a.reward, a.boxed,
                         rule=rule, k=a.k, horizon=a.horizon, sequence=a.sequence,
                         rollouts=a.rollouts, twin={"search-exact": "exact", "search-job": "job"}.get(r, "heightmap"),
-                        threads=a.threads)
+                        threads=a.threads, world=a.world)
         label = f"{r} (k = {a.k})" if r in ("lookahead", "geo-lookahead") else r
         if rule == "search":
             label = f"{r} (k = {a.k}, {a.rollouts or a.k} rollouts)"

@@ -239,9 +239,11 @@ impl VecEnv {
     /// (meshes; default `HERB_BOXED` or ../shared/boxed, primitives without it);
     /// `meshes=False` forces primitives; `sequence_model`: the transition counts (default
     /// `models/sequence.json` in the working directory, else in the checkout the extension was
-    /// built from); `threads`: rayon threads (default: all cores).
+    /// built from); `threads`: rayon threads (default: all cores); `world`: `ideal` (default),
+    /// `field` (the shipped field model, `models/field.toml`) or a field model file: the errors
+    /// of a real cell the environments add, told to no rule, twin or policy.
     #[new]
-    #[pyo3(signature = (num_envs, reward="cs0.6", sequence=None, seed=0, min_objects=10, max_objects=25, boxed=None, meshes=true, sequence_model=None, threads=None, autoreset=true))]
+    #[pyo3(signature = (num_envs, reward="cs0.6", sequence=None, seed=0, min_objects=10, max_objects=25, boxed=None, meshes=true, sequence_model=None, threads=None, autoreset=true, world=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         num_envs: usize,
@@ -255,7 +257,9 @@ impl VecEnv {
         sequence_model: Option<String>,
         threads: Option<usize>,
         autoreset: bool,
+        world: Option<&str>,
     ) -> PyResult<Self> {
+        let cfg = world_config(world)?;
         if !(1..=4096).contains(&num_envs) {
             return Err(value_err(format!("num_envs {num_envs} outside 1..=4096")));
         }
@@ -309,7 +313,7 @@ impl VecEnv {
         let slots = (0..num_envs)
             .map(|_| {
                 Ok(Slot {
-                    env: PackingEnv::new(catalog.clone(), WorldConfig::default(), reward)
+                    env: PackingEnv::new(catalog.clone(), cfg.clone(), reward)
                         .map_err(value_err)?,
                     rng: ChaCha8Rng::seed_from_u64(root_rng.random()),
                     running: false,
@@ -892,6 +896,29 @@ impl VecEnv {
 }
 
 /// The native module.
+/// The environments' world: `ideal` (or `None`), `field` (the shipped field model: the working
+/// directory's `models/field.toml`, else the checkout's the extension was built from) or a field
+/// model file.
+fn world_config(world: Option<&str>) -> PyResult<WorldConfig> {
+    let path = match world {
+        None | Some("ideal") => return Ok(WorldConfig::default()),
+        Some("field") => {
+            let here = std::path::PathBuf::from(herb_sim::field::SHIPPED);
+            if here.is_file() {
+                here
+            } else {
+                Path::new(env!("CARGO_MANIFEST_DIR"))
+                    .join("../..")
+                    .join(herb_sim::field::SHIPPED)
+            }
+        }
+        Some(file) => std::path::PathBuf::from(file),
+    };
+    herb_sim::field::FieldModel::load(&path)
+        .and_then(|m| m.apply(&WorldConfig::default()))
+        .map_err(value_err)
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<VecEnv>()?;

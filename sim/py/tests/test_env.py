@@ -151,3 +151,25 @@ def test_episodes_default_to_herbs_order():
     default = second_objects()
     assert np.array_equal(default, second_objects(sequence=herb_sim.HERB_ORDER))
     assert not np.array_equal(default, second_objects(sequence="beam3-last"))
+
+
+def test_the_field_world_is_chosen_by_name_and_a_bad_model_is_refused(tmp_path):
+    """``world``: ``ideal`` (default), ``field`` (models/field.toml) or a file; zero errors
+    step exactly as the ideal world, a bad file is a ValueError naming its key."""
+    zero = tmp_path / "zero.toml"
+    zero.write_text('name = "zero (fixture)"\n[release]\nxy_sd_m = 0.0\nyaw_sd_deg = 0.0\nheight_sd_m = 0.0\n')
+    runs = {}
+    for world in ("ideal", str(zero), "field"):
+        env = herb_sim.VecEnv(2, seed=3, meshes=False, world=world, threads=1)
+        env.reset(seed=3)
+        rewards = []
+        for _ in range(4):
+            _, r, _, _ = env.step(np.zeros((2, 3), np.float32))
+            rewards.append(r.copy())
+        runs[world] = np.stack(rewards)
+    assert np.array_equal(runs["ideal"], runs[str(zero)])
+    assert not np.array_equal(runs["ideal"], runs["field"])
+    bad = tmp_path / "bad.toml"
+    bad.write_text('name = "bad"\n[release]\nxy_sd_m = -0.1\nyaw_sd_deg = 0.0\nheight_sd_m = 0.0\n')
+    with pytest.raises(ValueError, match="release.xy_sd_m"):
+        herb_sim.VecEnv(1, meshes=False, world=str(bad))

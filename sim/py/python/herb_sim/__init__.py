@@ -42,7 +42,8 @@ class PackingEnv(gym.Env):
     """One packing episode per reset; one object placed per step.
 
     Keyword arguments go to ``VecEnv`` (``reward``, ``sequence``, ``min_objects``,
-    ``max_objects``, ``boxed``, ``meshes``, ``sequence_model``).
+    ``max_objects``, ``boxed``, ``meshes``, ``sequence_model``, ``world``: ``ideal``, ``field``
+    or a field model file).
     """
 
     metadata = {"render_modes": []}
