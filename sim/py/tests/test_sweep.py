@@ -129,6 +129,12 @@ def test_a_bad_spec_is_refused_before_anything_runs(tmp_path):
     with pytest.raises(sweep.SpecError, match="not TOML"):
         (tmp_path / "bad.toml").write_text("rows = [")
         sweep.load_spec(tmp_path / "bad.toml")
+    # The field model by name: the checkout's file, by its absolute path (the workers' own
+    # directory may be another); a missing model file is refused.
+    configs, _, _ = sweep.plan({**base, "rows": [{"method": "blbf", "settings": {"world": "field"}}]}, REPO)
+    assert configs[0].settings["world"] == str(REPO / "models" / "field.toml")
+    with pytest.raises(sweep.SpecError, match="nope.toml"):
+        sweep.plan({**base, "rows": [{"method": "blbf", "settings": {"world": "nope.toml"}}]}, REPO)
     # Sampled episodes: seeded by (seed, index), the same names and sizes every time.
     spec = {**base, "episodes": [{"set": "sample", "seed": 777, "count": 5}], "rows": [{"method": "blbf"}]}
     configs, tasks, _ = sweep.plan(spec, REPO)

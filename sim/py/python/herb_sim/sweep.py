@@ -173,6 +173,10 @@ def expand(spec: dict, base: Path | None = None) -> list[Config]:
                 settings = {**shared, **point, **row.get("settings", {}), **row_point}
                 for k in PATH_SETTINGS:
                     settings[k] = _resolve(settings[k], base)
+                # The field model by its absolute path too (`field`: the checkout's own file).
+                world = settings.get("world", "ideal")
+                if world != "ideal":
+                    settings["world"] = _resolve("models/field.toml" if world == "field" else world, base)
                 for episodes in sets:
                     body = {"row": row["method"], "policy": policy, "settings": settings, "episodes": episodes,
                             "boxed": spec.get("boxed"), "meshes": spec.get("meshes", True), "code": code,
@@ -187,6 +191,8 @@ def _files_digest(policy, settings, spec, base: Path) -> dict:
     out = {}
     models = Path(_resolve(spec.get("models", "models"), base))
     files = [Path(settings["sequence_model"])]
+    if settings.get("world", "ideal") != "ideal":
+        files.append(Path(settings["world"]))
     if policy is not None:
         p = Path(policy)
         files.append(p if p.is_absolute() else models / f"policy-{policy}.onnx")
@@ -351,6 +357,8 @@ def _run_key(c: Config) -> str:
 
 def _settings_text(settings: dict) -> str:
     shown = {k: v for k, v in settings.items() if k not in PATH_SETTINGS}
+    if shown.get("world", "ideal") != "ideal":
+        shown["world"] = Path(shown["world"]).name
     return ", ".join(f"{k}={json.dumps(v)}" for k, v in sorted(shown.items())) or "defaults"
 
 
