@@ -588,6 +588,9 @@ pub fn mean_std(v: impl IntoIterator<Item = f64>) -> (f64, f64) {
     )
 }
 
+/// The standard normal's two-sided 95 % quantile: the z of every 95 % interval of the tables.
+pub const Z95: f64 = 1.959_963_984_540_054;
+
 /// The 95 % interval of a success rate of `successes` out of `n` (Wilson's score interval,
 /// as fractions in `[0, 1]`; `(0, 1)` for `n = 0`): unlike the normal approximation it stays
 /// inside `[0, 1]` and is honest near 0 % and 100 %, where the rows of Table I sit.
@@ -595,7 +598,7 @@ pub fn success_interval(successes: usize, n: usize) -> (f64, f64) {
     if n == 0 {
         return (0.0, 1.0);
     }
-    const Z: f64 = 1.959_963_984_540_054;
+    const Z: f64 = Z95;
     let (k, n) = (successes.min(n) as f64, n as f64);
     let p = k / n;
     let z2 = Z * Z;
@@ -613,6 +616,8 @@ pub struct Summary {
     pub episodes: usize,
     /// Episodes that errored.
     pub errors: usize,
+    /// Episodes that succeeded.
+    pub successes: usize,
     /// Success rate (%).
     pub success_pct: f64,
     /// Objects packed: mean and population std.
@@ -641,6 +646,7 @@ pub fn summarize(method: &str, results: &[EpisodeOutcome]) -> Summary {
         method: method.to_owned(),
         episodes: ok.len(),
         errors: results.len() - ok.len(),
+        successes: ok.iter().filter(|r| r.success).count(),
         success_pct: 100.0 * ok.iter().filter(|r| r.success).count() as f64 / n,
         packed: mean_std(ok.iter().map(|r| r.packed as f64)),
         final_compactness: mean_std(

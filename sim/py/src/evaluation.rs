@@ -359,10 +359,7 @@ pub(crate) fn summary<'py>(py: Python<'py>, outcomes: Vec<String>) -> PyResult<B
         .map(|s| from_json(s))
         .collect::<PyResult<Vec<_>>>()?;
     let s = herb_sim::eval::summarize("", &results);
-    let successes = results
-        .iter()
-        .filter(|r| r.as_ref().is_ok_and(|r| r.success))
-        .count();
+    let successes = s.successes;
     let (lo, hi) = herb_sim::eval::success_interval(successes, s.episodes);
     let d = PyDict::new(py);
     d.set_item("episodes", s.episodes)?;
@@ -375,7 +372,7 @@ pub(crate) fn summary<'py>(py: Python<'py>, outcomes: Vec<String>) -> PyResult<B
     d.set_item("packed_std", s.packed.1)?;
     d.set_item(
         "packed_ci",
-        1.959_963_984_540_054 * s.packed.1 / (s.episodes.max(1) as f64).sqrt(),
+        herb_sim::eval::Z95 * s.packed.1 / (s.episodes.max(1) as f64).sqrt(),
     )?;
     d.set_item("final_c_mean", s.final_compactness.0)?;
     d.set_item("stability_pct", s.stability_pct)?;

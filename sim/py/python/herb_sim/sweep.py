@@ -82,7 +82,19 @@ class Task:
         return f"{self.config.key}/{self.first:05d}-{self.first + self.count - 1:05d}.json"
 
 
+_DIGESTS: dict = {}
+
+
 def _file_digest(path: Path) -> str:
+    """A file's sha256, read once per (file, size, time of change) in this process."""
+    st = os.stat(path)
+    key = (str(path), st.st_size, st.st_mtime_ns)
+    if key not in _DIGESTS:
+        _DIGESTS[key] = _read_digest(path)
+    return _DIGESTS[key]
+
+
+def _read_digest(path: Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
