@@ -15,7 +15,7 @@ use crate::catalog::{SharedCatalog, TypeIdx};
 use crate::error::{Result, SimError};
 use crate::observation::{ObsLayout, Projections, action_to_placement};
 pub use crate::world::RewardMode;
-use crate::world::{PackingWorld, PlacementOutcome, WorldConfig, offset_pose};
+use crate::world::{PackingWorld, PlacementOutcome, WorldConfig, offset_release};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rapier3d::math::{Pose, Rotation};
@@ -145,7 +145,7 @@ impl PackingEnv {
                 None => w.place_rotated(object, x, y, rot),
                 Some(offset) => {
                     let pose = w.checked_release_pose(object, x, y, rot)?;
-                    w.place_pose(object, moved(pose, offset))
+                    w.place_pose(object, offset_release(pose, offset))
                 }
             },
             (x, y, crate::frames::yaw_of(rot)),
@@ -158,34 +158,15 @@ impl PackingEnv {
     pub fn step_pose(&mut self, pose: Pose) -> Result<StepResult<'_>> {
         // The step reports the pose given; the world gets it moved by the noise.
         let (t, yaw) = (pose.translation, crate::frames::yaw_of(pose.rotation));
-        let released = self.draw_noise().map_or(pose, |o| moved(pose, o));
+        let released = self.draw_noise().map_or(pose, |o| offset_release(pose, o));
         self.step_with(|w, object| w.place_pose(object, released), (t.x, t.y, yaw))
     }
 
-    /// The next release's offset (x, y, yaw, height) by the world's release noise, `None`
-    /// without noise (nothing drawn). The height is drawn last and only when its noise is set,
-    /// never lower than touching (`clearance_m` under the decided release).
+    /// The next release's offset (x, y, yaw, height) by the world's release noise
+    /// ([`crate::world::ReleaseNoise::draw`]), `None` without noise (nothing drawn).
     fn draw_noise(&mut self) -> Option<[f32; 4]> {
-        let cfg = self.world.config();
-        let (n, height_sd, floor) = (
-            cfg.release_noise(),
-            cfg.release_height_sd_m,
-            -cfg.clearance_m,
-        );
-        if n.is_zero() && height_sd == 0.0 {
-            return None;
-        }
-        let (dx, dy, dyaw) = if n.is_zero() {
-            (0.0, 0.0, 0.0)
-        } else {
-            n.draw(&mut self.noise_rng)
-        };
-        let dz = if height_sd > 0.0 {
-            (height_sd * crate::world::standard_normal(&mut self.noise_rng)).max(floor)
-        } else {
-            0.0
-        };
-        Some([dx, dy, dyaw, dz])
+        let n = self.world.config().release_noise();
+        (!n.is_zero()).then(|| n.draw(&mut self.noise_rng))
     }
 
     fn step_with(
@@ -275,13 +256,6 @@ impl PackingEnv {
     pub fn observation(&self) -> &[f32] {
         &self.obs
     }
-}
-
-/// `pose` moved by a release offset `[dx, dy, dyaw, dz]` (m, rad, m).
-fn moved(pose: Pose, [dx, dy, dyaw, dz]: [f32; 4]) -> Pose {
-    let mut p = offset_pose(pose, dx, dy, dyaw);
-    p.translation.z += dz;
-    p
 }
 
 /// The objects of an episode of the training distribution (the HERB paper's): a count drawn

@@ -372,6 +372,7 @@ fn the_robust_search_ranks_by_noisy_rollouts_that_a_replay_draws_again() {
     let noise = ReleaseNoise {
         sigma_m: 0.005,
         sigma_deg: 3.0,
+        ..ReleaseNoise::default()
     };
     let (p, r) = search(noise);
     assert_eq!(r.finished.len(), 3, "{r:?}");

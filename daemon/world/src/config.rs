@@ -98,12 +98,15 @@ impl Default for WorldConfig {
 }
 
 impl WorldConfig {
-    /// The release noise of [`WorldConfig::release_noise_m`] and
-    /// [`WorldConfig::release_noise_deg`].
+    /// The release noise of [`WorldConfig::release_noise_m`],
+    /// [`WorldConfig::release_noise_deg`] and [`WorldConfig::release_height_sd_m`], never lower
+    /// than touching.
     pub fn release_noise(&self) -> ReleaseNoise {
         ReleaseNoise {
             sigma_m: self.release_noise_m,
             sigma_deg: self.release_noise_deg,
+            sigma_height_m: self.release_height_sd_m,
+            lowest_m: -self.clearance_m,
         }
     }
 

@@ -800,28 +800,46 @@ pub struct ReleaseNoise {
     pub sigma_m: f32,
     /// Standard deviation in yaw (degrees).
     pub sigma_deg: f32,
+    /// Standard deviation in height (m).
+    pub sigma_height_m: f32,
+    /// The lowest height offset (m, <= 0): a release never lower than touching.
+    pub lowest_m: f32,
 }
 
 impl ReleaseNoise {
     /// No noise: nothing is drawn.
     pub fn is_zero(&self) -> bool {
-        self.sigma_m == 0.0 && self.sigma_deg == 0.0
+        self.sigma_m == 0.0 && self.sigma_deg == 0.0 && self.sigma_height_m == 0.0
     }
 
-    /// One release's offset from `rng`: x, y (m) and yaw (rad), drawn in that order.
-    pub fn draw(&self, rng: &mut impl rand::Rng) -> (f32, f32, f32) {
-        let (dx, dy) = (
-            self.sigma_m * standard_normal(rng),
-            self.sigma_m * standard_normal(rng),
-        );
-        (dx, dy, self.sigma_deg.to_radians() * standard_normal(rng))
+    /// One release's offset from `rng`: x, y (m), yaw (rad) and height (m). x, y and yaw are
+    /// drawn in that order unless their noise is 0, the height last and only when its noise is
+    /// set, so that without a height noise every draw is as it was without one.
+    pub fn draw(&self, rng: &mut impl rand::Rng) -> [f32; 4] {
+        let (mut dx, mut dy, mut dyaw, mut dz) = (0.0, 0.0, 0.0, 0.0);
+        if self.sigma_m != 0.0 || self.sigma_deg != 0.0 {
+            dx = self.sigma_m * standard_normal(rng);
+            dy = self.sigma_m * standard_normal(rng);
+            dyaw = self.sigma_deg.to_radians() * standard_normal(rng);
+        }
+        if self.sigma_height_m > 0.0 {
+            dz = (self.sigma_height_m * standard_normal(rng)).max(self.lowest_m);
+        }
+        [dx, dy, dyaw, dz]
     }
 
-    /// `pose` moved by one offset drawn from `rng` ([`offset_pose`]).
+    /// `pose` moved by one offset drawn from `rng` ([`offset_release`]).
     pub fn apply(&self, pose: Pose, rng: &mut impl rand::Rng) -> Pose {
-        let (dx, dy, dyaw) = self.draw(rng);
-        offset_pose(pose, dx, dy, dyaw)
+        offset_release(pose, self.draw(rng))
     }
+}
+
+/// `pose` moved by a release offset `[dx, dy, dyaw, dz]` (m, rad, m; [`offset_pose`], then up by
+/// `dz`).
+pub fn offset_release(pose: Pose, [dx, dy, dyaw, dz]: [f32; 4]) -> Pose {
+    let mut p = offset_pose(pose, dx, dy, dyaw);
+    p.translation.z += dz;
+    p
 }
 
 /// The axis-aligned bounds of `points` (`(MAX, MIN)` for none).
