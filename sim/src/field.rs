@@ -62,6 +62,26 @@ impl FieldModel {
         Self::parse(&text, &path.display().to_string())
     }
 
+    /// The model a world is named by: `ideal` (none), `field` (the shipped file, [`SHIPPED`],
+    /// in the working directory, else in the checkout this was built from) or a file's path.
+    pub fn by_name(name: &str) -> Result<Option<Self>> {
+        let path = match name {
+            "ideal" => return Ok(None),
+            "field" => {
+                let here = std::path::PathBuf::from(SHIPPED);
+                if here.is_file() {
+                    here
+                } else {
+                    Path::new(env!("CARGO_MANIFEST_DIR"))
+                        .join("..")
+                        .join(SHIPPED)
+                }
+            }
+            file => std::path::PathBuf::from(file),
+        };
+        Self::load(&path).map(Some)
+    }
+
     /// `cfg` with this model's errors, checked against the world's ranges.
     pub fn apply(&self, cfg: &WorldConfig) -> Result<WorldConfig> {
         let mut c = cfg.clone();

@@ -174,11 +174,7 @@ impl EvalSettings {
 
     /// The field model of the evaluation's world (`None` for `ideal`).
     pub fn field_model(&self) -> Result<Option<FieldModel>, SetupError> {
-        Ok(match self.world.as_str() {
-            "ideal" => None,
-            "field" => Some(FieldModel::load(Path::new(herb_sim::field::SHIPPED))?),
-            file => Some(FieldModel::load(Path::new(file))?),
-        })
+        Ok(FieldModel::by_name(&self.world)?)
     }
 
     /// The evaluation's world: today's defaults, its field model, the release noise, then each

@@ -895,30 +895,18 @@ impl VecEnv {
     }
 }
 
-/// The native module.
 /// The environments' world: `ideal` (or `None`), `field` (the shipped field model: the working
 /// directory's `models/field.toml`, else the checkout's the extension was built from) or a field
 /// model file.
 fn world_config(world: Option<&str>) -> PyResult<WorldConfig> {
-    let path = match world {
-        None | Some("ideal") => return Ok(WorldConfig::default()),
-        Some("field") => {
-            let here = std::path::PathBuf::from(herb_sim::field::SHIPPED);
-            if here.is_file() {
-                here
-            } else {
-                Path::new(env!("CARGO_MANIFEST_DIR"))
-                    .join("../..")
-                    .join(herb_sim::field::SHIPPED)
-            }
-        }
-        Some(file) => std::path::PathBuf::from(file),
-    };
-    herb_sim::field::FieldModel::load(&path)
-        .and_then(|m| m.apply(&WorldConfig::default()))
-        .map_err(value_err)
+    match herb_sim::field::FieldModel::by_name(world.unwrap_or("ideal")) {
+        Ok(None) => Ok(WorldConfig::default()),
+        Ok(Some(m)) => m.apply(&WorldConfig::default()).map_err(value_err),
+        Err(e) => Err(value_err(e)),
+    }
 }
 
+/// The native module.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<VecEnv>()?;
