@@ -15,7 +15,10 @@ use crate::catalog::{SharedCatalog, TypeIdx};
 use crate::error::{Result, SimError};
 use crate::observation::{ObsLayout, Projections, action_to_placement};
 pub use crate::world::RewardMode;
-use crate::world::{PackingWorld, PlacementOutcome, WorldConfig, offset_release};
+use crate::world::{
+    Camera, ObjectVariation, PackingWorld, PlacementOutcome, WorldConfig, offset_release,
+};
+use herb_core::heightmap::Heightmap;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rapier3d::math::{Pose, Rotation};
@@ -50,6 +53,10 @@ pub struct StepResult<'a> {
 
 /// Seeds the release noise's generator (with the episode's seed).
 const NOISE_SEED: u64 = 0x6e6f_6973_6521;
+/// Seeds the camera error's generator (with the episode's seed).
+const CAMERA_SEED: u64 = 0x6361_6d65_7261;
+/// Seeds the object error's generator (with the episode's seed).
+const OBJECT_SEED: u64 = 0x6f62_6a65_6374;
 
 /// The packing environment.
 #[derive(Debug)]
@@ -65,6 +72,12 @@ pub struct PackingEnv {
     /// Draws the release noise ([`WorldConfig::release_noise_m`]), apart from `rng` so that
     /// noise does not change the random placer's actions.
     noise_rng: ChaCha8Rng,
+    /// The camera of a world with a camera error ([`WorldConfig::camera_noise`]); `None`: the
+    /// methods see the world's own heightmap.
+    camera: Option<Camera>,
+    camera_rng: ChaCha8Rng,
+    /// Each object's variation in this episode (empty without an object error).
+    variations: Vec<ObjectVariation>,
     obs: Vec<f32>,
 }
 
@@ -72,8 +85,11 @@ impl PackingEnv {
     /// A new environment (call [`PackingEnv::reset`] before stepping).
     pub fn new(catalog: SharedCatalog, cfg: WorldConfig, reward: RewardMode) -> Result<Self> {
         let projections = Projections::new(&catalog);
+        let world = PackingWorld::new(catalog, cfg)?;
+        let camera =
+            (!world.config().camera_noise().is_zero()).then(|| Camera::new(world.heightmap()));
         Ok(Self {
-            world: PackingWorld::new(catalog, cfg)?,
+            world,
             projections,
             reward,
             sequence: Vec::new(),
@@ -82,6 +98,9 @@ impl PackingEnv {
             running: false,
             rng: ChaCha8Rng::seed_from_u64(0),
             noise_rng: ChaCha8Rng::seed_from_u64(NOISE_SEED),
+            camera,
+            camera_rng: ChaCha8Rng::seed_from_u64(CAMERA_SEED),
+            variations: Vec::new(),
             obs: vec![0.0; ObsLayout::LEN],
         })
     }
@@ -106,6 +125,15 @@ impl PackingEnv {
         self.running = true;
         self.rng = ChaCha8Rng::seed_from_u64(seed);
         self.noise_rng = ChaCha8Rng::seed_from_u64(seed ^ NOISE_SEED);
+        self.camera_rng = ChaCha8Rng::seed_from_u64(seed ^ CAMERA_SEED);
+        let objects = self.world.config().object_errors();
+        self.variations.clear();
+        if !objects.is_zero() {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed ^ OBJECT_SEED);
+            self.variations
+                .extend(sequence.iter().map(|_| objects.draw(&mut rng)));
+        }
+        self.look();
         self.write_obs()?;
         Ok(&self.obs)
     }
@@ -136,30 +164,121 @@ impl PackingEnv {
     }
 
     /// Places the next object at `(x, y)` with any orientation `rot` of its canonical frame
-    /// (used to replay the humans' full, possibly tilted, placements). With release noise, at
-    /// the world's release pose moved by the noise.
+    /// (used to replay the humans' full, possibly tilted, placements), released at its height
+    /// estimated on the heightmap the methods see ([`PackingEnv::release_pose`]). With the
+    /// field model's errors, as [`PackingEnv::step_pose`] releases.
     pub fn step_rotated(&mut self, x: f32, y: f32, rot: Rotation) -> Result<StepResult<'_>> {
-        let offset = self.draw_noise();
-        self.step_with(
-            |w, object| match offset {
-                None => w.place_rotated(object, x, y, rot),
-                Some(offset) => {
-                    let pose = w.checked_release_pose(object, x, y, rot)?;
-                    w.place_pose(object, offset_release(pose, offset))
-                }
-            },
-            (x, y, crate::frames::yaw_of(rot)),
-        )
+        let yaw = crate::frames::yaw_of(rot);
+        if !self.has_field_errors() {
+            let offset = self.draw_noise();
+            return self.step_with(
+                |w, object, _| match offset {
+                    None => w.place_rotated(object, x, y, rot),
+                    Some(offset) => {
+                        let pose = w.checked_release_pose(object, x, y, rot)?;
+                        w.place_pose(object, offset_release(pose, offset))
+                    }
+                },
+                (x, y, yaw),
+            );
+        }
+        let object = self.next_object().ok_or(SimError::EpisodeOver {
+            placed: self.packed,
+        })?;
+        let pose = self.checked_release_pose(object, x, y, rot)?;
+        self.step_pose(pose)
     }
 
     /// Releases the next object at an explicit pose of its canonical frame (z included, no
     /// estimate): the humans' recorded poses, or a gripper's. With release noise, at that pose
-    /// moved by the noise.
+    /// moved by the noise; with the field model's camera or object error, never lower than
+    /// touching the true pile with the true object ([`PackingEnv::release_of`]).
     pub fn step_pose(&mut self, pose: Pose) -> Result<StepResult<'_>> {
         // The step reports the pose given; the world gets it moved by the noise.
         let (t, yaw) = (pose.translation, crate::frames::yaw_of(pose.rotation));
-        let released = self.draw_noise().map_or(pose, |o| offset_release(pose, o));
-        self.step_with(|w, object| w.place_pose(object, released), (t.x, t.y, yaw))
+        let offset = self.draw_noise();
+        if !self.has_field_errors() {
+            let released = offset.map_or(pose, |o| offset_release(pose, o));
+            return self.step_with(
+                |w, object, _| w.place_pose(object, released),
+                (t.x, t.y, yaw),
+            );
+        }
+        self.step_with(
+            |w, object, v| {
+                let released = Self::release_of(w, object, pose, offset, v);
+                w.place_pose_as(object, released, v)
+            },
+            (t.x, t.y, yaw),
+        )
+    }
+
+    /// Where a real cell releases `object` decided at `pose`: moved by the release offset, then
+    /// raised to touching the true pile (the world's own heightmap, the gripper stops on
+    /// contact) when lower, and by what the true object's larger size adds below its catalog
+    /// hull (its lowest point scaled about the canonical origin).
+    fn release_of(
+        w: &mut PackingWorld,
+        object: TypeIdx,
+        pose: Pose,
+        offset: Option<[f32; 4]>,
+        v: ObjectVariation,
+    ) -> Pose {
+        let mut released = offset.map_or(pose, |o| offset_release(pose, o));
+        let t = released.translation;
+        let touching = w
+            .release_pose(object, t.x, t.y, released.rotation)
+            .translation
+            .z
+            - w.config().clearance_m;
+        let below = (-w.catalog().shape(object).aabb_min.z).max(0.0);
+        let grown = (v.scale - 1.0).max(0.0) * below;
+        released.translation.z = released.translation.z.max(touching) + grown;
+        released
+    }
+
+    /// Whether this world has a camera or object error (the field model beyond the release).
+    fn has_field_errors(&self) -> bool {
+        self.camera.is_some() || !self.variations.is_empty()
+    }
+
+    /// The pose at which a controller releases `object` decided at `(x, y)` with orientation
+    /// `rot`: its height estimated on the heightmap the methods see ([`PackingEnv::camera`])
+    /// plus the world's clearance. Checks the inputs as
+    /// [`PackingWorld::checked_release_pose`].
+    pub fn release_pose(&mut self, object: TypeIdx, x: f32, y: f32, rot: Rotation) -> Pose {
+        match &self.camera {
+            Some(c) => self.world.release_pose_over(c.view(), object, x, y, rot),
+            None => self.world.release_pose(object, x, y, rot),
+        }
+    }
+
+    fn checked_release_pose(
+        &mut self,
+        object: TypeIdx,
+        x: f32,
+        y: f32,
+        rot: Rotation,
+    ) -> Result<Pose> {
+        self.world.checked_release_pose(object, x, y, rot)?;
+        Ok(self.release_pose(object, x, y, rot))
+    }
+
+    /// The heightmap the methods see: the world's own, or with a camera error
+    /// ([`WorldConfig::camera_noise`]) the camera's view of it after the last placement.
+    pub fn camera(&self) -> &Heightmap {
+        match &self.camera {
+            Some(c) => c.view(),
+            None => self.world.heightmap(),
+        }
+    }
+
+    /// The camera looks at the world again (after a reset or a placement).
+    fn look(&mut self) {
+        if let Some(c) = &mut self.camera {
+            let noise = self.world.config().camera_noise();
+            c.see(self.world.heightmap(), &noise, &mut self.camera_rng);
+        }
     }
 
     /// The next release's offset (x, y, yaw, height) by the world's release noise
@@ -171,7 +290,7 @@ impl PackingEnv {
 
     fn step_with(
         &mut self,
-        place: impl FnOnce(&mut PackingWorld, TypeIdx) -> Result<PlacementOutcome>,
+        place: impl FnOnce(&mut PackingWorld, TypeIdx, ObjectVariation) -> Result<PlacementOutcome>,
         (x, y, theta): (f32, f32, f32),
     ) -> Result<StepResult<'_>> {
         if !self.running {
@@ -180,7 +299,13 @@ impl PackingEnv {
             });
         }
         let object = self.sequence[self.next];
-        let outcome = place(&mut self.world, object)?;
+        let variation = self
+            .variations
+            .get(self.next)
+            .copied()
+            .unwrap_or(ObjectVariation::NOMINAL);
+        let outcome = place(&mut self.world, object, variation)?;
+        self.look();
         self.next += 1;
         if outcome.inside {
             self.packed += 1;
@@ -209,7 +334,11 @@ impl PackingEnv {
         } else {
             None
         };
-        ObsLayout::write(self.world.heightmap(), next, &mut self.obs)
+        let seen = match &self.camera {
+            Some(c) => c.view(),
+            None => self.world.heightmap(),
+        };
+        ObsLayout::write(seen, next, &mut self.obs)
     }
 
     /// A uniform random action from the environment's seeded generator.

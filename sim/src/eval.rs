@@ -266,9 +266,7 @@ pub fn apply<'a>(env: &'a mut PackingEnv, d: Decision) -> Result<StepResult<'a>>
 pub fn release_at(env: &mut PackingEnv, p: Option<crate::lattice::Placement>) -> Option<Decision> {
     let (p, object) = (p?, env.next_object()?);
     let rotation = Rotation::from_rotation_z(p.theta());
-    Some(Decision::Pose(
-        env.world_mut().release_pose(object, p.x, p.y, rotation),
-    ))
+    Some(Decision::Pose(env.release_pose(object, p.x, p.y, rotation)))
 }
 
 /// A human replay in the world ([`Replay::Human`], [`Replay::HumanPose`], [`Replay::Random`]).

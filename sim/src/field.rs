@@ -3,8 +3,10 @@
 //! told of them. Each figure is a standard deviation; with every figure 0 the world is the ideal
 //! one, bit for bit.
 //!
-//! `field-v0` holds the release error (x, y, yaw and height). Every key is required: a file
-//! with a missing, unknown, negative or non-finite figure is refused with the key named.
+//! Three parts, each its own section of the file: the gripper's release error (x, y, yaw and
+//! height), the camera's depth noise and dropouts, and the objects' size, mass and friction
+//! against the catalog. Every key is required: a file with a missing, unknown, negative or
+//! non-finite figure is refused with the key named.
 
 use crate::error::{Result, SimError};
 use crate::world::WorldConfig;
@@ -17,10 +19,39 @@ pub const SHIPPED: &str = "models/field.toml";
 #[derive(Debug, Clone, PartialEq, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FieldModel {
-    /// Its name and version (`field-v0`).
+    /// Its name and version (`field-v1`).
     pub name: String,
     /// The gripper's release error.
     pub release: ReleaseError,
+    /// The camera's error in the heightmap the methods see.
+    pub camera: CameraError,
+    /// The objects' error against their catalog entries, per episode.
+    pub object: ObjectError,
+}
+
+/// The camera's error of the field model ([`crate::world::CameraNoise`]).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraError {
+    /// Standard deviation of a seen cell's depth (m).
+    pub depth_sd_m: f32,
+    /// The share of cells not seen, anywhere.
+    pub dropout: f32,
+    /// The share of cells at a step edge not seen.
+    pub edge_dropout: f32,
+}
+
+/// The objects' error of the field model ([`crate::world::ObjectErrors`]): relative standard
+/// deviations, each draw cut at two.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObjectError {
+    /// Of the size (every axis alike).
+    pub size_sd: f32,
+    /// Of the mass.
+    pub mass_sd: f32,
+    /// Of the friction coefficient.
+    pub friction_sd: f32,
 }
 
 /// The release error of the field model: standard deviations of each release off its decided
@@ -41,12 +72,18 @@ impl FieldModel {
     pub fn parse(text: &str, origin: &str) -> Result<Self> {
         let bad = |message: String| SimError::Config(format!("field model {origin}: {message}"));
         let m: FieldModel = toml::from_str(text).map_err(|e| bad(e.message().to_string()))?;
-        let r = m.release;
+        let (r, c, o) = (m.release, m.camera, m.object);
         // The world's own ranges (`WorldConfig::validate`), named by the file's keys.
         for (key, v, max) in [
             ("release.xy_sd_m", r.xy_sd_m, 0.05),
             ("release.yaw_sd_deg", r.yaw_sd_deg, 45.0),
             ("release.height_sd_m", r.height_sd_m, 0.05),
+            ("camera.depth_sd_m", c.depth_sd_m, 0.05),
+            ("camera.dropout", c.dropout, 0.5),
+            ("camera.edge_dropout", c.edge_dropout, 1.0),
+            ("object.size_sd", o.size_sd, 0.1),
+            ("object.mass_sd", o.mass_sd, 0.25),
+            ("object.friction_sd", o.friction_sd, 0.25),
         ] {
             if !(v.is_finite() && (0.0..=max).contains(&v)) {
                 return Err(bad(format!("{key} = {v}: need a number from 0 to {max}")));
@@ -88,6 +125,12 @@ impl FieldModel {
         c.release_noise_m = self.release.xy_sd_m;
         c.release_noise_deg = self.release.yaw_sd_deg;
         c.release_height_sd_m = self.release.height_sd_m;
+        c.camera_depth_sd_m = self.camera.depth_sd_m;
+        c.camera_dropout = self.camera.dropout;
+        c.camera_edge_dropout = self.camera.edge_dropout;
+        c.object_size_sd = self.object.size_sd;
+        c.object_mass_sd = self.object.mass_sd;
+        c.object_friction_sd = self.object.friction_sd;
         c.validate()?;
         Ok(c)
     }

@@ -150,21 +150,17 @@ impl LatticeRule {
         };
         match self {
             Self::Blbf(l) => {
-                let w = env.world();
-                l.compute(w.heightmap(), w.catalog(), next);
+                l.compute(env.camera(), env.world().catalog(), next);
                 Ok(l.blbf())
             }
 
             Self::Lookahead(t) => t.decide(env.world(), remaining),
-            Self::Geo(t) => {
-                let w = env.world();
-                Ok(t.decide(w.catalog(), w.heightmap(), remaining))
-            }
+            Self::Geo(t) => Ok(t.decide(env.world().catalog(), env.camera(), remaining)),
             Self::Reserve(b) => {
                 let (l, r) = &mut **b;
-                let w = env.world();
-                l.compute(w.heightmap(), w.catalog(), next);
-                r.prepare(l.pooled(), w.catalog(), &remaining[1..]);
+                let catalog = env.world().catalog();
+                l.compute(env.camera(), catalog, next);
+                r.prepare(l.pooled(), catalog, &remaining[1..]);
                 l.candidates();
                 let l = &*l;
                 let mut best: Option<(usize, Placement)> = None;

@@ -23,6 +23,85 @@ pub const MAX_VALID_HEIGHT: f32 = 1.0;
 /// copy (`herb_ipc::HEIGHT_RANGE_M`) is tied to it by a test.
 pub const HEIGHT_RANGE_M: (f32, f32) = (-0.05, MAX_VALID_HEIGHT);
 
+/// A depth camera adapter's default floor threshold (m): a seen cell lower than this is the
+/// floor, 0 ([`finish_camera_cells`]).
+pub const CAMERA_FLOOR_THRESHOLD_M: f32 = 0.003;
+/// A depth camera adapter's default fill radius (cells): an unseen cell takes the highest seen
+/// cell within this many cells ([`finish_camera_cells`]).
+pub const CAMERA_FILL_RADIUS_CELLS: usize = 6;
+
+/// How many unseen cells [`finish_camera_cells`] filled.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CameraFill {
+    /// Cells filled from a seen neighbour within the radius.
+    pub near: u32,
+    /// Cells filled with the frame's highest seen cell (nothing seen near them).
+    pub far: u32,
+}
+
+/// What a depth camera's heightmap does to its cells once its points are binned: the one
+/// implementation of the camera contract, run by the camera adapter and by the evaluation's
+/// field camera. A seen cell lower than `floor_threshold` becomes the floor (0), the others are
+/// clamped to `max_height`. An unseen cell (`seen[i]` false: occluded, or without a valid depth)
+/// is filled **conservatively**, never as a hole: with the highest seen cell within
+/// `fill_radius` cells (a square window), else with the highest seen cell of the frame (0 when
+/// none was seen). `scratch` is a buffer of the grid's size. Allocates nothing.
+pub fn finish_camera_cells(
+    spec: &GridSpec,
+    cells: &mut [f32],
+    seen: &[bool],
+    (floor_threshold, max_height, fill_radius): (f32, f32, usize),
+    scratch: &mut [f32],
+) -> CameraFill {
+    let mut highest = 0.0f32;
+    for (o, &s) in cells.iter_mut().zip(seen) {
+        if s {
+            *o = if *o < floor_threshold {
+                0.0
+            } else {
+                o.min(max_height)
+            };
+            highest = highest.max(*o);
+        }
+    }
+    scratch.copy_from_slice(cells);
+    let r = fill_radius as isize;
+    let mut fill = CameraFill::default();
+    for row in 0..spec.ny {
+        for col in 0..spec.nx {
+            let i = row * spec.nx + col;
+            if seen[i] {
+                continue;
+            }
+            let mut best = f32::NEG_INFINITY;
+            for dr in -r..=r {
+                let rr = row as isize + dr;
+                if rr < 0 || rr as usize >= spec.ny {
+                    continue;
+                }
+                for dc in -r..=r {
+                    let cc = col as isize + dc;
+                    if cc < 0 || cc as usize >= spec.nx {
+                        continue;
+                    }
+                    let j = rr as usize * spec.nx + cc as usize;
+                    if seen[j] {
+                        best = best.max(scratch[j]);
+                    }
+                }
+            }
+            if best.is_finite() {
+                cells[i] = best;
+                fill.near += 1;
+            } else {
+                cells[i] = highest;
+                fill.far += 1;
+            }
+        }
+    }
+    fill
+}
+
 /// The geometry of a heightmap grid over the box interior.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GridSpec {

@@ -230,8 +230,11 @@ pub struct Search {
 }
 
 impl Search {
-    /// A search over `catalog`'s objects, its twins built with the world configuration `cfg`.
+    /// A search over `catalog`'s objects, its twins built with the world configuration `cfg`
+    /// without the evaluation's errors ([`WorldConfig::without_errors`]: a twin is never told
+    /// of them; the robust search's assumed error is its own setting).
     pub fn new(catalog: SharedCatalog, cfg: WorldConfig, settings: SearchSettings) -> Self {
+        let cfg = cfg.without_errors();
         Self {
             lattice: Lattice::new(&catalog),
             rollouts: (0..settings.threads.max(1))

@@ -1,8 +1,8 @@
 //! The packing world's settings ([`WorldConfig`]): physics, settling, the success volume's
-//! tolerance and the evaluation's release noise, with their defaults, setting by name and
+//! tolerance and the evaluation's errors (release, camera, objects), with their defaults, setting by name and
 //! checks.
 
-use crate::{INSIDE_TOLERANCE_M, ReleaseNoise};
+use crate::{CameraNoise, INSIDE_TOLERANCE_M, ObjectErrors, ReleaseNoise};
 use herb_core::error::{Result, SimError};
 use herb_core::observation::ObsLayout;
 
@@ -67,6 +67,23 @@ pub struct WorldConfig {
     /// estimated contact). Drawn after x, y and yaw, and only when not 0, so that without it
     /// every other draw is as before.
     pub release_height_sd_m: f32,
+    /// The evaluation's camera: standard deviation (m) of each seen cell's depth error in the
+    /// heightmap the methods decide on ([`CameraNoise`]). Like the release noise, applied by
+    /// the evaluation's environment only, never by the world or a twin.
+    pub camera_depth_sd_m: f32,
+    /// The evaluation's camera: the share of cells anywhere that it does not see (dropouts,
+    /// filled as a camera adapter fills them).
+    pub camera_dropout: f32,
+    /// The evaluation's camera: the share of cells at a step edge (a neighbour 1 cm higher or
+    /// lower) that it does not see.
+    pub camera_edge_dropout: f32,
+    /// The evaluation's objects: relative standard deviation of each object's true size
+    /// against its catalog hull, per episode ([`ObjectErrors`]).
+    pub object_size_sd: f32,
+    /// The evaluation's objects: relative standard deviation of each object's true mass.
+    pub object_mass_sd: f32,
+    /// The evaluation's objects: relative standard deviation of each object's friction.
+    pub object_friction_sd: f32,
 }
 
 impl Default for WorldConfig {
@@ -93,6 +110,12 @@ impl Default for WorldConfig {
             release_noise_m: 0.0,
             release_noise_deg: 0.0,
             release_height_sd_m: 0.0,
+            camera_depth_sd_m: 0.0,
+            camera_dropout: 0.0,
+            camera_edge_dropout: 0.0,
+            object_size_sd: 0.0,
+            object_mass_sd: 0.0,
+            object_friction_sd: 0.0,
         }
     }
 }
@@ -107,6 +130,44 @@ impl WorldConfig {
             sigma_deg: self.release_noise_deg,
             sigma_height_m: self.release_height_sd_m,
             lowest_m: -self.clearance_m,
+        }
+    }
+
+    /// The camera error of [`WorldConfig::camera_depth_sd_m`], [`WorldConfig::camera_dropout`]
+    /// and [`WorldConfig::camera_edge_dropout`].
+    pub fn camera_noise(&self) -> CameraNoise {
+        CameraNoise {
+            depth_sd_m: self.camera_depth_sd_m,
+            dropout: self.camera_dropout,
+            edge_dropout: self.camera_edge_dropout,
+        }
+    }
+
+    /// The object error of [`WorldConfig::object_size_sd`], [`WorldConfig::object_mass_sd`] and
+    /// [`WorldConfig::object_friction_sd`].
+    pub fn object_errors(&self) -> ObjectErrors {
+        ObjectErrors {
+            size_sd: self.object_size_sd,
+            mass_sd: self.object_mass_sd,
+            friction_sd: self.object_friction_sd,
+        }
+    }
+
+    /// This configuration without the evaluation's errors (release, camera, objects): what a
+    /// method, the search and its twins are given, which are never told of them.
+    pub fn without_errors(&self) -> Self {
+        let d = Self::default();
+        Self {
+            release_noise_m: d.release_noise_m,
+            release_noise_deg: d.release_noise_deg,
+            release_height_sd_m: d.release_height_sd_m,
+            camera_depth_sd_m: d.camera_depth_sd_m,
+            camera_dropout: d.camera_dropout,
+            camera_edge_dropout: d.camera_edge_dropout,
+            object_size_sd: d.object_size_sd,
+            object_mass_sd: d.object_mass_sd,
+            object_friction_sd: d.object_friction_sd,
+            ..self.clone()
         }
     }
 
@@ -236,6 +297,12 @@ impl WorldConfig {
         check("release_noise_m", self.release_noise_m, 0.0, 0.05)?;
         check("release_noise_deg", self.release_noise_deg, 0.0, 45.0)?;
         check("release_height_sd_m", self.release_height_sd_m, 0.0, 0.05)?;
+        check("camera_depth_sd_m", self.camera_depth_sd_m, 0.0, 0.05)?;
+        check("camera_dropout", self.camera_dropout, 0.0, 0.5)?;
+        check("camera_edge_dropout", self.camera_edge_dropout, 0.0, 1.0)?;
+        check("object_size_sd", self.object_size_sd, 0.0, 0.1)?;
+        check("object_mass_sd", self.object_mass_sd, 0.0, 0.25)?;
+        check("object_friction_sd", self.object_friction_sd, 0.0, 0.25)?;
         Ok(())
     }
 }

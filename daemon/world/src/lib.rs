@@ -36,9 +36,14 @@ use rapier3d::math::{Pose, Rotation, Vector};
 use rapier3d::prelude::*;
 
 mod config;
+mod errors;
 mod reward;
 pub mod rollout;
 pub use config::WorldConfig;
+pub use errors::{
+    Camera, CameraNoise, ObjectErrors, ObjectVariation, ReleaseNoise, offset_pose, offset_release,
+    standard_normal,
+};
 pub use reward::RewardMode;
 pub use rollout::{CandidateOutcome, RolloutFailure};
 
@@ -93,6 +98,9 @@ pub struct PlacedObject {
     pub ty: TypeIdx,
     /// Its rigid body.
     pub body: RigidBodyHandle,
+    /// Its true size against the catalog's hull: 1, or the field model's size error
+    /// ([`ObjectVariation::scale`]).
+    pub scale: f32,
 }
 
 /// The pile of a twin ([`PackingWorld::twin`]): what a heightmap says of the objects already in
@@ -491,9 +499,41 @@ impl PackingWorld {
         )
     }
 
+    /// [`PackingWorld::release_pose`] estimated on `seen` instead of the world's own heightmap
+    /// (a camera's view of it: where a real cell's controller releases). `seen` must be on the
+    /// world's grid, `ty` a catalog type and the inputs finite.
+    pub fn release_pose_over(
+        &mut self,
+        seen: &Heightmap,
+        ty: TypeIdx,
+        x: f32,
+        y: f32,
+        rot: Rotation,
+    ) -> Pose {
+        release_pose_on(
+            seen,
+            self.catalog.shape(ty),
+            (x, y, rot),
+            self.cfg.clearance_m,
+            &mut self.zscratch,
+        )
+    }
+
     /// Releases `ty` at an explicit pose (e.g. the gripper's) and settles. The outcome's `z` is
     /// the pose's z.
     pub fn place_pose(&mut self, ty: TypeIdx, pose: Pose) -> Result<PlacementOutcome> {
+        self.place_pose_as(ty, pose, ObjectVariation::NOMINAL)
+    }
+
+    /// [`PackingWorld::place_pose`] of a real object that differs from its catalog entry by
+    /// `v` (the field model's object error; [`ObjectVariation::NOMINAL`]: `place_pose`). Its
+    /// factors must be finite and within 0.5 to 2.
+    pub fn place_pose_as(
+        &mut self,
+        ty: TypeIdx,
+        pose: Pose,
+        v: ObjectVariation,
+    ) -> Result<PlacementOutcome> {
         self.check_type(ty)?;
         if !pose.is_finite() {
             return Err(SimError::InvalidPlacement {
@@ -502,15 +542,40 @@ impl PackingWorld {
                 theta: f32::NAN,
             });
         }
+        if ![v.scale, v.mass, v.friction]
+            .iter()
+            .all(|f| f.is_finite() && (0.5..=2.0).contains(f))
+        {
+            return Err(SimError::Config(format!(
+                "object variation {v:?}: each factor must be within 0.5 to 2"
+            )));
+        }
         let spec = self.catalog.spec(ty);
         let shape = self.catalog.shape(ty);
-        // As `ColliderBuilder::mass` computes them, from the catalog's unit-density properties.
-        let mut mass = shape.unit_mass;
-        mass.set_mass(spec.mass_kg, true);
-        let collider = ColliderBuilder::new(shape.collider.clone())
-            .mass_properties(mass)
-            .friction(self.cfg.friction)
-            .restitution(0.0);
+        let collider = if v == ObjectVariation::NOMINAL {
+            // As `ColliderBuilder::mass` computes them, from the catalog's unit-density
+            // properties.
+            let mut mass = shape.unit_mass;
+            mass.set_mass(spec.mass_kg, true);
+            ColliderBuilder::new(shape.collider.clone())
+                .mass_properties(mass)
+                .friction(self.cfg.friction)
+        } else {
+            let scaled = shape
+                .collider
+                .as_convex_polyhedron()
+                .and_then(|p| p.clone().scaled(Vector::splat(v.scale)))
+                .map(SharedShape::new)
+                .ok_or_else(|| {
+                    SimError::Config(format!("object {}: its hull cannot be scaled", spec.id))
+                })?;
+            let mut mass = scaled.mass_properties(1.0);
+            mass.set_mass(spec.mass_kg * v.mass, true);
+            ColliderBuilder::new(scaled)
+                .mass_properties(mass)
+                .friction(self.cfg.friction * v.friction)
+        }
+        .restitution(0.0);
         let body = RigidBodyBuilder::dynamic().pose(pose).build();
         let (handle, _) = self.phys.insert(body, collider);
         {
@@ -518,7 +583,11 @@ impl PackingWorld {
             act.normalized_linear_threshold = self.cfg.sleep_speed_mps / self.cfg.length_unit_m;
             act.time_until_sleep = self.cfg.time_until_sleep_s;
         }
-        self.placed.push(PlacedObject { ty, body: handle });
+        self.placed.push(PlacedObject {
+            ty,
+            body: handle,
+            scale: v.scale,
+        });
         let (settle_steps, settled) = self.settle();
         let scan = self.scan(true);
         let rot = *self.phys.bodies[handle].rotation();
@@ -592,7 +661,7 @@ impl PackingWorld {
                 return true;
             }
             let s = self.catalog.shape(p.ty);
-            let r = s.aabb_min.length().max(s.aabb_max.length());
+            let r = s.aabb_min.length().max(s.aabb_max.length()) * p.scale;
             b.linvel().length() + b.angvel().length() * r < speed
         })
     }
@@ -652,9 +721,14 @@ impl PackingWorld {
         for (i, p) in self.placed.iter().enumerate() {
             let pose = *self.phys.bodies[p.body].position();
             let shape = self.catalog.shape(p.ty);
+            let scale = p.scale;
             self.verts.clear();
-            self.verts
-                .extend(shape.vertices.iter().map(|&v| pose.transform_point(v)));
+            self.verts.extend(
+                shape
+                    .vertices
+                    .iter()
+                    .map(|&v| pose.transform_point(if scale == 1.0 { v } else { v * scale })),
+            );
             let (blo, bhi) = bounds_of(&self.verts);
             let crossed = volume_ok.violation(blo, bhi);
             if first_outside.is_none()
@@ -676,7 +750,7 @@ impl PackingWorld {
             }
             lo = lo.min(blo);
             hi = hi.max(bhi);
-            volume += shape.volume;
+            volume += shape.volume * scale * scale * scale;
             if render {
                 self.heightmap
                     .raise_to_hull(&mut self.verts, &shape.triangles);
@@ -773,73 +847,6 @@ impl SuccessVolume {
             .zip(over)
             .max_by(|a, b| a.1.total_cmp(&b.1))
     }
-}
-
-/// `pose` moved by `dx`, `dy` (m) in B and turned by `dyaw` (rad) about B z: a release off
-/// the pose it was decided at (the evaluation's release noise, the job twin's fit).
-pub fn offset_pose(mut pose: Pose, dx: f32, dy: f32, dyaw: f32) -> Pose {
-    pose.translation.x += dx;
-    pose.translation.y += dy;
-    pose.rotation = Rotation::from_rotation_z(dyaw) * pose.rotation;
-    pose
-}
-
-/// One draw of a standard normal variable from `rng` (Box-Muller, two uniform draws): the one
-/// normal draw of the world's noises.
-pub fn standard_normal(rng: &mut impl rand::Rng) -> f32 {
-    let (u1, u2): (f32, f32) = (rng.random(), rng.random());
-    (-2.0 * (1.0 - u1).ln()).sqrt() * (std::f32::consts::TAU * u2).cos()
-}
-
-/// A gripper's release error: each release off its decided pose by normal noise of these
-/// standard deviations in x and y and in yaw (the evaluation's release noise, the robust
-/// search's rollouts).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct ReleaseNoise {
-    /// Standard deviation in x and in y (m).
-    pub sigma_m: f32,
-    /// Standard deviation in yaw (degrees).
-    pub sigma_deg: f32,
-    /// Standard deviation in height (m).
-    pub sigma_height_m: f32,
-    /// The lowest height offset (m, <= 0): a release never lower than touching.
-    pub lowest_m: f32,
-}
-
-impl ReleaseNoise {
-    /// No noise: nothing is drawn.
-    pub fn is_zero(&self) -> bool {
-        self.sigma_m == 0.0 && self.sigma_deg == 0.0 && self.sigma_height_m == 0.0
-    }
-
-    /// One release's offset from `rng`: x, y (m), yaw (rad) and height (m). x, y and yaw are
-    /// drawn in that order unless their noise is 0, the height last and only when its noise is
-    /// set, so that without a height noise every draw is as it was without one.
-    pub fn draw(&self, rng: &mut impl rand::Rng) -> [f32; 4] {
-        let (mut dx, mut dy, mut dyaw, mut dz) = (0.0, 0.0, 0.0, 0.0);
-        if self.sigma_m != 0.0 || self.sigma_deg != 0.0 {
-            dx = self.sigma_m * standard_normal(rng);
-            dy = self.sigma_m * standard_normal(rng);
-            dyaw = self.sigma_deg.to_radians() * standard_normal(rng);
-        }
-        if self.sigma_height_m > 0.0 {
-            dz = (self.sigma_height_m * standard_normal(rng)).max(self.lowest_m);
-        }
-        [dx, dy, dyaw, dz]
-    }
-
-    /// `pose` moved by one offset drawn from `rng` ([`offset_release`]).
-    pub fn apply(&self, pose: Pose, rng: &mut impl rand::Rng) -> Pose {
-        offset_release(pose, self.draw(rng))
-    }
-}
-
-/// `pose` moved by a release offset `[dx, dy, dyaw, dz]` (m, rad, m; [`offset_pose`], then up by
-/// `dz`).
-pub fn offset_release(pose: Pose, [dx, dy, dyaw, dz]: [f32; 4]) -> Pose {
-    let mut p = offset_pose(pose, dx, dy, dyaw);
-    p.translation.z += dz;
-    p
 }
 
 /// The axis-aligned bounds of `points` (`(MAX, MIN)` for none).

@@ -133,8 +133,8 @@ impl Default for HeightmapSettings {
     fn default() -> Self {
         Self {
             cell_m: herb_core::ObsLayout::CELL_M,
-            floor_threshold_m: 0.003,
-            fill_radius_cells: 6,
+            floor_threshold_m: herb_core::heightmap::CAMERA_FLOOR_THRESHOLD_M,
+            fill_radius_cells: herb_core::heightmap::CAMERA_FILL_RADIUS_CELLS,
             median_frames: 1,
         }
     }

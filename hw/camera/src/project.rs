@@ -9,7 +9,7 @@
 //! hole the camera could not see; the count of filled cells is reported with every frame.
 
 use herb_core::frames::{BOX_HALF_X, BOX_HALF_Y};
-use herb_core::heightmap::GridSpec;
+use herb_core::heightmap::{GridSpec, finish_camera_cells};
 use nalgebra::{Isometry3, Point3};
 
 /// What is unusable in a camera info or a depth image.
@@ -297,53 +297,17 @@ impl Projector {
                 self.seen[i] = true;
             }
         }
-        let mut highest = 0.0f32;
-        for (o, &s) in out.iter_mut().zip(&self.seen) {
-            if s {
-                *o = if *o < p.floor_threshold {
-                    0.0
-                } else {
-                    o.min(p.max_height)
-                };
-                highest = highest.max(*o);
-            }
-        }
-        // Unseen cells: the highest seen cell within the radius (a square window), else the
-        // frame's highest.
-        self.scratch.copy_from_slice(out);
-        let r = p.fill_radius as isize;
-        for row in 0..spec.ny {
-            for col in 0..spec.nx {
-                let i = row * spec.nx + col;
-                if self.seen[i] {
-                    continue;
-                }
-                let mut best = f32::NEG_INFINITY;
-                for dr in -r..=r {
-                    let rr = row as isize + dr;
-                    if rr < 0 || rr as usize >= spec.ny {
-                        continue;
-                    }
-                    for dc in -r..=r {
-                        let cc = col as isize + dc;
-                        if cc < 0 || cc as usize >= spec.nx {
-                            continue;
-                        }
-                        let j = rr as usize * spec.nx + cc as usize;
-                        if self.seen[j] {
-                            best = best.max(self.scratch[j]);
-                        }
-                    }
-                }
-                if best.is_finite() {
-                    out[i] = best;
-                    stats.filled_near += 1;
-                } else {
-                    out[i] = highest;
-                    stats.filled_far += 1;
-                }
-            }
-        }
+        // Floor, clamp and the conservative fill of unseen cells: the camera contract's one
+        // implementation, shared with the evaluation's field camera.
+        let fill = finish_camera_cells(
+            &spec,
+            out,
+            &self.seen,
+            (p.floor_threshold, p.max_height, p.fill_radius),
+            &mut self.scratch,
+        );
+        stats.filled_near = fill.near;
+        stats.filled_far = fill.far;
         stats
     }
 }

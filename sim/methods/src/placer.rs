@@ -43,11 +43,7 @@ fn decide_in<P: Policy + ?Sized>(
     if env.next_object().is_none() {
         return Ok(None);
     }
-    let d = decider.decide_on(
-        env.world().heightmap().into(),
-        env.remaining(),
-        env.step_index(),
-    );
+    let d = decider.decide_on(env.camera().into(), env.remaining(), env.step_index());
     match d {
         Ok(d) => Ok(Some(Decision::Pose(d.pose()))),
         Err(DecideError::NoFeasiblePlacement) => Ok(None),
@@ -78,7 +74,7 @@ impl Placer for SearchPlacer {
     ) -> std::result::Result<Option<Decision>, PlaceError> {
         let search = self.0.policy_mut();
         if search.settings().twin == TwinKind::ExactClone {
-            let p = search.decide(env.world().heightmap(), env.remaining(), Some(env.world()))?;
+            let p = search.decide(env.camera(), env.remaining(), Some(env.world()))?;
             return Ok(release_at(env, p));
         }
         decide_in(&mut self.0, env)
@@ -105,7 +101,7 @@ impl Placer for PackitPlacer {
         let shape = world.catalog().shape(object);
         let pose = self
             .0
-            .decide(world.heightmap(), shape, world.config().clearance_m);
+            .decide(env.camera(), shape, world.config().clearance_m);
         Ok(pose.map(Decision::Pose))
     }
 }

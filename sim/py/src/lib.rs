@@ -162,7 +162,7 @@ impl VecEnv {
         match remaining.split_first() {
             Some((&next, after)) => {
                 s.feats
-                    .compute(lattice, catalog, s.env.world().heightmap(), next, after);
+                    .compute(lattice, catalog, s.env.camera(), next, after);
             }
             None => s.feats.clear(),
         }
@@ -404,7 +404,7 @@ impl VecEnv {
                         s.env.next_object()?;
                         // herbd's decision itself (`Decider::decide_on`): the labels are the
                         // placements the `blbf` rows of Table I send, as actions.
-                        let heightmap = s.env.world().heightmap().into();
+                        let heightmap = s.env.camera().into();
                         let d = s
                             .expert
                             .decide_on(heightmap, s.env.remaining(), s.len as usize);
@@ -769,7 +769,7 @@ impl VecEnv {
                             };
                             let exact = (twin == TwinKind::ExactClone).then(|| s.env.world());
                             let p = search
-                                .decide(s.env.world().heightmap(), s.env.remaining(), exact)
+                                .decide(s.env.camera(), s.env.remaining(), exact)
                                 .map_err(|e| e.to_string())?;
                             let o = Self::place(s, p)?;
                             return Self::finish_step(sampler, s, o, autoreset);
