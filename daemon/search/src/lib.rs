@@ -227,6 +227,8 @@ pub struct Search {
     report: SearchReport,
     job: Option<JobTwin>,
     zscratch: ZScratch,
+    /// The heightmap the candidates are found on when the job's twin agrees ([`fuse`]).
+    fused: Option<Heightmap>,
 }
 
 impl Search {
@@ -246,6 +248,7 @@ impl Search {
             cfg,
             report: SearchReport::default(),
             job: None,
+            fused: None,
         }
     }
 
@@ -300,7 +303,20 @@ impl Search {
         let Some(&next) = remaining.first() else {
             return Ok(None);
         };
-        self.lattice.compute(heightmap, &self.catalog, next);
+        let agreed =
+            self.settings.twin == TwinKind::Job && self.follow_job(heightmap, remaining)?;
+        // The candidates on the job's twin's heightmap where it agrees with the camera's
+        // (within JOB_CELL_OFF_M: the decisions replayed, without the camera's noise and
+        // dropouts), on the camera's where it does not (what the twin does not know).
+        let seen = match (&self.job, agreed) {
+            (Some(j), true) => {
+                let fused = self.fused.get_or_insert_with(|| heightmap.clone());
+                fuse(j.world.heightmap(), heightmap, fused);
+                &*fused
+            }
+            _ => heightmap,
+        };
+        self.lattice.compute(seen, &self.catalog, next);
         let n = self.lattice.candidates().len();
         self.report.candidates = n;
         if n == 0 {
@@ -311,8 +327,6 @@ impl Search {
             Budget::Time(d) => (usize::MAX, Some(t0 + d)),
         };
         let k = self.settings.k.clamp(1, n).min(count);
-        let agreed =
-            self.settings.twin == TwinKind::Job && self.follow_job(heightmap, remaining)?;
         if k > 0 {
             let twin;
             let job = self.job.as_ref().filter(|_| agreed).map(|j| &j.world);
@@ -519,6 +533,18 @@ fn evaluate(
         o.success = all;
         o
     }))
+}
+
+/// Writes into `out` the twin's heightmap where it is within [`JOB_CELL_OFF_M`] of the camera's,
+/// and the camera's elsewhere. In a world that is its own model the two are equal, and so is
+/// `out`. All three on one grid (the twin's is the camera's grid).
+fn fuse(twin: &Heightmap, camera: &Heightmap, out: &mut Heightmap) {
+    if out.spec() != camera.spec() {
+        *out = camera.clone();
+    }
+    for ((o, &t), &c) in out.data_mut().iter_mut().zip(twin.data()).zip(camera.data()) {
+        *o = if (t - c).abs() <= JOB_CELL_OFF_M { t } else { c };
+    }
 }
 
 /// The sum of |a - b| over the cells (m), and the cells that differ by more than
