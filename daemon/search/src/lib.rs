@@ -542,8 +542,17 @@ fn fuse(twin: &Heightmap, camera: &Heightmap, out: &mut Heightmap) {
     if out.spec() != camera.spec() {
         *out = camera.clone();
     }
-    for ((o, &t), &c) in out.data_mut().iter_mut().zip(twin.data()).zip(camera.data()) {
-        *o = if (t - c).abs() <= JOB_CELL_OFF_M { t } else { c };
+    for ((o, &t), &c) in out
+        .data_mut()
+        .iter_mut()
+        .zip(twin.data())
+        .zip(camera.data())
+    {
+        *o = if (t - c).abs() <= JOB_CELL_OFF_M {
+            t
+        } else {
+            c
+        };
     }
 }
 

@@ -383,3 +383,60 @@ fn the_robust_search_ranks_by_noisy_rollouts_that_a_replay_draws_again() {
     let (again, r2) = search(noise);
     assert_eq!((p, rets(&r)), (again, rets(&r2)), "drawn again alike");
 }
+
+#[test]
+fn the_candidates_come_from_the_jobs_twin_where_the_camera_agrees_and_from_the_camera_elsewhere() {
+    let c = common::primitives();
+    let ids: Vec<_> = ["003", "005", "013", "007"]
+        .map(|i| c.by_id(i).unwrap())
+        .to_vec();
+    let settings = SearchSettings {
+        k: 3,
+        budget: Budget::Rollouts(3),
+        horizon: Some(2),
+        reward: RewardMode::cs(0.6).unwrap(),
+        twin: TwinKind::Job,
+        robust: None,
+        threads: 1,
+    };
+    let mut world = PackingWorld::new(c.clone(), WorldConfig::default()).unwrap();
+    let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
+    let first = s.decide(world.heightmap(), &ids, None).unwrap().unwrap();
+    world
+        .place(ids[0], first.x, first.y, first.theta())
+        .unwrap();
+    let decide = |seen: &Heightmap| {
+        let mut s = s.clone();
+        let p = s.decide(seen, &ids[1..], None).unwrap().unwrap();
+        (p, s.report().job.unwrap())
+    };
+    let (clean, a) = decide(world.heightmap());
+    assert!(a.used && a.off == 0.0, "{a:?}");
+    // A camera's noise (up to 3 mm, a fixed pattern) on every cell: the twin agrees, so the
+    // candidates and the decision are the clean heightmap's.
+    let mut noisy = world.heightmap().clone();
+    for (i, v) in noisy.data_mut().iter_mut().enumerate() {
+        *v += 0.003 * (((i * 7919) % 13) as f32 / 6.0 - 1.0);
+    }
+    let (p, a) = decide(&noisy);
+    assert!(a.used && a.mean_diff_m > 0.0, "{a:?}");
+    assert_eq!(
+        p, clean,
+        "camera noise within 1 cm does not move the decision"
+    );
+    // Something the twin does not know (5 cm high) where the clean decision would go: the
+    // camera's cells count there, and the decision goes elsewhere.
+    let mut foreign = world.heightmap().clone();
+    let spec = *foreign.spec();
+    for row in 0..spec.ny {
+        for col in 0..spec.nx {
+            let (x, y) = spec.cell_centre(col, row);
+            if (x - clean.x).abs() < 0.03 && (y - clean.y).abs() < 0.03 {
+                foreign.data_mut()[row * spec.nx + col] += 0.05;
+            }
+        }
+    }
+    let (p, a) = decide(&foreign);
+    assert!(a.used && a.off > 0.0, "{a:?}");
+    assert_ne!(p, clean, "the unknown object is seen");
+}
