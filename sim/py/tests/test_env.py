@@ -157,7 +157,9 @@ def test_the_field_world_is_chosen_by_name_and_a_bad_model_is_refused(tmp_path):
     """``world``: ``ideal`` (default), ``field`` (models/field.toml) or a file; zero errors
     step exactly as the ideal world, a bad file is a ValueError naming its key."""
     zero = tmp_path / "zero.toml"
-    zero.write_text('name = "zero (fixture)"\n[release]\nxy_sd_m = 0.0\nyaw_sd_deg = 0.0\nheight_sd_m = 0.0\n')
+    rest = ("[camera]\ndepth_sd_m = 0.0\ndropout = 0.0\nedge_dropout = 0.0\n"
+            "[object]\nsize_sd = 0.0\nmass_sd = 0.0\nfriction_sd = 0.0\n")
+    zero.write_text('name = "zero (fixture)"\n[release]\nxy_sd_m = 0.0\nyaw_sd_deg = 0.0\nheight_sd_m = 0.0\n' + rest)
     runs = {}
     for world in ("ideal", str(zero), "field"):
         env = herb_sim.VecEnv(2, seed=3, meshes=False, world=world, threads=1)
@@ -170,6 +172,6 @@ def test_the_field_world_is_chosen_by_name_and_a_bad_model_is_refused(tmp_path):
     assert np.array_equal(runs["ideal"], runs[str(zero)])
     assert not np.array_equal(runs["ideal"], runs["field"])
     bad = tmp_path / "bad.toml"
-    bad.write_text('name = "bad"\n[release]\nxy_sd_m = -0.1\nyaw_sd_deg = 0.0\nheight_sd_m = 0.0\n')
+    bad.write_text('name = "bad"\n[release]\nxy_sd_m = -0.1\nyaw_sd_deg = 0.0\nheight_sd_m = 0.0\n' + rest)
     with pytest.raises(ValueError, match="release.xy_sd_m"):
         herb_sim.VecEnv(1, meshes=False, world=str(bad))
