@@ -244,8 +244,8 @@ impl PackingEnv {
 
     /// The pose at which a controller releases `object` decided at `(x, y)` with orientation
     /// `rot`: its height estimated on the heightmap the methods see ([`PackingEnv::camera`])
-    /// plus the world's clearance. Checks the inputs as
-    /// [`PackingWorld::checked_release_pose`].
+    /// plus the world's clearance. `object` must be a catalog type and the inputs finite, as
+    /// [`PackingWorld::release_pose`] requires (the steps check them first).
     pub fn release_pose(&mut self, object: TypeIdx, x: f32, y: f32, rot: Rotation) -> Pose {
         match &self.camera {
             Some(c) => self.world.release_pose_over(c.view(), object, x, y, rot),
