@@ -9,7 +9,7 @@
 //! non-finite figure is refused with the key named.
 
 use crate::error::{Result, SimError};
-use crate::world::WorldConfig;
+use crate::world::{CameraNoise, ObjectErrors, WorldConfig};
 use std::path::Path;
 
 /// The shipped field model's file, relative to the checkout's root.
@@ -24,34 +24,9 @@ pub struct FieldModel {
     /// The gripper's release error.
     pub release: ReleaseError,
     /// The camera's error in the heightmap the methods see.
-    pub camera: CameraError,
+    pub camera: CameraNoise,
     /// The objects' error against their catalog entries, per episode.
-    pub object: ObjectError,
-}
-
-/// The camera's error of the field model ([`crate::world::CameraNoise`]).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct CameraError {
-    /// Standard deviation of a seen cell's depth (m).
-    pub depth_sd_m: f32,
-    /// The share of cells not seen, anywhere.
-    pub dropout: f32,
-    /// The share of cells at a step edge not seen.
-    pub edge_dropout: f32,
-}
-
-/// The objects' error of the field model ([`crate::world::ObjectErrors`]): relative standard
-/// deviations, each draw cut at two.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ObjectError {
-    /// Of the size (every axis alike).
-    pub size_sd: f32,
-    /// Of the mass.
-    pub mass_sd: f32,
-    /// Of the friction coefficient.
-    pub friction_sd: f32,
+    pub object: ObjectErrors,
 }
 
 /// The release error of the field model: standard deviations of each release off its decided

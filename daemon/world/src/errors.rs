@@ -81,8 +81,9 @@ pub fn offset_release(pose: Pose, [dx, dy, dyaw, dz]: [f32; 4]) -> Pose {
 /// noise on every seen cell, and cells it does not see (dropouts), anywhere and more often at
 /// step edges, where a real depth camera loses its readings. Unseen cells are filled as a camera
 /// adapter fills them ([`finish_camera_cells`], with the adapter's default floor threshold and
-/// fill radius).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+/// fill radius). Read as the field model file's `[camera]` section.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct CameraNoise {
     /// Standard deviation of a seen cell's depth error (m).
     pub depth_sd_m: f32,
@@ -178,8 +179,9 @@ impl Camera {
 
 /// The objects' errors (the field model's objects): each real object differs from its catalog
 /// entry by a size, mass and friction drawn per episode, each a normal relative error cut at two
-/// standard deviations.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+/// standard deviations. Read as the field model file's `[object]` section.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ObjectErrors {
     /// Relative standard deviation of the size (every axis alike).
     pub size_sd: f32,
