@@ -51,7 +51,7 @@ if [ -n "${DEMO_VIEW:-}" ]; then
     save) VIEW_ARGS=(--save "$OUT/job.rrd" --until-job-end) ;;
     *) echo "DEMO_VIEW=$DEMO_VIEW: expected web or save" >&2; exit 2 ;;
   esac
-  HERB_BIN_DIR="$BIN" "$PY" -m herb_client.view --prefix "$P" "${VIEW_ARGS[@]}" > "$OUT/view.log" 2>&1 &
+  HERB_BIN_DIR="$BIN" "$PY" -m herb_client.view --prefix "$P" "${HERBD_ARGS[@]}" "${VIEW_ARGS[@]}" > "$OUT/view.log" 2>&1 &
   VIEW=$!
   sleep 3
   grep -h "viewer:" "$OUT/view.log" || true

@@ -29,6 +29,9 @@ pub struct ReplayOptions {
     pub force: bool,
     /// Object index (0-based, in the packing order) to explain.
     pub explain: Option<u32>,
+    /// Keep the arm's joint states at most this often (ns of their stamps) in
+    /// [`Replayed::joint_states`]; `None` keeps none.
+    pub joint_states_every_ns: Option<u64>,
 }
 
 /// The decision made for the explained object, re-made on its recorded heightmap.
@@ -65,6 +68,11 @@ pub struct Replayed {
     pub decision_frames: Vec<(u32, Box<HeightmapFrame>)>,
     /// The explained object's decision, if asked for and reached.
     pub explained: Option<Explained>,
+    /// The arm's measured joint angles (stamp, `s0 .. w2` in rad), thinned as
+    /// [`ReplayOptions::joint_states_every_ns`] asks.
+    pub joint_states: Vec<(u64, [f64; herb_ipc::DOF])>,
+    /// The gripper's measured state each time it changed: (stamp, closed, holding).
+    pub gripper_states: Vec<(u64, bool, bool)>,
 }
 
 /// How a replay ended.
@@ -258,8 +266,26 @@ pub fn replay(log: &Log, opts: &ReplayOptions) -> Result<(Outcome, Replayed), Re
                 fx.digest = OutDigest::new();
                 fx.said.clear();
             }
-            Entry::Js(p, r, m) => job.joint_state(p, &m, now, r),
-            Entry::Gs(p, r, m) => job.gripper_state(p, &m, now, r),
+            Entry::Js(p, r, m) => {
+                if let Some(every) = opts.joint_states_every_ns {
+                    let due = out
+                        .joint_states
+                        .last()
+                        .is_none_or(|(t, _)| m.header.stamp_ns >= t.saturating_add(every));
+                    if due {
+                        out.joint_states.push((m.header.stamp_ns, m.position));
+                    }
+                }
+                job.joint_state(p, &m, now, r)
+            }
+            Entry::Gs(p, r, m) => {
+                let state = (m.closed != 0, m.holding != 0);
+                if out.gripper_states.last().map(|g| (g.1, g.2)) != Some(state) {
+                    out.gripper_states
+                        .push((m.header.stamp_ns, state.0, state.1));
+                }
+                job.gripper_state(p, &m, now, r)
+            }
             Entry::Arm(p, r, m) => job.arm_status(p, &m, now, r),
             Entry::Frame(meta) => {
                 let mut b = frame.as_bytes().to_vec();

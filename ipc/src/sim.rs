@@ -90,6 +90,11 @@ pub struct SimObject {
     pub lo: [f32; 3],
     /// Highest corner of its bounds (m).
     pub hi: [f32; 3],
+    /// Where its canonical origin ended (m): with `rotation`, the pose it settled at, to set
+    /// beside the pose it was decided at.
+    pub origin: [f32; 3],
+    /// Its orientation, a unit quaternion `[x, y, z, w]`.
+    pub rotation: [f32; 4],
 }
 
 impl SimObject {
@@ -119,6 +124,8 @@ impl SimOutcome {
             finite_all("placed.over_m", &[o.over_m, o.yaw_rad])?;
             finite_all("placed.lo", &o.lo)?;
             finite_all("placed.hi", &o.hi)?;
+            finite_all("placed.origin", &o.origin)?;
+            finite_all("placed.rotation", &o.rotation)?;
         }
         Ok(())
     }

@@ -223,7 +223,9 @@ fn layouts() -> Vec<Payload> {
         over_m: "m by which it crosses that bound (0 inside)",
         yaw_rad: "rad, heading of its canonical x axis about z",
         lo: "m, lowest corner of its bounds in the box frame",
-        hi: "m, highest corner of its bounds in the box frame");
+        hi: "m, highest corner of its bounds in the box frame",
+        origin: "m, where its canonical origin settled, in the box frame",
+        rotation: "its orientation in the box frame, unit quaternion x, y, z, w");
     layout!(s, CommandChecks,
         max_limit_excess_rad: "rad, largest joint-limit excess among received commands",
         received: "joint commands received",

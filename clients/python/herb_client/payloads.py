@@ -107,7 +107,7 @@ class SimReset(_Struct):
 
 class SimObject(_Struct):
     _fields_ = [("object_type", _u32), ("bound", _u32), ("over_m", _f32), ("yaw_rad", _f32),
-        ("lo", _f32 * 3), ("hi", _f32 * 3)]
+        ("lo", _f32 * 3), ("hi", _f32 * 3), ("origin", _f32 * 3), ("rotation", _f32 * 4)]
 
 
 class CommandChecks(_Struct):

@@ -1,14 +1,16 @@
 """The live view as a person uses it, against a real herbd and herb-loopback: the web viewer is
 opened in headless Chromium (Debian's package) while a job runs, and its screenshot must show
-the packed objects in the 3D panel; a recording (``--save``) of a job, live or made afterwards
-from herbd's run log (``herbd replay --events``), is read back and must hold every placed
-object.
+the packed objects, each in its own colour, and the arm in the 3D panel; a recording
+(``--save``) of a job, live or made afterwards from herbd's run log (``python -m
+herb_client.view RUN.log``), is read back and must hold every placed object, the arm moving
+through the job and, live, where each object landed against where it was decided.
 
 Needs ``rerun-sdk`` (the test command installs it) and, for the browser test, ``chromium``
 (``.ci/run`` installs it): without them the tests are skipped, except under ``CI=true``, where
 they fail.
 """
 
+import math
 import os
 import shutil
 import socket
@@ -21,6 +23,7 @@ import numpy as np
 import pytest
 
 from herb_client import Herb, StatusEvent, catalog_ids
+from herb_client import view as hv
 
 REPO = Path(__file__).resolve().parents[3]
 BIN = Path(os.environ.get("HERB_BIN_DIR", REPO / "target" / "debug"))
@@ -77,7 +80,7 @@ def cell(tmp_path_factory):
 def view(prefix: str, logs: Path, *args: str) -> subprocess.Popen:
     env = dict(os.environ, HERB_BIN_DIR=str(BIN))
     return subprocess.Popen(
-        [sys.executable, "-m", "herb_client.view", "--prefix", prefix, *args],
+        [sys.executable, "-m", "herb_client.view", "--prefix", prefix, "--config", str(logs / "herbd.toml"), *args],
         cwd=REPO,
         env=env,
         stdout=subprocess.PIPE,
@@ -92,9 +95,43 @@ def pack(herb: Herb, ids: list[str]) -> None:
     assert result.ok, [StatusEvent(s.event).name for s in result.statuses]
 
 
-def test_a_recording_holds_every_placed_object(cell, tmp_path):
-    pytest.importorskip("rerun") if not CI else __import__("rerun")
+def rows(rrd: Path) -> dict[str, int]:
+    """Rows logged per entity path (on a timeline) in a recording."""
     from rerun.chunk import RrdReader
+
+    reader = RrdReader(str(rrd))
+    assert len(reader.recordings()) == 1
+    out: dict[str, int] = {}
+    for chunk in reader.stream():
+        out.setdefault(chunk.entity_path, 0)
+        if not chunk.is_static:
+            out[chunk.entity_path] += chunk.num_rows
+    return out
+
+
+def test_the_view_composes_the_arm_as_herbd_and_refuses_a_model_it_would_not(monkeypatch):
+    if not (BIN / "herbd").is_file():
+        pytest.fail(f"{BIN / 'herbd'} is missing: build the workspace first (cargo test --workspace)")
+    monkeypatch.setenv("HERB_BIN_DIR", str(BIN))
+    model = hv.load_cell_model(None)
+    hv.check_cell_model(model)  # herbd's own forward kinematics, at its check configuration
+    end = hv.arm_frames(model, model["check"]["q"])[-1][:3, 3]
+    assert np.allclose(end, model["check"]["endpoint_in_box"], atol=1e-9)
+    bad = dict(model, joints=[dict(j) for j in model["joints"]])
+    bad["joints"][3] = dict(bad["joints"][3], origin=dict(bad["joints"][3]["origin"], translation=[0.0, 0.0, 0.3]))
+    with pytest.raises(SystemExit, match="does not read herbd's cell model right"):
+        hv.check_cell_model(bad)
+    with pytest.raises(SystemExit, match="format"):
+        hv.check_cell_model(dict(model, format=2))
+    # A cube's hull (12 triangles): its 12 edges, not the faces' diagonals.
+    v = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
+    faces = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1),
+             (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
+    assert hv.feature_edges(v, np.array(faces)).shape == (12, 2, 3)
+
+
+def test_a_recording_holds_every_placed_object_the_arm_and_the_landings(cell, tmp_path):
+    pytest.importorskip("rerun") if not CI else __import__("rerun")
 
     herb, prefix, logs = cell
     rrd = tmp_path / "job.rrd"
@@ -104,15 +141,16 @@ def test_a_recording_holds_every_placed_object(cell, tmp_path):
     out, _ = v.communicate(timeout=60)
     assert v.returncode == 0, (logs / "view.log").read_text()
     assert f"recording: {rrd}" in out
-    reader = RrdReader(str(rrd))
-    assert len(reader.recordings()) == 1
-    paths = {chunk.entity_path for chunk in reader.stream()}
+    paths = rows(rrd)
     for n in (1, 2, 3):
-        assert f"/cell/objects/{n}" in paths, sorted(paths)
-        assert f"/cell/objects/{n}/label" in paths
+        for p in ("", "/edges", "/label", "/decided", "/decided/edges"):
+            assert f"/cell/objects/{n}{p}" in paths, sorted(paths)
+        # Drawn at its decided pose, then where it landed.
+        assert paths[f"/cell/objects/{n}"] >= 2, paths
     for p in (
         "/cell/box",
         "/cell/pile",
+        "/cell/pick_station",
         "/cell/decision/candidates",
         "/job/events",
         "/arm/joints/s0",
@@ -120,16 +158,20 @@ def test_a_recording_holds_every_placed_object(cell, tmp_path):
     ):
         assert p in paths, sorted(paths)
     assert "/cell/objects/4" not in paths
+    # The arm, drawn through three picks and places at 20 Hz, its gripper closing and opening
+    # (twice per object at least), and a landing offset for each object.
+    assert paths.get("/cell/arm/links", 0) > 100, paths
+    assert paths.get("/cell/arm/gripper", 0) > 100 + 6, paths
+    assert paths.get("/job/landing_mm", 0) >= 3, paths
 
 
-def blue_pixels(png: Path) -> int:
-    """Pixels of the placed objects' blue in the 3D panel (the left 60 % of the window)."""
+def pixels_of(png: Path, rgb: tuple, tolerance: int = 60) -> int:
+    """Pixels near colour ``rgb`` in the 3D panel (the left 60 % of the window)."""
     from PIL import Image  # a dependency of rerun-sdk
 
-    rgb = np.asarray(Image.open(png).convert("RGB"), dtype=np.int16)
-    panel = rgb[:, : int(0.6 * rgb.shape[1])]
-    target = np.array([70, 130, 230])
-    return int((np.abs(panel - target).sum(axis=2) < 60).sum())
+    img = np.asarray(Image.open(png).convert("RGB"), dtype=np.int16)
+    panel = img[:, : int(0.6 * img.shape[1])]
+    return int((np.abs(panel - np.array(rgb)).sum(axis=2) < tolerance).sum())
 
 
 def test_the_live_view_in_a_browser_shows_the_packed_objects(cell, tmp_path):
@@ -149,18 +191,22 @@ def test_the_live_view_in_a_browser_shows_the_packed_objects(cell, tmp_path):
         try:
             page = Page(browser, url)
             pack(herb, ["003", "005"])
-            # The browser renders in software and catches up at its own pace: shots until the
-            # objects are drawn, or the deadline.
+            # The browser renders in software and catches up at its own pace: shots until both
+            # objects are drawn in their colours, and the arm in its red, or the deadline.
             shot = tmp_path / "view.png"
             deadline = time.monotonic() + 150
-            seen = 0
+            seen = {}
             while time.monotonic() < deadline:
                 time.sleep(5)
                 page.shoot(str(shot))
-                seen = blue_pixels(shot)
-                if seen > 2000:
+                seen = {
+                    "object 1": pixels_of(shot, hv.colour(0)),
+                    "object 2": pixels_of(shot, hv.colour(1)),
+                    "the arm": pixels_of(shot, hv.ARM),
+                }
+                if all(n > 300 for n in seen.values()):
                     break
-            assert seen > 2000, f"the 3D panel shows {seen} pixels of placed objects ({shot})"
+            assert all(n > 300 for n in seen.values()), f"pixels in the 3D panel: {seen} ({shot})"
         finally:
             browser.close()
     finally:
@@ -171,7 +217,6 @@ def test_the_live_view_in_a_browser_shows_the_packed_objects(cell, tmp_path):
 def test_a_finished_job_is_recorded_from_herbds_run_log(cell, tmp_path):
     if not CI:
         pytest.importorskip("rerun")
-    from rerun.chunk import RrdReader
 
     herb, prefix, logs = cell
     pack(herb, ["004", "002"])
@@ -190,16 +235,75 @@ def test_a_finished_job_is_recorded_from_herbds_run_log(cell, tmp_path):
         line for line in events.read_text().splitlines() if '"event":%d,' % StatusEvent.Placed in line
     ]
     assert len(placed) >= 2, r.stdout
+    lines = events.read_text().splitlines()
+    assert lines[0].startswith('{"cell":'), lines[0][:80]
+    assert sum('"joint_state"' in line for line in lines) > 50
+    assert any('"gripper"' in line for line in lines)
     rrd = tmp_path / "job.rrd"
     env = dict(os.environ, HERB_BIN_DIR=str(BIN))
+    # One command from the run log: the replay and the recording.
     v = subprocess.run(
-        [sys.executable, "-m", "herb_client.view", "--events", str(events), "--save", str(rrd)],
+        [sys.executable, "-m", "herb_client.view", str(log), "--save", str(rrd)],
         cwd=REPO,
         env=env,
         capture_output=True,
         text=True,
     )
     assert v.returncode == 0, v.stderr
-    paths = {chunk.entity_path for chunk in RrdReader(str(rrd)).stream()}
+    paths = rows(rrd)
     objects = {p for p in paths if p.startswith("/cell/objects/") and p.count("/") == 3}
     assert len(objects) >= 2 and "/cell/pile" in paths, sorted(paths)
+    # The arm as the run had it, moving (the run log's joint states at 20 Hz).
+    assert paths.get("/cell/arm/links", 0) > 50, paths
+    assert "/cell/pick_station" in paths, sorted(paths)
+
+
+def test_the_camera_sees_where_an_object_landed_against_its_decided_footprint():
+    """The camera's landing estimate, on heightmaps made here (a fixture: a 10 x 6 cm block
+    decided at the box's centre, seen landed 12 mm off in x and turned by 20 degrees)."""
+    from unittest import mock
+
+    from herb_client.payloads import HeightmapFrame, Status, StatusEvent as Ev
+
+    hx, hy = 0.05, 0.03
+    v = [[x, y, z] for x in (-hx, hx) for y in (-hy, hy) for z in (-0.02, 0.02)]
+    faces = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1),
+             (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
+    catalog = {
+        "box": {"half_x": 0.2, "half_y": 0.15, "height": 0.2, "wall": 0.005},
+        "objects": [{"id": "900", "name": "block", "vertices": v, "triangles": faces}],
+    }
+    view = hv.View(mock.MagicMock(), catalog)
+    nx, ny, cell = 80, 60, 0.005
+
+    def frame(landed):
+        f = HeightmapFrame()
+        f.nx, f.ny, f.cell_m = nx, ny, cell
+        z = np.zeros((ny, nx), dtype=np.float32)
+        if landed:
+            x = -0.5 * nx * cell + (np.arange(nx) + 0.5) * cell
+            y = 0.5 * ny * cell - (np.arange(ny) + 0.5) * cell
+            gx, gy = np.meshgrid(x, y)
+            c, s = math.cos(math.radians(20)), math.sin(math.radians(20))
+            u, w = c * (gx - 0.012) + s * gy, -s * (gx - 0.012) + c * gy
+            z[(np.abs(u) <= hx) & (np.abs(w) <= hy)] = 0.04
+        z[5, 5] = np.nan  # a dropout
+        np.ctypeslib.as_array(f.data)[: nx * ny] = z.ravel()
+        return f
+
+    def status(ev, index, pose=(0.0, 0.0, 0.02, 0.0)):
+        s = Status()
+        s.event, s.job_id, s.object_index, s.object_type, s.objects_total = ev, 7, index, 0, 2
+        s.pose[:] = pose
+        return s
+
+    view.status(status(Ev.Accepted, 0))
+    view.status(status(Ev.Decided, 0))
+    view.heightmap(frame(False))  # decided on the empty box
+    assert "camera" not in view.shown[0]
+    view.status(status(Ev.Decided, 1, (0.1, 0.0, 0.02, 0.0)))
+    view.heightmap(frame(True))  # the next decision's heightmap: the block landed
+    dxy, turn = view.shown[0]["camera"]
+    assert abs(dxy - 12.0) < 3.0, dxy
+    assert abs(turn - 20.0) < 3.0, turn
+    assert "off (camera)" in view.shown[0]["seen"]

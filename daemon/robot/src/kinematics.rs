@@ -168,6 +168,21 @@ impl Arm {
         self
     }
 
+    /// `left_torso_arm_mount`: `base` to the first joint's parent link.
+    pub fn mount(&self) -> &Isometry3<f64> {
+        &self.mount
+    }
+
+    /// Each joint's origin in its parent link (before its rotation about local z).
+    pub fn origins(&self) -> &[Isometry3<f64>; DOF] {
+        &self.origins
+    }
+
+    /// The last link to the gripper endpoint.
+    pub fn tool(&self) -> &Isometry3<f64> {
+        &self.tool
+    }
+
     /// The joints.
     pub fn joints(&self) -> &[JointSpec; DOF] {
         &self.specs

@@ -9,4 +9,5 @@
 pub mod calibrate;
 pub mod cell;
 pub mod kinematics;
+pub mod model;
 pub mod motion;

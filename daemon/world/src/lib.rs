@@ -82,6 +82,8 @@ pub struct ObjectReport {
     pub origin: [f32; 3],
     /// Heading of its canonical x axis about z (rad).
     pub yaw: f32,
+    /// Its orientation in B, a unit quaternion `[x, y, z, w]`.
+    pub rotation: [f32; 4],
     /// Lowest corner of its vertices' bounds in B (m).
     pub lo: [f32; 3],
     /// Highest corner of its vertices' bounds in B (m).
@@ -743,6 +745,7 @@ impl PackingWorld {
                     ty: p.ty,
                     origin: pose.translation.to_array(),
                     yaw: x.y.atan2(x.x),
+                    rotation: pose.rotation.to_array(),
                     lo: blo.to_array(),
                     hi: bhi.to_array(),
                     violation: crossed,

@@ -148,6 +148,8 @@ fn world_thread(
                 yaw_rad: r.yaw,
                 lo: r.lo,
                 hi: r.hi,
+                origin: r.origin,
+                rotation: r.rotation,
             };
         }
         let hm = w.heightmap();

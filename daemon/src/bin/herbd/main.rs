@@ -96,6 +96,11 @@ enum Tool {
         #[arg(long)]
         force: bool,
     },
+    /// Print the cell as viewers draw it, as one JSON document (`python -m herb_client.view`):
+    /// the arm's kinematic chain (herbd's own), the box and the pick station in the box frame,
+    /// from `--config` (or the defaults), and herbd's forward kinematics at one configuration
+    /// for a viewer to check its drawing against.
+    CellModel,
     /// Measure the box and pick-station poses for the `[cell]` table by touching them with the
     /// gripper (the arm moved by hand; the arm adapter must run, under the configuration's
     /// prefix): prints the lines to paste.
@@ -136,6 +141,13 @@ fn run_tool(cli: &Cli, tool: &Tool) -> ExitCode {
                 Err(e) => fail(e),
             }
         }
+        Tool::CellModel => match config(cli) {
+            Ok(c) => {
+                println!("{}", serde_json::json!(tools::cell_model(&c)));
+                ExitCode::SUCCESS
+            }
+            Err(e) => fail(e),
+        },
         Tool::CalibrateCell {
             corners,
             tip_offset,

@@ -4,6 +4,7 @@
 //! live here and not in the client (`herbctl`).
 
 use herb_core::{Catalog, GridSpec, Heightmap};
+use herb_daemon::config::Config;
 use herb_daemon::record::Log;
 use herb_daemon::replay::{self, Outcome, ReplayOptions, Replayed};
 use herb_ipc::{Fault, HeightmapFrame, Status, StatusEvent};
@@ -28,6 +29,7 @@ pub(crate) fn replay(
             boxed,
             force,
             explain: None,
+            joint_states_every_ns: events.map(|_| EVENTS_JOINT_PERIOD_NS),
         };
         let (o, r) = replay::replay(&log, &opts).map_err(|e| e.to_string())?;
         Ok((o, r, log))
@@ -43,7 +45,7 @@ pub(crate) fn replay(
                 log.header.herbd, log.header.segment, log.header.cpu
             );
             if let Some(p) = events {
-                match write_events(p, &r) {
+                match write_events(p, &log, &r) {
                     Ok(n) => println!("{n} events written to {}", p.display()),
                     Err(e) => {
                         eprintln!("herbd: error: {}: {e}", p.display());
@@ -74,50 +76,84 @@ pub(crate) fn replay(
     }
 }
 
-/// The replay's statuses (heartbeats left out) and decision heightmaps as JSON lines, in time
-/// order; the number of lines.
-fn write_events(path: &std::path::Path, r: &Replayed) -> std::io::Result<usize> {
+/// The arm's joint states in `herbd replay --events`: at most one per 50 ms (20 Hz), as the
+/// live view draws them.
+const EVENTS_JOINT_PERIOD_NS: u64 = 50_000_000;
+
+/// The cell as the run had it ([`herb_robot::model::CellModel`], from the run log's own
+/// configuration), for viewers.
+pub(crate) fn cell_model(cfg: &Config) -> herb_robot::model::CellModel {
+    herb_robot::model::CellModel::new(&cfg.cell, &herb_robot::kinematics::Arm::baxter_left())
+}
+
+/// What the replay saw, as JSON lines for a recording, in time order: first the cell (`cell`,
+/// from the run's configuration), then the statuses (heartbeats left out), the heightmap each
+/// decision was made on, the arm's joint states (20 Hz) and the gripper's changes. The number
+/// of lines.
+fn write_events(path: &std::path::Path, log: &Log, r: &Replayed) -> std::io::Result<usize> {
     use std::io::Write;
-    let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
-    let mut n = 0;
+    let cfg: Config = toml::from_str(&log.header.config_toml)
+        .map_err(|e| std::io::Error::other(format!("the recorded configuration: {e}")))?;
+    let mut lines: Vec<(u64, serde_json::Value)> = Vec::new();
     for (_, s) in &r.statuses {
-        let line = serde_json::json!({
-            "status": {
-                "stamp_ns": s.header.stamp_ns,
-                "job_id": s.job_id,
-                "event": s.event,
-                "state": s.state,
-                "fault": s.fault,
-                "objects_total": s.objects_total,
-                "objects_done": s.objects_done,
-                "object_index": s.object_index,
-                "object_type": s.object_type,
-                "decision_wait_ms": s.decision_wait_ms,
-                "pose": s.pose,
-                "decision_ns": s.decision_ns,
-            }
-        });
-        writeln!(w, "{line}")?;
-        n += 1;
+        lines.push((
+            s.header.stamp_ns,
+            serde_json::json!({
+                "status": {
+                    "stamp_ns": s.header.stamp_ns,
+                    "job_id": s.job_id,
+                    "event": s.event,
+                    "state": s.state,
+                    "fault": s.fault,
+                    "objects_total": s.objects_total,
+                    "objects_done": s.objects_done,
+                    "object_index": s.object_index,
+                    "object_type": s.object_type,
+                    "decision_wait_ms": s.decision_wait_ms,
+                    "pose": s.pose,
+                    "decision_ns": s.decision_ns,
+                }
+            }),
+        ));
         // The heightmap the object was decided on, at the time of its decision.
         if s.event == StatusEvent::Decided as u32
             && let Some((_, f)) = r.decision_frames.iter().find(|(i, _)| *i == s.object_index)
         {
-            let line = serde_json::json!({
-                "heightmap": {
-                    "stamp_ns": s.header.stamp_ns,
-                    "nx": f.nx,
-                    "ny": f.ny,
-                    "cell_m": f.cell_m,
-                    "cells": f.cells(),
-                }
-            });
-            writeln!(w, "{line}")?;
-            n += 1;
+            lines.push((
+                s.header.stamp_ns,
+                serde_json::json!({
+                    "heightmap": {
+                        "stamp_ns": s.header.stamp_ns,
+                        "nx": f.nx,
+                        "ny": f.ny,
+                        "cell_m": f.cell_m,
+                        "cells": f.cells(),
+                    }
+                }),
+            ));
         }
     }
+    for (t, q) in &r.joint_states {
+        lines.push((
+            *t,
+            serde_json::json!({"joint_state": {"stamp_ns": t, "position": q}}),
+        ));
+    }
+    for (t, closed, holding) in &r.gripper_states {
+        lines.push((
+            *t,
+            serde_json::json!({"gripper": {"stamp_ns": t, "closed": closed, "holding": holding}}),
+        ));
+    }
+    // Stable: a decision's heightmap stays after its status.
+    lines.sort_by_key(|(t, _)| *t);
+    let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
+    writeln!(w, "{}", serde_json::json!({ "cell": cell_model(&cfg) }))?;
+    for (_, l) in &lines {
+        writeln!(w, "{l}")?;
+    }
     w.flush()?;
-    Ok(n)
+    Ok(lines.len() + 1)
 }
 
 pub(crate) fn write_png(f: &HeightmapFrame, path: &std::path::Path) -> Result<(), String> {
@@ -147,6 +183,7 @@ pub(crate) fn explain(
         boxed,
         force,
         explain: Some(index),
+        joint_states_every_ns: None,
     };
     let (outcome, r) = replay::replay(&log, &opts).map_err(|e| e.to_string())?;
     let cfg: herb_daemon::config::Config =
