@@ -41,6 +41,7 @@ nothing is downloaded at run time); ``--save`` writes a recording anyone can ope
 from __future__ import annotations
 
 import argparse
+import colorsys
 import json
 import math
 import os
@@ -79,8 +80,8 @@ PILE_PERIOD_S = 0.5
 #: Log the arm's joints at most this often (s): the adapter publishes them at 1 kHz.
 JOINT_PERIOD_S = 0.05
 
-#: Object colours, by the object's number in the job (stable for the whole job): far apart in
-#: hue, none of them the box's grey or the outside red.
+#: The first objects' colours, by the object's number in the job (stable for the whole job):
+#: far apart in hue, none of them the box's grey or the outside red ([`colour`] goes on).
 PALETTE = (
     (31, 119, 180),
     (255, 127, 14),
@@ -125,8 +126,16 @@ DUE_FRAMES = 10
 
 
 def colour(index: int) -> tuple:
-    """The colour of object ``index`` (0-based) in a job."""
-    return PALETTE[index % len(PALETTE)]
+    """The colour of object ``index`` (0-based) in a job: the palette's, then hues a golden
+    angle apart at alternating strengths, so that no two objects of a job share one."""
+    if index < len(PALETTE):
+        return PALETTE[index]
+    k = index - len(PALETTE)
+    hue = (0.07 + 0.381966 * k) % 1.0
+    if hue < 0.04 or hue > 0.93:
+        hue = (hue + 0.12) % 1.0  # not the arm's or the outside red
+    r, g, b = colorsys.hsv_to_rgb(hue, 0.45 + 0.3 * (k % 2), 0.95 - 0.2 * (k % 3 == 2))
+    return (int(255 * r), int(255 * g), int(255 * b))
 
 
 def find_exe(name: str) -> str:

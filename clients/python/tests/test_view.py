@@ -128,6 +128,11 @@ def test_the_view_composes_the_arm_as_herbd_and_refuses_a_model_it_would_not(mon
     faces = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1),
              (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
     assert hv.feature_edges(v, np.array(faces)).shape == (12, 2, 3)
+    # Every object of the largest job in its own colour, none of them the arm's or outside red.
+    colours = [hv.colour(i) for i in range(64)]
+    assert len(set(colours)) == 64
+    for red in (hv.ARM, hv.OUTSIDE):
+        assert min(sum(abs(a - b) for a, b in zip(c, red)) for c in colours) > 60
 
 
 def test_a_recording_holds_every_placed_object_the_arm_and_the_landings(cell, tmp_path):
