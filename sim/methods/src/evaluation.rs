@@ -480,15 +480,25 @@ pub fn report(
 
 /// The note of a field model, for [`report`].
 pub fn field_note(m: &FieldModel, source: &str) -> String {
-    let r = m.release;
+    let (r, c, o) = (m.release, m.camera, m.object);
+    // Figures as the file gives them (f32 scaled to mm or % prints its rounding otherwise).
+    let g = |v: f32| format!("{}", (f64::from(v) * 1e3).round() / 1e3);
     format!(
         "world (every row): field model {} ({source}): each release off its decided pose by \
          normal noise, sd {} mm in x and y, {} deg in yaw, {} mm in height (never lower than \
-         touching)",
+         touching); the camera's depth noise sd {} mm, dropouts {} % of cells and {} % at \
+         step edges; each object's size, mass and friction off the catalog's by sd {} %, {} % \
+         and {} % per episode",
         m.name,
-        r.xy_sd_m * 1e3,
-        r.yaw_sd_deg,
-        r.height_sd_m * 1e3
+        g(r.xy_sd_m * 1e3),
+        g(r.yaw_sd_deg),
+        g(r.height_sd_m * 1e3),
+        g(c.depth_sd_m * 1e3),
+        g(c.dropout * 100.0),
+        g(c.edge_dropout * 100.0),
+        g(o.size_sd * 100.0),
+        g(o.mass_sd * 100.0),
+        g(o.friction_sd * 100.0)
     )
 }
 
