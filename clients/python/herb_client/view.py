@@ -790,49 +790,56 @@ def replay_events(view: View, path: str) -> int:
     and gripper states of a run log) to ``view``; the number of events."""
     n = 0
     with open(path) as f:
-        for line in f:
-            e = json.loads(line)
-            if "cell" in e:
-                check_cell_model(e["cell"])
-                view.cell = e["cell"]
-                view.static()
-            elif "status" in e:
-                d, s = e["status"], Status()
-                s.header.stamp_ns = d["stamp_ns"]
-                for k in (
-                    "job_id",
-                    "event",
-                    "state",
-                    "fault",
-                    "objects_total",
-                    "objects_done",
-                    "object_index",
-                    "object_type",
-                    "decision_wait_ms",
-                    "decision_ns",
-                ):
-                    setattr(s, k, d[k])
-                s.pose[:] = d["pose"]
-                view.status(s)
-            elif "heightmap" in e:
-                d, h = e["heightmap"], HeightmapFrame()
-                h.header.stamp_ns, h.nx, h.ny, h.cell_m = d["stamp_ns"], d["nx"], d["ny"], d["cell_m"]
-                cells = np.asarray(d["cells"], dtype=np.float32)
-                np.ctypeslib.as_array(h.data)[: cells.size] = cells
-                view.last_pile_s = -math.inf  # one heightmap per decision: each is drawn
-                view.heightmap(h)
-            elif "joint_state" in e:
-                d = e["joint_state"]
-                view.time(d["stamp_ns"])
-                view.joint_angles([float(v) for v in d["position"][:DOF]])
-            elif "gripper" in e:
-                d, g = e["gripper"], GripperState()
-                g.header.stamp_ns, g.closed, g.holding = d["stamp_ns"], int(d["closed"]), int(d["holding"])
-                view.gripper(g)
-            else:
-                raise SystemExit(f"{path}: an event of no known kind: {line[:80]!r}")
+        for lineno, line in enumerate(f, 1):
+            try:
+                replay_event(view, json.loads(line))
+            except (ValueError, KeyError, TypeError, AttributeError) as err:
+                raise SystemExit(f"{path}:{lineno}: not an event of herbd replay --events ({err!r})") from err
             n += 1
     return n
+
+
+def replay_event(view: View, e: dict) -> None:
+    """One line of ``herbd replay --events``, to ``view``."""
+    if "cell" in e:
+        check_cell_model(e["cell"])
+        view.cell = e["cell"]
+        view.static()
+    elif "status" in e:
+        d, s = e["status"], Status()
+        s.header.stamp_ns = d["stamp_ns"]
+        for k in (
+            "job_id",
+            "event",
+            "state",
+            "fault",
+            "objects_total",
+            "objects_done",
+            "object_index",
+            "object_type",
+            "decision_wait_ms",
+            "decision_ns",
+        ):
+            setattr(s, k, d[k])
+        s.pose[:] = d["pose"]
+        view.status(s)
+    elif "heightmap" in e:
+        d, h = e["heightmap"], HeightmapFrame()
+        h.header.stamp_ns, h.nx, h.ny, h.cell_m = d["stamp_ns"], d["nx"], d["ny"], d["cell_m"]
+        cells = np.asarray(d["cells"], dtype=np.float32)
+        np.ctypeslib.as_array(h.data)[: cells.size] = cells
+        view.last_pile_s = -math.inf  # one heightmap per decision: each is drawn
+        view.heightmap(h)
+    elif "joint_state" in e:
+        d = e["joint_state"]
+        view.time(d["stamp_ns"])
+        view.joint_angles([float(v) for v in d["position"][:DOF]])
+    elif "gripper" in e:
+        d, g = e["gripper"], GripperState()
+        g.header.stamp_ns, g.closed, g.holding = d["stamp_ns"], int(d["closed"]), int(d["holding"])
+        view.gripper(g)
+    else:
+        raise ValueError(f"an event of no known kind: {sorted(e)}")
 
 
 def replay_run_log(log: str, boxed: str | None, out: str) -> None:
@@ -905,6 +912,12 @@ def main(argv=None) -> int:
     offline = a.run_log or a.events
     # A finished job's cell is the run's own (the events' first line); a live one is herbd's.
     cell = None if offline else load_cell_model(a.config)
+    tmp = tempfile.TemporaryDirectory(prefix="herb-view-")
+    events = a.events
+    if a.run_log:
+        # Replayed before anything is written: a log herbd cannot read leaves no recording.
+        events = str(Path(tmp.name) / "events.jsonl")
+        replay_run_log(a.run_log, a.boxed, events)
     rr.init("herb", recording_id=f"herb-{a.prefix}-{int(time.time())}")
     if a.save:
         rr.save(a.save)
@@ -915,11 +928,7 @@ def main(argv=None) -> int:
     if offline:
         view = View(rr, catalog)
         rr.send_blueprint(view.blueprint())
-        with tempfile.TemporaryDirectory(prefix="herb-view-") as tmp:
-            events = a.events
-            if a.run_log:
-                events = str(Path(tmp) / "events.jsonl")
-                replay_run_log(a.run_log, a.boxed, events)
+        with tmp:
             n = replay_events(view, events)
         if view.cell is None:
             view.static()  # events of an older herbd: no arm

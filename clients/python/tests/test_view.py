@@ -312,3 +312,14 @@ def test_the_camera_sees_where_an_object_landed_against_its_decided_footprint():
     assert abs(dxy - 12.0) < 3.0, dxy
     assert abs(turn - 20.0) < 3.0, turn
     assert "off (camera)" in view.shown[0]["seen"]
+
+
+def test_a_bad_events_file_is_refused_naming_the_line(tmp_path):
+    from unittest import mock
+
+    view = hv.View(mock.MagicMock(), {"box": {}, "objects": []})
+    bad = tmp_path / "job.jsonl"
+    for second in ('{"status": {"stamp_ns": 1}}', "not json", '{"what": 1}'):
+        bad.write_text('{"joint_state": {"stamp_ns": 1, "position": [0, 0, 0, 0, 0, 0, 0]}}\n' + second + "\n")
+        with pytest.raises(SystemExit, match=r"job.jsonl:2: not an event of herbd replay --events"):
+            hv.replay_events(view, str(bad))
