@@ -42,12 +42,9 @@ from __future__ import annotations
 
 import argparse
 import colorsys
-import json
 import math
 import os
-import shutil
 import signal
-import subprocess
 import sys
 import tempfile
 import time
@@ -68,6 +65,26 @@ from .payloads import (
     SimOutcome,
     Status,
     StatusEvent,
+)
+from .view_geometry import (
+    arm_frames,
+    check_cell_model,
+    convex_polygon,
+    feature_edges,
+    inside_polygon,
+    quat_matrix,
+    rot_z,
+    spread,
+    wrap,
+    yaw_of,
+)
+from .view_inputs import (
+    drain,
+    load_catalog,
+    load_cell_model,
+    replay_events,
+    replay_run_log,
+    subscribe,
 )
 
 #: Baxter's left arm, in `JointState` order.
@@ -111,10 +128,6 @@ GHOST_ALPHA = 50
 FINGER_M = 0.045
 GRIP_OPEN_M = 0.09
 GRIP_CLOSED_M = 0.03
-#: The view's arm must compose to herbd's forward kinematics within this (m).
-ARM_CHECK_M = 1e-4
-#: Edges between hull faces turned by more than this are drawn (the rest are triangulation).
-EDGE_ANGLE_DEG = 12.0
 #: The camera's landing estimate: cells that rose by more than this between the heightmap an
 #: object was decided on and the next decision's (m), within this of the decided footprint (m),
 #: and at least this many of them.
@@ -136,180 +149,6 @@ def colour(index: int) -> tuple:
         hue = (hue + 0.12) % 1.0  # not the arm's or the outside red
     r, g, b = colorsys.hsv_to_rgb(hue, 0.45 + 0.3 * (k % 2), 0.95 - 0.2 * (k % 3 == 2))
     return (int(255 * r), int(255 * g), int(255 * b))
-
-
-def find_exe(name: str) -> str:
-    """``name`` (``herbctl``, ``herbd``): ``$HERB_BIN_DIR``, then ``PATH``, then this checkout's
-    ``target/release`` and ``target/debug``."""
-    repo = Path(__file__).resolve().parents[3]
-    candidates = []
-    if os.environ.get("HERB_BIN_DIR"):
-        candidates.append(Path(os.environ["HERB_BIN_DIR"]) / name)
-    found = shutil.which(name)
-    if found:
-        candidates.append(Path(found))
-    candidates += [repo / "target" / "release" / name, repo / "target" / "debug" / name]
-    for c in candidates:
-        if c.is_file() and os.access(c, os.X_OK):
-            return str(c)
-    package = "herb-daemon" if name == "herbd" else name
-    raise SystemExit(
-        f"{name} not found (set HERB_BIN_DIR, put it on PATH, or build it: cargo build -p {package})"
-    )
-
-
-def load_catalog(path: str | None, boxed: str | None) -> dict:
-    """The catalog document of ``herbctl catalog`` (from ``path``, or by running herbctl)."""
-    if path:
-        text = Path(path).read_text()
-    else:
-        cmd = [find_exe("herbctl")]
-        if boxed:
-            cmd += ["--boxed", boxed]
-        run = subprocess.run(cmd + ["catalog"], capture_output=True, text=True)
-        if run.returncode != 0:
-            raise SystemExit(f"{' '.join(cmd)} catalog failed: {run.stderr.strip()}")
-        text = run.stdout
-    doc = json.loads(text)
-    if doc.get("format") != 1:
-        raise SystemExit(f"catalog format {doc.get('format')!r}: this view reads format 1")
-    return doc
-
-
-def load_cell_model(config: str | None) -> dict:
-    """The arm and the cell as herbd plans with them (``herbd [--config FILE] cell-model``)."""
-    cmd = [find_exe("herbd")]
-    if config:
-        cmd += ["--config", config]
-    run = subprocess.run(cmd + ["cell-model"], capture_output=True, text=True)
-    if run.returncode != 0:
-        raise SystemExit(f"{' '.join(cmd)} cell-model failed: {run.stderr.strip()}")
-    return json.loads(run.stdout)
-
-
-# --- geometry (numpy; every frame is herbd's, only composed here) -----------------------------
-
-
-def quat_matrix(q) -> np.ndarray:
-    """The rotation matrix of a unit quaternion ``[x, y, z, w]``."""
-    x, y, z, w = (float(v) for v in q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def frame(f: dict) -> np.ndarray:
-    """The 4x4 matrix of a cell-model frame (``translation``, ``quaternion_xyzw``)."""
-    m = np.eye(4)
-    m[:3, :3] = quat_matrix(f["quaternion_xyzw"])
-    m[:3, 3] = f["translation"]
-    return m
-
-
-def rot_z(a: float) -> np.ndarray:
-    """A rotation by ``a`` (rad) about z, 4x4."""
-    m = np.eye(4)
-    c, s = math.cos(a), math.sin(a)
-    m[:2, :2] = [[c, -s], [s, c]]
-    return m
-
-
-def arm_frames(model: dict, q) -> list[np.ndarray]:
-    """The arm's frames in B for joint angles ``q``: ``base``, the mount, each joint after its
-    rotation (seven), the gripper endpoint. The composition ``base_in_box * mount * Π (origin_i
-    * Rz(q_i)) * tool`` of ``herbd cell-model``."""
-    t = frame(model["base_in_box"])
-    out = [t]
-    t = t @ frame(model["mount"])
-    out.append(t)
-    for j, a in zip(model["joints"], q):
-        t = t @ frame(j["origin"]) @ rot_z(float(a))
-        out.append(t)
-    out.append(t @ frame(model["tool"]))
-    return out
-
-
-def check_cell_model(model: dict) -> None:
-    """Refuses a model of another format, or one this view would compose differently from
-    herbd's forward kinematics (its ``check``)."""
-    if model.get("format") != 1:
-        raise SystemExit(f"cell model format {model.get('format')!r}: this view reads format 1")
-    got = arm_frames(model, model["check"]["q"])[-1][:3, 3]
-    want = np.asarray(model["check"]["endpoint_in_box"])
-    if not np.linalg.norm(got - want) <= ARM_CHECK_M:
-        raise SystemExit(
-            f"the arm composed here ends at {got.round(4).tolist()}, herbd's kinematics at "
-            f"{want.round(4).tolist()}: this view does not read herbd's cell model right"
-        )
-
-
-def feature_edges(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """The hull's edges between faces turned by more than ``EDGE_ANGLE_DEG``, as segments
-    ``(n, 2, 3)`` in the object's frame (the diagonals of flat faces left out)."""
-    v, t = vertices, triangles
-    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-    faces: dict[tuple[int, int], list[int]] = {}
-    for f, tri in enumerate(t.tolist()):
-        for a, b in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
-            faces.setdefault((min(a, b), max(a, b)), []).append(f)
-    cos = math.cos(math.radians(EDGE_ANGLE_DEG))
-    keep = [
-        e for e, fs in faces.items() if len(fs) != 2 or float(n[fs[0]] @ n[fs[1]]) < cos
-    ]
-    return v[np.asarray(keep, dtype=np.int64).reshape(-1, 2)]
-
-
-def convex_polygon(points: np.ndarray) -> np.ndarray:
-    """The convex hull of 2D points, counter-clockwise (monotone chain)."""
-    pts = sorted(set(map(tuple, np.round(points, 6).tolist())))
-    if len(pts) < 3:
-        return np.asarray(pts, dtype=np.float64)
-
-    def half(seq):
-        out: list = []
-        for p in seq:
-            while len(out) >= 2 and (out[-1][0] - out[-2][0]) * (p[1] - out[-2][1]) - (
-                out[-1][1] - out[-2][1]
-            ) * (p[0] - out[-2][0]) <= 0:
-                out.pop()
-            out.append(p)
-        return out
-
-    lower, upper = half(pts), half(reversed(pts))
-    return np.asarray(lower[:-1] + upper[:-1], dtype=np.float64)
-
-
-def inside_polygon(poly: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Which points (x, y) are inside a counter-clockwise convex polygon."""
-    ok = np.ones(np.shape(x), dtype=bool)
-    for (ax, ay), (bx, by) in zip(poly, np.roll(poly, -1, axis=0)):
-        ok &= (bx - ax) * (y - ay) - (by - ay) * (x - ax) >= 0
-    return ok
-
-
-def spread(x: np.ndarray, y: np.ndarray) -> tuple:
-    """Centroid and long axis (rad, modulo a half turn) of a set of cells; the axis is None when
-    the cells are nearly round (their two spreads within 20 %)."""
-    cx, cy = float(x.mean()), float(y.mean())
-    cov = np.cov(np.stack([x - cx, y - cy])) if x.size > 2 else np.zeros((2, 2))
-    w, v = np.linalg.eigh(cov)
-    axis = math.atan2(v[1, 1], v[0, 1]) if w[1] > 1.2 * max(w[0], 1e-12) else None
-    return cx, cy, axis
-
-
-def yaw_of(r: np.ndarray) -> float:
-    """The heading of a rotation's x axis about z (rad)."""
-    return math.atan2(r[1, 0], r[0, 0])
-
-
-def wrap(a: float) -> float:
-    """``a`` (rad) in (-pi, pi]."""
-    return math.atan2(math.sin(a), math.cos(a))
 
 
 class View:
@@ -783,98 +622,6 @@ class View:
             if s.get("landed_at") != now:
                 s["landed_at"] = now
                 self.landed(i, p)
-
-
-def replay_events(view: View, path: str) -> int:
-    """Feeds ``herbd replay --events`` JSON lines (the cell, statuses, decision heightmaps, joint
-    and gripper states of a run log) to ``view``; the number of events."""
-    n = 0
-    with open(path) as f:
-        for lineno, line in enumerate(f, 1):
-            try:
-                replay_event(view, json.loads(line))
-            except (ValueError, KeyError, TypeError, AttributeError) as err:
-                raise SystemExit(f"{path}:{lineno}: not an event of herbd replay --events ({err!r})") from err
-            n += 1
-    return n
-
-
-def replay_event(view: View, e: dict) -> None:
-    """One line of ``herbd replay --events``, to ``view``."""
-    if "cell" in e:
-        check_cell_model(e["cell"])
-        view.cell = e["cell"]
-        view.static()
-    elif "status" in e:
-        d, s = e["status"], Status()
-        s.header.stamp_ns = d["stamp_ns"]
-        for k in (
-            "job_id",
-            "event",
-            "state",
-            "fault",
-            "objects_total",
-            "objects_done",
-            "object_index",
-            "object_type",
-            "decision_wait_ms",
-            "decision_ns",
-        ):
-            setattr(s, k, d[k])
-        s.pose[:] = d["pose"]
-        view.status(s)
-    elif "heightmap" in e:
-        d, h = e["heightmap"], HeightmapFrame()
-        h.header.stamp_ns, h.nx, h.ny, h.cell_m = d["stamp_ns"], d["nx"], d["ny"], d["cell_m"]
-        cells = np.asarray(d["cells"], dtype=np.float32)
-        np.ctypeslib.as_array(h.data)[: cells.size] = cells
-        view.last_pile_s = -math.inf  # one heightmap per decision: each is drawn
-        view.heightmap(h)
-    elif "joint_state" in e:
-        d = e["joint_state"]
-        view.time(d["stamp_ns"])
-        view.joint_angles([float(v) for v in d["position"][:DOF]])
-    elif "gripper" in e:
-        d, g = e["gripper"], GripperState()
-        g.header.stamp_ns, g.closed, g.holding = d["stamp_ns"], int(d["closed"]), int(d["holding"])
-        view.gripper(g)
-    else:
-        raise ValueError(f"an event of no known kind: {sorted(e)}")
-
-
-def replay_run_log(log: str, boxed: str | None, out: str) -> None:
-    """``herbd replay LOG --events OUT``: a run log's events for a recording. A log that ends
-    early or diverges still gives what was replayed before, with a warning."""
-    cmd = [find_exe("herbd")]
-    if boxed:
-        cmd += ["--boxed", boxed]
-    run = subprocess.run(cmd + ["replay", log, "--events", out], capture_output=True, text=True)
-    if run.returncode not in (0, 1, 3) or not Path(out).is_file():
-        raise SystemExit(f"{' '.join(cmd)} replay {log} failed: {(run.stderr or run.stdout).strip()}")
-    if run.returncode != 0:
-        last = run.stdout.strip().splitlines()
-        print(f"warning: herbd replay: {' '.join(last[-2:])}", file=sys.stderr, flush=True)
-
-
-def subscribe(node, prefix: str, leaf: str, payload, timeout_s: float):
-    """A subscriber of ``<prefix>/<leaf>``, retried until the service exists."""
-    deadline = time.monotonic() + timeout_s
-    name = iox2.ServiceName.new(f"{prefix}/{leaf}")
-    while True:
-        try:
-            svc = node.service_builder(name).publish_subscribe(payload).open()
-            return svc.subscriber_builder().create()
-        except Exception as e:  # iceoryx2 raises one class per error kind
-            if time.monotonic() > deadline:
-                raise SystemExit(f"cannot open {prefix}/{leaf}: {e!r} (is the cell running?)") from e
-            time.sleep(0.05)
-
-
-def drain(sub, payload):
-    """Every sample that arrived, copied."""
-    while (sample := sub.receive()) is not None:
-        yield payload.from_buffer_copy(sample.payload().contents)
-        sample.delete()
 
 
 def main(argv=None) -> int:
