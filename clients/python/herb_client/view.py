@@ -68,6 +68,7 @@ from .payloads import (
 )
 from .view_geometry import (
     arm_frames,
+    cell_centres,
     check_cell_model,
     convex_polygon,
     feature_edges,
@@ -136,6 +137,11 @@ NEAR_M = 0.05
 MIN_CELLS = 6
 #: ... waiting at most this many heightmaps for the last object to settle.
 DUE_FRAMES = 10
+
+
+def edge_colour(index: int, outside: bool = False) -> tuple:
+    """The colour of object ``index``'s edges: its own, darker; red when it ended outside."""
+    return OUTSIDE if outside else tuple(int(0.55 * v) for v in colour(index))
 
 
 def colour(index: int) -> tuple:
@@ -291,10 +297,8 @@ class View:
         rows, cols = np.mgrid[0:ny:PILE_STRIDE, 0:nx:PILE_STRIDE]
         z = cells[rows, cols]
         keep = np.isfinite(z) & (z > PILE_MIN_M)
-        # Row 0 is the box's +y edge, column 0 its -x edge (herb_core::heightmap::GridSpec).
-        x = -0.5 * nx * cell + (cols[keep] + 0.5) * cell
-        y = 0.5 * ny * cell - (rows[keep] + 0.5) * cell
-        pts = np.stack([x, y, z[keep]], axis=1)
+        xs, ys = cell_centres(nx, ny, cell)
+        pts = np.stack([xs[cols[keep]], ys[rows[keep]], z[keep]], axis=1)
         self.time(f.header.stamp_ns)
         self.rr.log(
             "cell/pile",
@@ -413,7 +417,7 @@ class View:
         c = colour(index)
         top = self.hull(f"cell/objects/{index + 1}/decided", o["type"], r, (x, y, z), (*c, GHOST_ALPHA), c, 0.0012)
         if "landed" not in o:
-            edges = OUTSIDE if o.get("outside") else tuple(int(0.55 * v) for v in c)
+            edges = edge_colour(index, o.get("outside", False))
             top = self.hull(f"cell/objects/{index + 1}", o["type"], r, (x, y, z), (*c, 255), edges, 0.0015)
         o["at"], o["top"] = (x, y), top
 
@@ -429,10 +433,8 @@ class View:
         dyaw = math.degrees(wrap(yaw_of(r) - yaw))
         tilt = math.degrees(math.acos(max(-1.0, min(1.0, r[2, 2]))))
         o["outside"] = placed.bound != 0
-        c = colour(index)
-        edges = OUTSIDE if o["outside"] else tuple(int(0.55 * v) for v in c)
-        radius = 0.003 if o["outside"] else 0.0015
-        o["top"] = self.hull(f"cell/objects/{index + 1}", o["type"], r, p, (*c, 255), edges, radius)
+        edges, radius = edge_colour(index, o["outside"]), 0.003 if o["outside"] else 0.0015
+        o["top"] = self.hull(f"cell/objects/{index + 1}", o["type"], r, p, (*colour(index), 255), edges, radius)
         o["at"] = (float(p[0]), float(p[1]))
         first = "landed" not in o
         o["landed"] = f"{dxy:.1f} mm {dyaw:+.1f} deg off"
@@ -468,9 +470,7 @@ class View:
             return True
         if o["before"].shape != cells.shape or "camera" in o:
             return True
-        x = -0.5 * nx * cell + (np.arange(nx) + 0.5) * cell
-        y = 0.5 * ny * cell - (np.arange(ny) + 0.5) * cell
-        gx, gy = np.meshgrid(x, y)
+        gx, gy = np.meshgrid(*cell_centres(nx, ny, cell))
         v, _, _ = self.shape(o["type"])
         px, py, _, yaw = o["pose"]
         poly = convex_polygon(v[:, :2] @ rot_z(yaw)[:2, :2].T + [px, py])
@@ -504,10 +504,9 @@ class View:
             if turn is not None:
                 self.rr.log("job/landing_deg", self.rr.Scalars(abs(turn)))
             r = rot_z(yaw + math.radians(turn or 0.0))[:3, :3]
-            c = colour(index)
             at = (px + sx - dx, py + sy - dy, o["pose"][2])
             o["top"] = self.hull(
-                f"cell/objects/{index + 1}", o["type"], r, at, (*c, 255), tuple(int(0.55 * v) for v in c), 0.0015
+                f"cell/objects/{index + 1}", o["type"], r, at, (*colour(index), 255), edge_colour(index), 0.0015
             )
             o["at"] = at[:2]
             o["seen"] = f"{dxy:.1f} mm" + ("" if turn is None else f" {turn:+.1f} deg") + " off (camera)"

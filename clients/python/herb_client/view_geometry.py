@@ -127,6 +127,14 @@ def spread(x: np.ndarray, y: np.ndarray) -> tuple:
     return cx, cy, axis
 
 
+def cell_centres(nx: int, ny: int, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """The x and y (m, in B) of a heightmap's cell centres, columns and rows: row 0 is the box's
+    +y edge, column 0 its -x edge (``herb_core::heightmap::GridSpec``)."""
+    x = -0.5 * nx * cell + (np.arange(nx) + 0.5) * cell
+    y = 0.5 * ny * cell - (np.arange(ny) + 0.5) * cell
+    return x, y
+
+
 def yaw_of(r: np.ndarray) -> float:
     """The heading of a rotation's x axis about z (rad)."""
     return math.atan2(r[1, 0], r[0, 0])
