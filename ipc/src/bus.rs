@@ -192,15 +192,25 @@ impl std::fmt::Debug for Bus {
     }
 }
 
+/// How long opening a service waits for another process that is creating or removing it at
+/// the same moment (iceoryx2's default is 1 s). On a loaded machine, herbd restarting while a
+/// client's last port on a service goes away took longer than 1 s in CI and herbd refused to
+/// start (`HangsInCreation`); a cell whose processes all start at boot is as loaded.
+pub const CREATION_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
+
 impl Bus {
     /// Opens a node named `name` for the services under `services`, first removing what dead
     /// processes left behind. iceoryx2 does not take over SIGINT/SIGTERM (the processes handle
-    /// them), and logs only errors.
+    /// them), and logs only errors. A service another process is creating or removing at the
+    /// same moment is waited for up to [`CREATION_TIMEOUT`].
     pub fn open(name: &str, services: &Services) -> Result<Self, BusError> {
         set_log_level(LogLevel::Error);
         let node_name: NodeName = name.try_into().map_err(|e| err(name, e))?;
+        let mut config = Config::global_config().clone();
+        config.global.creation_timeout = config.global.creation_timeout.max(CREATION_TIMEOUT);
         let node = NodeBuilder::new()
             .name(&node_name)
+            .config(&config)
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
             .map_err(|e| err("node", e))?;
@@ -339,5 +349,20 @@ impl Bus {
             .client_builder()
             .create()
             .map_err(|e| err(&name, e))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every node HERB opens waits [`CREATION_TIMEOUT`] for a service in creation or removal,
+    /// not iceoryx2's default second.
+    #[test]
+    fn a_bus_waits_longer_than_iceoryx2s_default_for_a_service_in_flux() {
+        let services = Services::new(&format!("bustest{}", std::process::id())).unwrap();
+        let bus = Bus::open("bus-test", &services).unwrap();
+        assert_eq!(bus.node.config().global.creation_timeout, CREATION_TIMEOUT);
+        assert!(CREATION_TIMEOUT > Config::default().global.creation_timeout);
     }
 }
