@@ -23,6 +23,9 @@ use herb_search::{PackingWorld, WorldConfig};
 use std::sync::Arc;
 use std::time::Instant;
 
+/// One state's decision: rollouts finished, and whether the budget ended it.
+type PerState = (usize, bool);
+
 /// Sessions whose states are timed.
 const SESSIONS: usize = 12;
 
@@ -77,19 +80,25 @@ fn main() {
         states.iter().map(|s| s.1.len()).min().unwrap_or(0),
         states.iter().map(|s| s.1.len()).max().unwrap_or(0)
     );
-    let mut per_thread = Vec::new();
-    for (label, budget_s, allowed, k, threads) in [
-        ("8 rollouts of 8 candidates", 30.0, Some(8), 8, 1),
-        ("herbd's default budget, 1.0 s", 1.0, None, 8, 1),
-        ("16 rollouts of 16 candidates", 30.0, Some(16), 16, 1),
-        ("16 rollouts of 16 candidates", 30.0, Some(16), 16, 2),
-        ("1.0 s, k = 64", 1.0, None, 64, 1),
-        ("1.0 s, k = 64", 1.0, None, 64, 2),
+    // The k = 64 cases' per-state results (rollouts finished, ended by the budget), one run per
+    // thread count, by robust samples (0: plain).
+    let mut per_thread: Vec<(usize, Vec<Vec<PerState>>)> = Vec::new();
+    for (label, budget_s, allowed, k, threads, samples) in [
+        ("8 rollouts of 8 candidates", 30.0, Some(8), 8, 1, 0),
+        ("herbd's default budget, 1.0 s", 1.0, None, 8, 1, 0),
+        ("16 rollouts of 16 candidates", 30.0, Some(16), 16, 1, 0),
+        ("16 rollouts of 16 candidates", 30.0, Some(16), 16, 2, 0),
+        ("1.0 s, k = 64", 1.0, None, 64, 1, 0),
+        ("1.0 s, k = 64", 1.0, None, 64, 2, 0),
+        ("robust, 4 samples, 1.0 s, k = 8", 1.0, None, 8, 1, 4),
+        ("robust, 4 samples, 1.0 s, k = 64", 1.0, None, 64, 1, 4),
+        ("robust, 4 samples, 1.0 s, k = 64", 1.0, None, 64, 2, 4),
     ] {
         cfg.decision.budget_s = budget_s;
         cfg.decision.timeout_s = budget_s + 10.0;
         cfg.decision.k = k;
         cfg.decision.threads = threads;
+        cfg.decision.samples = samples;
         let mut core = DecisionCore::new(&cfg, catalog.clone()).expect("decision core");
         let mut h = Histogram::<u64>::new_with_bounds(1, 60_000_000_000, 3).expect("histogram");
         let (mut rollouts, mut feasible, mut bound, mut cut) = (0u64, 0u64, 0u64, 0u64);
@@ -133,17 +142,21 @@ fn main() {
             feasible as f64 / h.len().max(1) as f64,
         );
         if k == 64 {
-            per_thread.push(each);
+            match per_thread.iter_mut().find(|p| p.0 == samples) {
+                Some(p) => p.1.push(each),
+                None => per_thread.push((samples, vec![each])),
+            }
         }
     }
-    if let [one, two] = &per_thread[..] {
-        let sum = |v: &[(usize, bool)]| v.iter().map(|e| e.0).sum::<usize>() as f64;
+    for (samples, runs) in &per_thread {
+        let [one, two] = &runs[..] else { continue };
+        let sum = |v: &[PerState]| v.iter().map(|e| e.0).sum::<usize>() as f64;
         // Where the budget ended the decision on both thread counts: what it bought, not
         // what the candidates allowed.
         let both: Vec<_> = one.iter().zip(two).filter(|(a, b)| a.1 && b.1).collect();
         let (a, b): (Vec<_>, Vec<_>) = both.iter().map(|(a, b)| (**a, **b)).unzip();
         println!(
-            "search, 1.0 s, k = 64: two threads finish {:.2} x the rollouts of one over every decision, {:.2} x over the {} the budget ended on both",
+            "search, 1.0 s, k = 64, {samples} samples: two threads finish {:.2} x the rollouts of one over every decision, {:.2} x over the {} the budget ended on both",
             sum(two) / sum(one).max(f64::MIN_POSITIVE),
             sum(&b) / sum(&a).max(f64::MIN_POSITIVE),
             both.len()

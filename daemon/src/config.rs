@@ -190,6 +190,16 @@ pub struct DecisionConfig {
     /// leave, at least one, [`DecisionConfig::search_threads`]). A searched run replays bit
     /// for bit whatever the count.
     pub threads: usize,
+    /// The robust search (0 to 64; 0: off): each candidate rolled out this many times, every
+    /// object of each rollout released off its placement by the release error below (the same
+    /// draws for every candidate), ranked by the mean return.
+    pub samples: usize,
+    /// The release error the robust search assumes: standard deviation of x and of y (mm, 0
+    /// to 50). Measure your cell's: release an object at known poses and read where it lands.
+    pub release_error_mm: f64,
+    /// The release error the robust search assumes: standard deviation of the yaw (degrees,
+    /// 0 to 45).
+    pub release_error_deg: f64,
     /// A decision not back this long after it was asked for (s) faults the job (`Decision`):
     /// a hung worker never holds the arm.
     pub timeout_s: f64,
@@ -204,6 +214,9 @@ impl Default for DecisionConfig {
             horizon: 0,
             twin: DecisionTwin::Job,
             threads: 0,
+            samples: 0,
+            release_error_mm: 5.0,
+            release_error_deg: 3.0,
             timeout_s: 10.0,
         }
     }
@@ -443,6 +456,23 @@ impl ConfigFile for Config {
         if d.threads > 64 {
             return Err(format!("decision.threads {} outside 0..=64", d.threads).into());
         }
+        if d.samples > 64 {
+            return Err(format!("decision.samples {} outside 0..=64", d.samples).into());
+        }
+        if !(d.release_error_mm.is_finite() && (0.0..=50.0).contains(&d.release_error_mm)) {
+            return Err(format!(
+                "decision.release_error_mm {} outside 0..=50",
+                d.release_error_mm
+            )
+            .into());
+        }
+        if !(d.release_error_deg.is_finite() && (0.0..=45.0).contains(&d.release_error_deg)) {
+            return Err(format!(
+                "decision.release_error_deg {} outside 0..=45",
+                d.release_error_deg
+            )
+            .into());
+        }
         if d.horizon > herb_ipc::MAX_JOB_OBJECTS {
             return Err(format!(
                 "decision.horizon {} above the {} objects of a job",
@@ -553,6 +583,15 @@ mod tests {
             ("[decision]\nk = 0\n", "decision.k"),
             ("[decision]\nk = 65\n", "decision.k"),
             ("[decision]\nthreads = 65\n", "decision.threads"),
+            ("[decision]\nsamples = 65\n", "decision.samples"),
+            (
+                "[decision]\nrelease_error_mm = -1.0\n",
+                "decision.release_error_mm",
+            ),
+            (
+                "[decision]\nrelease_error_deg = nan\n",
+                "decision.release_error_deg",
+            ),
             ("[decision]\ntwin = \"exact\"\n", "twin"),
             (
                 "[recovery]\noutside_limits = \"ignore\"\n",

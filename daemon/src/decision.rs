@@ -28,7 +28,10 @@ use herb_ipc::{
     CandidateReport, DecisionReport, Fault, Header, HeightmapFrame, MAX_REPORTED_CANDIDATES,
     Services,
 };
-use herb_search::{Budget, Search, SearchReport, SearchSettings, TwinKind, WorldConfig};
+use herb_search::{
+    Budget, ReleaseNoise, RobustRollouts, Search, SearchReport, SearchSettings, TwinKind,
+    WorldConfig,
+};
 use iceoryx2::prelude::ipc;
 use iceoryx2::sample::Sample;
 use std::sync::Arc;
@@ -90,6 +93,14 @@ impl DecisionCore {
                         DecisionTwin::Job => TwinKind::Job,
                     },
                     threads: d.search_threads(),
+                    robust: (d.samples > 0).then(|| RobustRollouts {
+                        noise: ReleaseNoise {
+                            sigma_m: (d.release_error_mm * 1e-3) as f32,
+                            sigma_deg: d.release_error_deg as f32,
+                            ..ReleaseNoise::default()
+                        },
+                        samples: d.samples,
+                    }),
                     ..SearchSettings::default()
                 };
                 // The twins release where the arm does: the same clearance.

@@ -327,10 +327,16 @@ fn bench_rollout_worlds_with(
     suffix: &str,
     cfg: &WorldConfig,
 ) -> Vec<f64> {
+    // The first halves packed as the evaluation's world packs them (never frozen); a rollout
+    // under `freeze_settled` freezes its clone.
+    let unfrozen = WorldConfig {
+        freeze_settled: false,
+        ..cfg.clone()
+    };
     let mut starts = Vec::new();
     for ep in s.episodes.iter().take(BENCH_EPISODES) {
         let half = ep.len() / 2;
-        let mut w = PackingWorld::new(s.catalog.clone(), cfg.clone()).expect("world");
+        let mut w = PackingWorld::new(s.catalog.clone(), unfrozen.clone()).expect("world");
         if ep[..half]
             .iter()
             .all(|&(t, x, y, th)| w.place(t, x, y, th).expect("place").inside)
@@ -354,7 +360,13 @@ fn bench_rollout_worlds_with(
                     let (start, rest) = &starts[k % starts.len()];
                     k += 1;
                     let mut w = match kind {
-                        "exact" => start.clone(),
+                        "exact" => {
+                            let mut w = start.clone();
+                            if cfg.freeze_settled {
+                                w.freeze_settled();
+                            }
+                            w
+                        }
                         _ => PackingWorld::twin(s.catalog.clone(), cfg.clone(), start.heightmap())
                             .expect("twin"),
                     };
@@ -384,7 +396,9 @@ fn bench_rollout_worlds_with(
             &h,
         );
         if h.is_empty() {
-            return rates;
+            // Filtered out: no rate (the ratios below print NaN).
+            rates.push(f64::NAN);
+            continue;
         }
         let rate = 1e9 / h.mean();
         eprintln!(

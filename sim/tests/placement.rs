@@ -417,3 +417,36 @@ fn the_settle_rules_end_sooner_with_the_same_outcome() {
     assert!(!oa.inside && !ob.inside, "{oa:?} {ob:?}");
     assert!(ob.settle_steps < oa.settle_steps, "{ob:?} against {oa:?}");
 }
+
+/// The search's rollouts' rigid pile (`freeze_settled`): an object released half over a can
+/// settles on it (it comes to rest, tilted), and the can does not move by a bit; every object is
+/// fixed after its settle. The world's own default leaves the pile live.
+#[test]
+fn a_rigid_pile_holds_still_under_an_object_released_on_it() {
+    let c = common::primitives();
+    let mut w = common::world(&c);
+    assert!(!w.config().freeze_settled);
+    let tuna = c.by_id("007").unwrap();
+    let cracker = c.by_id("004").unwrap();
+    assert!(w.place(tuna, 0.0, 0.0, 0.0).unwrap().inside);
+    let live = w.clone();
+    w.freeze_settled();
+    let can = w.pose_of(&w.placed()[0]);
+    let o = w.place(cracker, 0.06, 0.0, 0.0).unwrap();
+    assert!(o.settled, "{o:?}");
+    assert_eq!(w.pose_of(&w.placed()[0]), can, "the rigid can moved");
+    for p in w.placed() {
+        assert!(w.physics().bodies[p.body].is_fixed());
+    }
+    // The same release on the live pile leaves the objects dynamic.
+    let mut live = live;
+    live.place(cracker, 0.06, 0.0, 0.0).unwrap();
+    // It rests on the can, tilted (24 degrees), which the live pile's release pushed.
+    assert!(o.tilt_rad.to_degrees() > 10.0, "{o:?}");
+    assert_ne!(live.pose_of(&live.placed()[0]), can);
+    assert!(
+        live.placed()
+            .iter()
+            .all(|p| live.physics().bodies[p.body].is_dynamic())
+    );
+}

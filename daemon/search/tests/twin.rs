@@ -78,6 +78,7 @@ fn the_search_is_anytime_and_never_worse_than_its_prior_on_its_own_rollouts() {
         reward: RewardMode::cs(0.6).unwrap(),
         twin: TwinKind::Heightmap,
         robust: None,
+        rigid_pile: true,
         threads: 1,
     };
     let mut s = Search::new(
@@ -228,6 +229,7 @@ fn pack_with(
         reward: RewardMode::cs(0.6).unwrap(),
         twin,
         robust: None,
+        rigid_pile: true,
         threads: 1,
     };
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
@@ -279,6 +281,7 @@ fn the_jobs_twin_replays_its_decisions_and_falls_back_where_the_heightmap_disagr
         reward: RewardMode::cs(0.6).unwrap(),
         twin,
         robust: None,
+        rigid_pile: true,
         threads: 1,
     };
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings(TwinKind::Job));
@@ -313,6 +316,7 @@ fn the_jobs_twin_leaves_out_an_object_never_released_and_forgets_a_finished_job(
         reward: RewardMode::cs(0.6).unwrap(),
         twin: TwinKind::Job,
         robust: None,
+        rigid_pile: true,
         threads: 1,
     };
     let empty = PackingWorld::new(c.clone(), WorldConfig::default()).unwrap();
@@ -357,6 +361,7 @@ fn the_robust_search_ranks_by_noisy_rollouts_that_a_replay_draws_again() {
             reward: RewardMode::cs(0.6).unwrap(),
             twin: TwinKind::Heightmap,
             robust,
+            rigid_pile: true,
             threads: 1,
         };
         let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
@@ -397,6 +402,7 @@ fn the_candidates_come_from_the_jobs_twin_where_the_camera_agrees_and_from_the_c
         reward: RewardMode::cs(0.6).unwrap(),
         twin: TwinKind::Job,
         robust: None,
+        rigid_pile: true,
         threads: 1,
     };
     let mut world = PackingWorld::new(c.clone(), WorldConfig::default()).unwrap();

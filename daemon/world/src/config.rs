@@ -55,6 +55,16 @@ pub struct WorldConfig {
     /// last full update keeps its contact points instead of being computed again (m; rapier's
     /// contact recycling). 0: every pair is computed every step.
     pub contact_recycle_m: f32,
+    /// Once a placement has settled, every object placed so far becomes fixed: later objects
+    /// land and settle on them but cannot move them, so each settle simulates one body against
+    /// a rigid pile (the heightmap twin's pile is rigid already). A model's approximation for
+    /// the search's rollouts ([`PackingWorld::freeze_settled`](crate::PackingWorld::freeze_settled)),
+    /// never the evaluation's world: a real pile can be pushed.
+    pub freeze_settled: bool,
+    /// The cell of a heightmap twin's pile collider (m): the heightmap max-pooled to about
+    /// this (default the placement lattice's own cell, 1.25 cm). Coarser cells make fewer
+    /// colliders under an object, and a pile up to a cell wider than it is.
+    pub pile_cell_m: f32,
     /// Release noise of the evaluation: standard deviation (m) of the x and y offsets by which
     /// the evaluation's environment (`herb_sim::PackingEnv`) releases each object off the pose
     /// it was given, as a real gripper does (0: exactly there). The world's own calls ([`PackingWorld::place_pose`]) and the
@@ -107,6 +117,8 @@ impl Default for WorldConfig {
             prediction_distance_m: 0.02,
             length_unit_m: 1.0,
             contact_recycle_m: 0.0,
+            freeze_settled: false,
+            pile_cell_m: 0.0125,
             release_noise_m: 0.0,
             release_noise_deg: 0.0,
             release_height_sd_m: 0.0,
@@ -172,7 +184,7 @@ impl WorldConfig {
     }
 
     /// The settings [`WorldConfig::set`] knows, by name.
-    pub const SETTABLE: [&'static str; 16] = [
+    pub const SETTABLE: [&'static str; 18] = [
         "dt",
         "settle_cap_s",
         "time_until_sleep_s",
@@ -189,6 +201,8 @@ impl WorldConfig {
         "out_past_walls",
         "out_check_steps",
         "inside_tolerance_m",
+        "freeze_settled",
+        "pile_cell_m",
     ];
 
     /// Sets the field `key` (one of [`WorldConfig::SETTABLE`]) from its text, then checks the
@@ -199,6 +213,13 @@ impl WorldConfig {
         let bad = || SimError::Config(format!("world setting {key} = {value:?}: not a number"));
         let num = || value.trim().parse::<f32>().map_err(|_| bad());
         let int = || value.trim().parse::<u32>().map_err(|_| bad());
+        let flag = || match value.trim() {
+            "true" | "1" => Ok(true),
+            "false" | "0" => Ok(false),
+            _ => Err(SimError::Config(format!(
+                "world setting {key} = {value:?}: expected true or false"
+            ))),
+        };
         match key {
             "dt" => next.dt = num()?,
             "settle_cap_s" => next.settle_cap_s = num()?,
@@ -213,17 +234,9 @@ impl WorldConfig {
             "contact_recycle_m" => next.contact_recycle_m = num()?,
             "clearance_m" => next.clearance_m = num()?,
             "early_out_m" => next.early_out_m = num()?,
-            "out_past_walls" => {
-                next.out_past_walls = match value.trim() {
-                    "true" | "1" => true,
-                    "false" | "0" => false,
-                    _ => {
-                        return Err(SimError::Config(format!(
-                            "world setting {key} = {value:?}: expected true or false"
-                        )));
-                    }
-                }
-            }
+            "out_past_walls" => next.out_past_walls = flag()?,
+            "freeze_settled" => next.freeze_settled = flag()?,
+            "pile_cell_m" => next.pile_cell_m = num()?,
             "out_check_steps" => next.out_check_steps = int()?,
             "inside_tolerance_m" => next.inside_tolerance_m = num()?,
             _ => {
@@ -294,6 +307,7 @@ impl WorldConfig {
         )?;
         check("length_unit_m", self.length_unit_m, 0.01, 1.0)?;
         check("contact_recycle_m", self.contact_recycle_m, 0.0, 0.05)?;
+        check("pile_cell_m", self.pile_cell_m, 0.001, 0.05)?;
         check("release_noise_m", self.release_noise_m, 0.0, 0.05)?;
         check("release_noise_deg", self.release_noise_deg, 0.0, 45.0)?;
         check("release_height_sd_m", self.release_height_sd_m, 0.0, 0.05)?;

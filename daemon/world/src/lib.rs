@@ -120,10 +120,6 @@ struct Pile {
 /// Cells lower than this (m) are the floor, not the pile.
 const PILE_FLOOR_M: f32 = 0.002;
 
-/// The cell of a twin's pile collider (m): the heightmap max-pooled to about this, the
-/// placement lattice's own cell.
-const PILE_COLLIDER_CELL_M: f32 = 0.0125;
-
 /// The pile collider's heights are rounded up to this (m), so that a row's cells of about one
 /// height make one cuboid.
 const PILE_STEP_M: f32 = 0.002;
@@ -252,11 +248,11 @@ impl PackingWorld {
                 }
             }
         }
-        // The collider: the pile max-pooled to cells of about PILE_COLLIDER_CELL_M (never
+        // The collider: the pile max-pooled to cells of about `pile_cell_m` (never
         // below the heightmap: objects land on it, not in it), heights rounded up to
         // PILE_STEP_M, each row's runs of one height merged into one static cuboid from the
         // floor up. Objects settle on flat tops, as cheaply as on the real objects' hulls.
-        let f = ((PILE_COLLIDER_CELL_M / cell).round() as usize).max(1);
+        let f = ((w.cfg.pile_cell_m / cell).round() as usize).max(1);
         let (px, py) = (nx.div_ceil(f), ny.div_ceil(f));
         let pooled = |bi: usize, bj: usize| {
             let mut top = 0.0f32;
@@ -592,6 +588,9 @@ impl PackingWorld {
         });
         let (settle_steps, settled) = self.settle();
         let scan = self.scan(true);
+        if self.cfg.freeze_settled {
+            self.phys.bodies[handle].set_body_type(RigidBodyType::Fixed, false);
+        }
         let rot = *self.phys.bodies[handle].rotation();
         let tilt = tilt_from(pose.rotation, rot);
         Ok(PlacementOutcome {
@@ -625,11 +624,10 @@ impl PackingWorld {
         let mut slow_for = 0u32;
         for step in 1..=max_steps {
             self.phys.step();
-            if self
-                .placed
-                .iter()
-                .all(|p| self.phys.bodies[p.body].is_sleeping())
-            {
+            if self.placed.iter().all(|p| {
+                let b = &self.phys.bodies[p.body];
+                b.is_sleeping() || b.is_fixed()
+            }) {
                 return (step, true);
             }
             if rest > 0.0 {
@@ -800,6 +798,14 @@ impl PackingWorld {
         for p in &self.placed {
             self.phys.bodies[p.body].set_body_type(RigidBodyType::Fixed, false);
         }
+    }
+
+    /// From now on a rigid pile ([`WorldConfig::freeze_settled`]): every object placed so far
+    /// becomes fixed, and so does each later one once it has settled. What the search's
+    /// rollouts run in: one body simulated per settle.
+    pub fn freeze_settled(&mut self) {
+        self.cfg.freeze_settled = true;
+        self.freeze_placed();
     }
 
     /// The collider set and body set, for queries in tests and tools (ray casting).

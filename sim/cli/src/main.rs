@@ -144,6 +144,18 @@ struct EvalArgs {
     /// the evaluation's world: the twins' fidelity bound). Default `job`, herbd's.
     #[arg(long, default_value = "job", value_parser = TwinKind::parse)]
     search_world: TwinKind,
+    /// The search's rollouts on a live pile (every object they wake simulated) instead of a
+    /// rigid one (each object settles alone against the objects before it): for measurements.
+    #[arg(long)]
+    search_live_pile: bool,
+    /// The robust search: rollouts per candidate, every object of each released off its
+    /// placement by `--search-noise` (the same draws for every candidate); 0: one rollout,
+    /// exact releases.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=64))]
+    search_samples: u64,
+    /// The release error the robust search assumes: MM,DEG (sd of x and y, of yaw).
+    #[arg(long, default_value = "5,3", value_parser = parse_noise)]
+    search_noise: (f32, f32),
     /// The evaluation's world: `ideal` (every object released where it was decided), `field`
     /// (the shipped field model, models/field.toml: a real cell's release error, seeded per
     /// episode, told to no twin or method) or a field model file.
@@ -526,6 +538,9 @@ impl EvalArgs {
             search_threads: self.search_threads as usize,
             search_horizon: self.search_horizon.map(|h| h as usize),
             search_world: self.search_world.name().into(),
+            search_live_pile: self.search_live_pile,
+            search_samples: self.search_samples as usize,
+            search_noise: self.search_noise,
             world: self.world.clone(),
             release_noise: self.release_noise,
             world_set: self.world_set.clone(),

@@ -193,6 +193,7 @@ fn probe(
         reward: REWARD,
         twin,
         robust,
+        rigid_pile: true,
         threads: 1,
     };
     let kind = match mode {

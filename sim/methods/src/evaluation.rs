@@ -10,7 +10,7 @@
 
 use crate::{Method, MethodSettings};
 use herb_decide::{Order, PolicySpec, SequenceModel};
-use herb_search::{Budget, SearchSettings, TwinKind};
+use herb_search::{Budget, ReleaseNoise, RobustRollouts, SearchSettings, TwinKind};
 use herb_sim::boxed::Episode;
 use herb_sim::eval::{self, EpisodeOutcome, EvalError, Summary};
 use herb_sim::field::FieldModel;
@@ -85,6 +85,13 @@ pub struct EvalSettings {
     pub search_horizon: Option<usize>,
     /// The search's world: `heightmap`, `job` or `exact`.
     pub search_world: String,
+    /// The search's rollouts on a live pile instead of a rigid one
+    /// (`SearchSettings::rigid_pile`; for measurements).
+    pub search_live_pile: bool,
+    /// The robust search: rollouts per candidate under `search_noise` (0: one, exact releases).
+    pub search_samples: usize,
+    /// The release error the robust search assumes: sd in mm (x, y) and degrees (yaw).
+    pub search_noise: (f32, f32),
     /// The evaluation's world: `ideal` (no error), `field` (the shipped field model,
     /// `models/field.toml`) or a field model file.
     pub world: String,
@@ -112,6 +119,9 @@ impl Default for EvalSettings {
             search_threads: 1,
             search_horizon: None,
             search_world: TwinKind::Job.name().into(),
+            search_live_pile: false,
+            search_samples: 0,
+            search_noise: (5.0, 3.0),
             world: "ideal".into(),
             release_noise: None,
             world_set: Vec::new(),
@@ -132,6 +142,19 @@ impl EvalSettings {
         let max_k = herb_sim::lattice::MAX_CANDIDATES;
         if !(1..=max_k).contains(&self.lookahead_k) {
             return Err(format!("lookahead_k {}: need 1 to {max_k}", self.lookahead_k).into());
+        }
+        if self.search_samples > 64 {
+            return Err(format!("search_samples {}: need 0 to 64", self.search_samples).into());
+        }
+        let (mm, deg) = self.search_noise;
+        if !(mm.is_finite()
+            && (0.0..=50.0).contains(&mm)
+            && deg.is_finite()
+            && (0.0..=45.0).contains(&deg))
+        {
+            return Err(
+                format!("search_noise {mm},{deg}: need 0 to 50 mm and 0 to 45 degrees").into(),
+            );
         }
         if !(1..=64).contains(&self.search_threads) {
             return Err(format!("search_threads {}: need 1 to 64", self.search_threads).into());
@@ -221,7 +244,15 @@ impl EvalSettings {
                 horizon: self.search_horizon,
                 reward,
                 twin: TwinKind::parse(&self.search_world)?,
-                robust: None,
+                robust: (self.search_samples > 0).then(|| RobustRollouts {
+                    noise: ReleaseNoise {
+                        sigma_m: self.search_noise.0 * 1e-3,
+                        sigma_deg: self.search_noise.1,
+                        ..ReleaseNoise::default()
+                    },
+                    samples: self.search_samples,
+                }),
+                rigid_pile: !self.search_live_pile,
                 threads: self.search_threads,
             },
             world: world.clone(),
@@ -279,7 +310,15 @@ impl EvalSettings {
                 let world = TwinKind::parse(&self.search_world)
                     .map(|t| t.name().to_string())
                     .unwrap_or_else(|_| self.search_world.clone());
-                format!("search ({budget}, k = {}, {world})", self.search_k)
+                let mut extra = String::new();
+                if self.search_samples > 0 {
+                    let (mm, deg) = self.search_noise;
+                    extra += &format!(", {} samples of {mm} mm / {deg} deg", self.search_samples);
+                }
+                if self.search_live_pile {
+                    extra += ", live pile";
+                }
+                format!("search ({budget}, k = {}, {world}{extra})", self.search_k)
             }
             (Method::Lookahead, _) => {
                 let horizon = self

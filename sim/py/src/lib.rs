@@ -722,8 +722,8 @@ impl VecEnv {
                 .first()
                 .map_or(RewardMode::Simple, |s| s.env.reward_mode()),
             twin,
-            robust: None,
             threads: search_threads,
+            ..SearchSettings::default()
         };
         let horizon = horizon.unwrap_or(usize::MAX);
         let method = match rule.parse::<Method>() {
