@@ -167,6 +167,10 @@ pub struct RobustRollouts {
     pub samples: usize,
 }
 
+/// With a rigid pile, the best candidates at most rolled out again on the live pile
+/// ([`SearchReport::live_checked`]).
+pub const LIVE_CHECKS: usize = 3;
+
 /// Seeds sample `i`'s release offsets (with `i`).
 const ROBUST_SEED: u64 = 0x726f_6275_7374;
 
@@ -189,6 +193,12 @@ pub struct SearchReport {
     pub job: Option<JobAgreement>,
     /// Threads the rollouts ran on.
     pub threads: usize,
+    /// With a rigid pile: the best candidates rolled out again on the live pile (at most
+    /// [`LIVE_CHECKS`]).
+    pub live_checked: usize,
+    /// Of those, the ones whose rollout failed there (an object pushed out, or one that went
+    /// out where the rigid pile held it): passed over for the next best.
+    pub live_rejected: usize,
     /// With [`TwinKind::Job`]: where the job's twin will replay the chosen placement's release
     /// at the next decision (the one release pose, [`release_pose_on`]: the z estimate on this
     /// heightmap plus the world's clearance, herbd's `[models] clearance_m`).
@@ -334,6 +344,7 @@ impl Search {
             Budget::Time(d) => (usize::MAX, Some(t0 + d)),
         };
         let k = self.settings.k.clamp(1, n).min(count);
+        let mut best = None;
         if k > 0 {
             let twin;
             let job = self.job.as_ref().filter(|_| agreed).map(|j| &j.world);
@@ -348,6 +359,7 @@ impl Search {
             let end = remaining
                 .len()
                 .min(self.settings.horizon.unwrap_or(usize::MAX).max(1));
+            let live = world;
             let rigid;
             let world = if self.settings.rigid_pile {
                 let mut w = world.clone();
@@ -380,17 +392,37 @@ impl Search {
                 }
             }
             self.report.threads = self.rollouts.len().min(k);
+            // The finished candidates by return, best first, ties to the prior's order.
+            let mut ranked: Vec<(usize, f32)> =
+                self.report.finished.iter().map(|(c, o)| (*c, o.ret)).collect();
+            ranked.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+            best = ranked.first().map(|r| r.0);
+            if self.settings.rigid_pile {
+                // A rigid pile cannot be pushed: the best candidates are rolled out once more
+                // on the live pile, every object released exactly, and the first whose rollout
+                // succeeds there is chosen (the best when none does). Deterministic: a replay
+                // checks alike.
+                for &(c, _) in ranked.iter().take(LIVE_CHECKS) {
+                    let o = rollout_until(
+                        &mut self.rollouts[0],
+                        self.settings.reward,
+                        live,
+                        &remaining[..end],
+                        firsts[c],
+                        None,
+                        None,
+                    )?;
+                    self.report.live_checked += 1;
+                    if o.is_some_and(|o| o.success) {
+                        best = Some(c);
+                        break;
+                    }
+                    self.report.live_rejected += 1;
+                }
+            }
         }
-        // The best finished return, ties to the prior's order; else the prior's first.
-        let best = self
-            .report
-            .finished
-            .iter()
-            .fold(None::<(usize, f32)>, |b, &(c, ref o)| match b {
-                Some((_, r)) if r >= o.ret => b,
-                _ => Some((c, o.ret)),
-            })
-            .map_or(0, |(c, _)| c);
+        // The best finished candidate; else the prior's first.
+        let best = best.unwrap_or(0);
         self.report.chosen = Some(best);
         let chosen = self.lattice.candidates()[best];
         if let Some(job) = &mut self.job {
