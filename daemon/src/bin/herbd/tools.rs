@@ -247,6 +247,12 @@ pub(crate) fn explain(
                 }
             );
         }
+        if rep.live_checked > 0 {
+            println!(
+                "rigid pile: the best {} rolled out again on the live pile, {} passed over (an object pushed out or gone out there)",
+                rep.live_checked, rep.live_rejected
+            );
+        }
     }
     match e.response.outcome {
         Ok(p) => println!(
