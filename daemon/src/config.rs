@@ -456,22 +456,22 @@ impl ConfigFile for Config {
         if d.threads > 64 {
             return Err(format!("decision.threads {} outside 0..=64", d.threads).into());
         }
-        if d.samples > 64 {
-            return Err(format!("decision.samples {} outside 0..=64", d.samples).into());
-        }
-        if !(d.release_error_mm.is_finite() && (0.0..=50.0).contains(&d.release_error_mm)) {
+        use herb_search::RobustRollouts as R;
+        if d.samples > R::MAX_SAMPLES {
             return Err(format!(
-                "decision.release_error_mm {} outside 0..=50",
-                d.release_error_mm
+                "decision.samples {} outside 0..={}",
+                d.samples,
+                R::MAX_SAMPLES
             )
             .into());
         }
-        if !(d.release_error_deg.is_finite() && (0.0..=45.0).contains(&d.release_error_deg)) {
-            return Err(format!(
-                "decision.release_error_deg {} outside 0..=45",
-                d.release_error_deg
-            )
-            .into());
+        for (name, v, max) in [
+            ("release_error_mm", d.release_error_mm, R::MAX_ERROR_MM),
+            ("release_error_deg", d.release_error_deg, R::MAX_ERROR_DEG),
+        ] {
+            if !(v.is_finite() && (0.0..=max).contains(&v)) {
+                return Err(format!("decision.{name} {v} outside 0..={max}").into());
+            }
         }
         if d.horizon > herb_ipc::MAX_JOB_OBJECTS {
             return Err(format!(

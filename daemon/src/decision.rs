@@ -29,8 +29,7 @@ use herb_ipc::{
     Services,
 };
 use herb_search::{
-    Budget, ReleaseNoise, RobustRollouts, Search, SearchReport, SearchSettings, TwinKind,
-    WorldConfig,
+    Budget, RobustRollouts, Search, SearchReport, SearchSettings, TwinKind, WorldConfig,
 };
 use iceoryx2::prelude::ipc;
 use iceoryx2::sample::Sample;
@@ -93,14 +92,11 @@ impl DecisionCore {
                         DecisionTwin::Job => TwinKind::Job,
                     },
                     threads: d.search_threads(),
-                    robust: (d.samples > 0).then(|| RobustRollouts {
-                        noise: ReleaseNoise {
-                            sigma_m: (d.release_error_mm * 1e-3) as f32,
-                            sigma_deg: d.release_error_deg as f32,
-                            ..ReleaseNoise::default()
-                        },
-                        samples: d.samples,
-                    }),
+                    robust: RobustRollouts::assumed(
+                        d.samples,
+                        d.release_error_mm,
+                        d.release_error_deg,
+                    ),
                     ..SearchSettings::default()
                 };
                 // The twins release where the arm does: the same clearance.

@@ -41,6 +41,15 @@ def find_exe(name: str) -> str:
     )
 
 
+def tool_output(cmd: list[str], sub: str) -> str:
+    """What ``cmd sub`` (one of herbd's or herbctl's tools) printed; it failing ends the view,
+    saying why."""
+    run = subprocess.run(cmd + [sub], capture_output=True, text=True)
+    if run.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)} {sub} failed: {run.stderr.strip()}")
+    return run.stdout
+
+
 def load_catalog(path: str | None, boxed: str | None) -> dict:
     """The catalog document of ``herbctl catalog`` (from ``path``, or by running herbctl)."""
     if path:
@@ -49,10 +58,7 @@ def load_catalog(path: str | None, boxed: str | None) -> dict:
         cmd = [find_exe("herbctl")]
         if boxed:
             cmd += ["--boxed", boxed]
-        run = subprocess.run(cmd + ["catalog"], capture_output=True, text=True)
-        if run.returncode != 0:
-            raise SystemExit(f"{' '.join(cmd)} catalog failed: {run.stderr.strip()}")
-        text = run.stdout
+        text = tool_output(cmd, "catalog")
     doc = json.loads(text)
     if doc.get("format") != 1:
         raise SystemExit(f"catalog format {doc.get('format')!r}: this view reads format 1")
@@ -64,10 +70,7 @@ def load_cell_model(config: str | None) -> dict:
     cmd = [find_exe("herbd")]
     if config:
         cmd += ["--config", config]
-    run = subprocess.run(cmd + ["cell-model"], capture_output=True, text=True)
-    if run.returncode != 0:
-        raise SystemExit(f"{' '.join(cmd)} cell-model failed: {run.stderr.strip()}")
-    return json.loads(run.stdout)
+    return json.loads(tool_output(cmd, "cell-model"))
 
 
 def replay_events(view, path: str) -> int:

@@ -167,6 +167,29 @@ pub struct RobustRollouts {
     pub samples: usize,
 }
 
+impl RobustRollouts {
+    /// Rollouts per candidate at most (herbd's `[decision] samples`, `--search-samples`).
+    pub const MAX_SAMPLES: usize = 64;
+    /// The largest release error in x and y (mm) a configuration may assume.
+    pub const MAX_ERROR_MM: f64 = 50.0;
+    /// The largest yaw error (degrees) a configuration may assume.
+    pub const MAX_ERROR_DEG: f64 = 45.0;
+
+    /// The robust search of `samples` rollouts a candidate under a release error of
+    /// `error_mm` (sd of x and of y) and `error_deg` (sd of the yaw); `None` with 0 samples.
+    /// The values are the caller's, checked against the limits above.
+    pub fn assumed(samples: usize, error_mm: f64, error_deg: f64) -> Option<Self> {
+        (samples > 0).then(|| Self {
+            noise: ReleaseNoise {
+                sigma_m: (error_mm * 1e-3) as f32,
+                sigma_deg: error_deg as f32,
+                ..ReleaseNoise::default()
+            },
+            samples,
+        })
+    }
+}
+
 /// With a rigid pile, the best candidates at most rolled out again on the live pile
 /// ([`SearchReport::live_checked`]; not in the heightmap twin, whose pile is rigid).
 pub const LIVE_CHECKS: usize = 3;

@@ -10,7 +10,7 @@
 
 use crate::{Method, MethodSettings};
 use herb_decide::{Order, PolicySpec, SequenceModel};
-use herb_search::{Budget, ReleaseNoise, RobustRollouts, SearchSettings, TwinKind};
+use herb_search::{Budget, RobustRollouts, SearchSettings, TwinKind};
 use herb_sim::boxed::Episode;
 use herb_sim::eval::{self, EpisodeOutcome, EvalError, Summary};
 use herb_sim::field::FieldModel;
@@ -143,18 +143,28 @@ impl EvalSettings {
         if !(1..=max_k).contains(&self.lookahead_k) {
             return Err(format!("lookahead_k {}: need 1 to {max_k}", self.lookahead_k).into());
         }
-        if self.search_samples > 64 {
-            return Err(format!("search_samples {}: need 0 to 64", self.search_samples).into());
+        let (max_samples, max_mm, max_deg) = (
+            RobustRollouts::MAX_SAMPLES,
+            RobustRollouts::MAX_ERROR_MM,
+            RobustRollouts::MAX_ERROR_DEG,
+        );
+        if self.search_samples > max_samples {
+            return Err(format!(
+                "search_samples {}: need 0 to {max_samples}",
+                self.search_samples
+            )
+            .into());
         }
         let (mm, deg) = self.search_noise;
         if !(mm.is_finite()
-            && (0.0..=50.0).contains(&mm)
+            && (0.0..=max_mm).contains(&f64::from(mm))
             && deg.is_finite()
-            && (0.0..=45.0).contains(&deg))
+            && (0.0..=max_deg).contains(&f64::from(deg)))
         {
-            return Err(
-                format!("search_noise {mm},{deg}: need 0 to 50 mm and 0 to 45 degrees").into(),
-            );
+            return Err(format!(
+                "search_noise {mm},{deg}: need 0 to {max_mm} mm and 0 to {max_deg} degrees"
+            )
+            .into());
         }
         if !(1..=64).contains(&self.search_threads) {
             return Err(format!("search_threads {}: need 1 to 64", self.search_threads).into());
@@ -244,14 +254,11 @@ impl EvalSettings {
                 horizon: self.search_horizon,
                 reward,
                 twin: TwinKind::parse(&self.search_world)?,
-                robust: (self.search_samples > 0).then(|| RobustRollouts {
-                    noise: ReleaseNoise {
-                        sigma_m: self.search_noise.0 * 1e-3,
-                        sigma_deg: self.search_noise.1,
-                        ..ReleaseNoise::default()
-                    },
-                    samples: self.search_samples,
-                }),
+                robust: RobustRollouts::assumed(
+                    self.search_samples,
+                    self.search_noise.0.into(),
+                    self.search_noise.1.into(),
+                ),
                 rigid_pile: !self.search_live_pile,
                 threads: self.search_threads,
             },
