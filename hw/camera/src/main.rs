@@ -185,6 +185,10 @@ struct Frame {
 #[derive(Debug, Clone, Copy, Default, serde::Serialize)]
 struct Counters {
     images: u64,
+    /// Images that arrived before the first camera info: expected at start (ROS connects the
+    /// image and camera info topics separately, so either may come first), not bad input.
+    images_before_info: u64,
+    /// Images refused as bad input (undecodable, or disagreeing with the camera info).
     images_rejected: u64,
     camera_infos_rejected: u64,
     lagged: u64,
@@ -323,12 +327,16 @@ async fn session(
                     mono16_said = true;
                 }
                 lock(counters).images += 1;
-                let checked = intr
-                    .ok_or_else(|| "no camera info yet".to_string())
-                    .and_then(|i| {
-                        let d = Depth::from_image(&img.encoding, img.is_bigendian, img.width, img.height, img.step, &img.data, &i).map_err(|e| e.to_string())?;
+                let Some(intr) = intr else {
+                    lock(counters).images_before_info += 1;
+                    say_once(&mut last_said, "image dropped: no camera info yet".into());
+                    continue;
+                };
+                let checked = Depth::from_image(&img.encoding, img.is_bigendian, img.width, img.height, img.step, &img.data, &intr)
+                    .map_err(|e| e.to_string())
+                    .and_then(|d| {
                         let stamp = herb_ros1::time::to_monotonic(&img.header.stamp, monotonic_ns(), SystemTime::now(), max_age_ns).map_err(|e| e.to_string())?;
-                        Ok((i, d, stamp))
+                        Ok((intr, d, stamp))
                     });
                 let (i, depth, stamp_ns) = match checked {
                     Ok(v) => v,
