@@ -259,37 +259,66 @@ fn memory(s: &Setup) {
 /// With `HERB_WORLD_B=KEY=VALUE,...` (settings of [`WorldConfig::set`]) the same is timed again
 /// under those settings, in the same run, and the ratio of the rates printed, with how far the
 /// outcomes agree ([`agreement`]): every speed-up is a ratio measured in one run.
+///
+/// `HERB_WORLD_A=KEY=VALUE,...` changes the first run's settings (default: today's defaults), so
+/// a default that changed can still be compared with the settings it replaced.
 fn bench_rollout_worlds(c: &mut Criterion, s: &Setup) {
-    let a = bench_rollout_worlds_with(c, s, "", &WorldConfig::default());
-    let Ok(list) = std::env::var("HERB_WORLD_B") else {
+    let settings = |var: &str| {
+        let list = std::env::var(var).ok()?;
+        let mut cfg = WorldConfig::default();
+        if let Err(e) = cfg.set_all(&list) {
+            panic!("{var}: world settings KEY=VALUE,...: {e}");
+        }
+        Some((cfg, list))
+    };
+    let (cfg_a, list_a) = settings("HERB_WORLD_A").unwrap_or_default();
+    let a = bench_rollout_worlds_with(c, s, "", &cfg_a);
+    let Some((cfg, list)) = settings("HERB_WORLD_B") else {
         return;
     };
-    let mut cfg = WorldConfig::default();
-    cfg.set_all(&list)
-        .expect("HERB_WORLD_B: world settings KEY=VALUE,...");
     let b = bench_rollout_worlds_with(c, s, "-b", &cfg);
     for (kind, (ra, rb)) in ["exact", "twin"].iter().zip(a.iter().zip(&b)) {
         eprintln!(
-            "rollout-{kind}/{}: settings B ({list}) place {:.2} x as many objects per second as today's",
+            "rollout-{kind}/{}: settings B ({list}) place {:.2} x as many objects per second as A ({})",
             s.label,
-            rb / ra
+            rb / ra,
+            if list_a.is_empty() {
+                "defaults"
+            } else {
+                &list_a
+            }
         );
     }
-    agreement(s, &cfg, &list);
+    agreement(s, &cfg_a, &cfg, &list);
 }
 
-/// How far the rollouts' outcomes under `cfg` agree with today's settings': the second half of
-/// each of the first [`BENCH_EPISODES`] episodes on its first half, each placed object's inside and stable
-/// flags compared while both runs go on, and the final compactness.
-fn agreement(s: &Setup, cfg: &WorldConfig, list: &str) {
-    let run = |cfg: &WorldConfig| -> Vec<Vec<(bool, bool, f32)>> {
+/// How far the outcomes under `cfg` agree with those under `cfg_a`, for the first
+/// [`BENCH_EPISODES`] episodes: in the world itself (each episode from an empty box), and in
+/// the heightmap twin (the second half of each episode in a twin of the world that packed its
+/// first half under today's defaults). Each placed object's inside and stable flags are
+/// compared while both runs go on, and the compactness after each.
+fn agreement(s: &Setup, cfg_a: &WorldConfig, cfg: &WorldConfig, list: &str) {
+    let run = |cfg: &WorldConfig, twin: bool| -> Vec<Vec<(bool, bool, f32)>> {
         s.episodes
             .iter()
             .take(BENCH_EPISODES)
             .map(|ep| {
-                let mut w = PackingWorld::new(s.catalog.clone(), cfg.clone()).expect("world");
+                let (mut w, rest) = if twin {
+                    let half = ep.len() / 2;
+                    let mut w = PackingWorld::new(s.catalog.clone(), WorldConfig::default())
+                        .expect("world");
+                    for &(t, x, y, th) in &ep[..half] {
+                        w.place(t, x, y, th).expect("place");
+                    }
+                    let t = PackingWorld::twin(s.catalog.clone(), cfg.clone(), w.heightmap())
+                        .expect("twin");
+                    (t, &ep[half..])
+                } else {
+                    let w = PackingWorld::new(s.catalog.clone(), cfg.clone()).expect("world");
+                    (w, &ep[..])
+                };
                 let mut out = Vec::new();
-                for &(t, x, y, th) in ep {
+                for &(t, x, y, th) in rest {
                     let o = w.place(t, x, y, th).expect("place");
                     out.push((o.inside, o.stable, o.compactness));
                     if !o.inside {
@@ -300,23 +329,25 @@ fn agreement(s: &Setup, cfg: &WorldConfig, list: &str) {
             })
             .collect()
     };
-    let (a, b) = (run(&WorldConfig::default()), run(cfg));
-    let (mut same, mut n, mut dc, mut ended_same) = (0, 0, 0.0f64, 0);
-    for (ea, eb) in a.iter().zip(&b) {
-        ended_same +=
-            (ea.len() == eb.len() && ea.last().map(|o| o.0) == eb.last().map(|o| o.0)) as usize;
-        for (oa, ob) in ea.iter().zip(eb) {
-            n += 1;
-            same += (oa.0 == ob.0 && oa.1 == ob.1) as usize;
-            dc += (oa.2 - ob.2).abs() as f64;
+    for (kind, twin) in [("world", false), ("twin", true)] {
+        let (a, b) = (run(cfg_a, twin), run(cfg, twin));
+        let (mut same, mut n, mut dc, mut ended_same) = (0, 0, 0.0f64, 0);
+        for (ea, eb) in a.iter().zip(&b) {
+            ended_same +=
+                (ea.len() == eb.len() && ea.last().map(|o| o.0) == eb.last().map(|o| o.0)) as usize;
+            for (oa, ob) in ea.iter().zip(eb) {
+                n += 1;
+                same += (oa.0 == ob.0 && oa.1 == ob.1) as usize;
+                dc += (oa.2 - ob.2).abs() as f64;
+            }
         }
+        eprintln!(
+            "agreement-{kind}/{} ({list}): {same} of {n} placements with the same inside and stable flags, mean |dC| {:.4}; {ended_same} of {} episodes ended alike",
+            s.label,
+            dc / n.max(1) as f64,
+            a.len()
+        );
     }
-    eprintln!(
-        "agreement/{} ({list}): {same} of {n} placements with the same inside and stable flags, mean |dC| {:.4}; {ended_same} of {} episodes ended alike",
-        s.label,
-        dc / n.max(1) as f64,
-        a.len()
-    );
 }
 
 /// [`bench_rollout_worlds`] under `cfg` (benches named with `suffix`): the placements per
@@ -352,6 +383,9 @@ fn bench_rollout_worlds_with(
         let mut step_hist = hist();
         let mut capped = 0u64;
         let mut k = 0usize;
+        // The twin's build (not in the placements' rate: herbd's search builds it once per
+        // decision).
+        let mut build = hist();
         c.bench_function(&format!("rollout-{kind}{suffix}/{}", s.label), |b| {
             b.iter_custom(|iters| {
                 let mut total = Duration::ZERO;
@@ -367,8 +401,17 @@ fn bench_rollout_worlds_with(
                             }
                             w
                         }
-                        _ => PackingWorld::twin(s.catalog.clone(), cfg.clone(), start.heightmap())
-                            .expect("twin"),
+                        _ => {
+                            let t0 = Instant::now();
+                            let w = PackingWorld::twin(
+                                s.catalog.clone(),
+                                cfg.clone(),
+                                start.heightmap(),
+                            )
+                            .expect("twin");
+                            build.record(t0.elapsed().as_nanos() as u64).ok();
+                            w
+                        }
                     };
                     for &(t, x, y, th) in rest.iter() {
                         if done == iters {
@@ -410,6 +453,12 @@ fn bench_rollout_worlds_with(
             100.0 * capped as f64 / h.len().max(1) as f64
         );
         rates.push(rate);
+        if !build.is_empty() {
+            report(
+                &format!("twin-build{suffix}/{} (once per decision)", s.label),
+                &build,
+            );
+        }
     }
     eprintln!(
         "rollout{suffix}/{}: the twin places {:.2} x as many objects per second as the exact clone",

@@ -65,6 +65,14 @@ pub struct WorldConfig {
     /// this (default the placement lattice's own cell, 1.25 cm). Coarser cells make fewer
     /// colliders under an object, and a pile up to a cell wider than it is.
     pub pile_cell_m: f32,
+    /// A heightmap twin's pile collider is made of convex pieces, each as large as it can be
+    /// while its top stays within this (m) above every cell it covers (never below one): a
+    /// flat or tilted top is one piece, so an object resting on it touches one shape, not one
+    /// per cell. 0: the collider before pieces, row runs of cuboids of heights rounded up to
+    /// `pile_step_m` (kept for the benches' ratios).
+    pub pile_fit_m: f32,
+    /// With `pile_fit_m` 0 only: the row runs' heights are rounded up to this (m).
+    pub pile_step_m: f32,
     /// Release noise of the evaluation: standard deviation (m) of the x and y offsets by which
     /// the evaluation's environment (`herb_sim::PackingEnv`) releases each object off the pose
     /// it was given, as a real gripper does (0: exactly there). The world's own calls ([`PackingWorld::place_pose`]) and the
@@ -119,6 +127,8 @@ impl Default for WorldConfig {
             contact_recycle_m: 0.0,
             freeze_settled: false,
             pile_cell_m: 0.0125,
+            pile_fit_m: 0.006,
+            pile_step_m: 0.002,
             release_noise_m: 0.0,
             release_noise_deg: 0.0,
             release_height_sd_m: 0.0,
@@ -184,7 +194,7 @@ impl WorldConfig {
     }
 
     /// The settings [`WorldConfig::set`] knows, by name.
-    pub const SETTABLE: [&'static str; 18] = [
+    pub const SETTABLE: [&'static str; 20] = [
         "dt",
         "settle_cap_s",
         "time_until_sleep_s",
@@ -203,6 +213,8 @@ impl WorldConfig {
         "inside_tolerance_m",
         "freeze_settled",
         "pile_cell_m",
+        "pile_fit_m",
+        "pile_step_m",
     ];
 
     /// Sets the field `key` (one of [`WorldConfig::SETTABLE`]) from its text, then checks the
@@ -237,6 +249,8 @@ impl WorldConfig {
             "out_past_walls" => next.out_past_walls = flag()?,
             "freeze_settled" => next.freeze_settled = flag()?,
             "pile_cell_m" => next.pile_cell_m = num()?,
+            "pile_fit_m" => next.pile_fit_m = num()?,
+            "pile_step_m" => next.pile_step_m = num()?,
             "out_check_steps" => next.out_check_steps = int()?,
             "inside_tolerance_m" => next.inside_tolerance_m = num()?,
             _ => {
@@ -308,6 +322,8 @@ impl WorldConfig {
         check("length_unit_m", self.length_unit_m, 0.01, 1.0)?;
         check("contact_recycle_m", self.contact_recycle_m, 0.0, 0.05)?;
         check("pile_cell_m", self.pile_cell_m, 0.001, 0.05)?;
+        check("pile_step_m", self.pile_step_m, 0.0005, 0.02)?;
+        check("pile_fit_m", self.pile_fit_m, 0.0, 0.02)?;
         check("release_noise_m", self.release_noise_m, 0.0, 0.05)?;
         check("release_noise_deg", self.release_noise_deg, 0.0, 45.0)?;
         check("release_height_sd_m", self.release_height_sd_m, 0.0, 0.05)?;

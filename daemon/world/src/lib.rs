@@ -37,6 +37,7 @@ use rapier3d::prelude::*;
 
 mod config;
 mod errors;
+mod pile;
 mod reward;
 pub mod rollout;
 pub use config::WorldConfig;
@@ -117,12 +118,7 @@ struct Pile {
     bounds: Option<(Vector, Vector)>,
 }
 
-/// Cells lower than this (m) are the floor, not the pile.
-const PILE_FLOOR_M: f32 = 0.002;
-
-/// The pile collider's heights are rounded up to this (m), so that a row's cells of about one
-/// height make one cuboid.
-const PILE_STEP_M: f32 = 0.002;
+use pile::PILE_FLOOR_M;
 
 /// The packing world. Deterministic: the same calls give bit-identical states.
 pub struct PackingWorld {
@@ -249,43 +245,39 @@ impl PackingWorld {
             }
         }
         // The collider: the pile max-pooled to cells of about `pile_cell_m` (never
-        // below the heightmap: objects land on it, not in it), heights rounded up to
-        // PILE_STEP_M, each row's runs of one height merged into one static cuboid from the
-        // floor up. Objects settle on flat tops, as cheaply as on the real objects' hulls.
+        // below the heightmap: objects land on it, not in it), then static convex pieces or
+        // row runs of cuboids from the floor up (`pile::pile_colliders`).
         let f = ((w.cfg.pile_cell_m / cell).round() as usize).max(1);
         let (px, py) = (nx.div_ceil(f), ny.div_ceil(f));
-        let pooled = |bi: usize, bj: usize| {
-            let mut top = 0.0f32;
+        let mut pooled = vec![0.0f32; px * py];
+        for (i, top) in pooled.iter_mut().enumerate() {
+            let (bi, bj) = (i / px, i % px);
             for row in bi * f..((bi + 1) * f).min(ny) {
                 for col in bj * f..((bj + 1) * f).min(nx) {
-                    top = top.max(pile.data()[row * nx + col]);
+                    *top = top.max(pile.data()[row * nx + col]);
                 }
             }
-            (top / PILE_STEP_M).ceil() * PILE_STEP_M
+        }
+        let grid = pile::PileGrid {
+            h: &pooled,
+            nx: px,
+            ny: py,
+            xs: (0..=px)
+                .map(|c| spec.x_min() + ((c * f).min(nx)) as f32 * cell)
+                .collect(),
+            ys: (0..=py)
+                .map(|r| spec.y_max() - ((r * f).min(ny)) as f32 * cell)
+                .collect(),
         };
-        let (x_min, y_max) = (spec.x_min(), spec.y_max());
         let body = w.phys.insert_body(RigidBodyBuilder::fixed());
-        for bi in 0..py {
-            let y0 = y_max - (bi * f) as f32 * cell;
-            let y1 = y_max - (((bi + 1) * f).min(ny)) as f32 * cell;
-            let mut bj = 0;
-            while bj < px {
-                let h = pooled(bi, bj);
-                let mut end = bj + 1;
-                while end < px && pooled(bi, end) == h {
-                    end += 1;
-                }
-                if h > PILE_FLOOR_M {
-                    let x0 = x_min + (bj * f) as f32 * cell;
-                    let x1 = x_min + ((end * f).min(nx)) as f32 * cell;
-                    let c = ColliderBuilder::cuboid(0.5 * (x1 - x0), 0.5 * (y0 - y1), 0.5 * h)
-                        .translation(Vector::new(0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.5 * h))
-                        .friction(w.cfg.friction)
-                        .restitution(0.0);
-                    w.phys.insert_collider(c, Some(body));
-                }
-                bj = end;
-            }
+        for c in pile::pile_colliders(&grid, w.cfg.pile_fit_m, w.cfg.pile_step_m) {
+            // A fixed body's colliders need no mass: given, it is not computed from each
+            // piece's mesh.
+            let c = c
+                .friction(w.cfg.friction)
+                .restitution(0.0)
+                .mass_properties(MassProperties::default());
+            w.phys.insert_collider(c, Some(body));
         }
         w.pile = Some(Pile {
             heightmap: pile.clone(),
