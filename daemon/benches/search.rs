@@ -3,7 +3,9 @@
 //! a count of rollouts (what tables use) and for herbd's time budget on one thread; then, with
 //! every lattice candidate allowed (k = 64, so that the budget and not k ends the decision),
 //! herbd's time budget on one thread and on two, in one run: the rollouts finished per
-//! decision and their ratio.
+//! decision and their ratio, for the plain search (which may run out of candidates before the
+//! budget) and for robust searches of 4 and 16 samples per candidate (16: more work than one
+//! thread finishes in the budget on any state).
 //!
 //! `cargo bench -p herb-daemon --bench search` (BoxED needed: mid-pack heightmaps of the first
 //! sessions, their humans' placements after a quarter, half and three quarters of the episode,
@@ -93,6 +95,10 @@ fn main() {
         ("robust, 4 samples, 1.0 s, k = 8", 1.0, None, 8, 1, 4),
         ("robust, 4 samples, 1.0 s, k = 64", 1.0, None, 64, 1, 4),
         ("robust, 4 samples, 1.0 s, k = 64", 1.0, None, 64, 2, 4),
+        // Work that one thread cannot finish in the budget on any state: what two threads add
+        // where there is work for them.
+        ("robust, 16 samples, 1.0 s, k = 64", 1.0, None, 64, 1, 16),
+        ("robust, 16 samples, 1.0 s, k = 64", 1.0, None, 64, 2, 16),
     ] {
         cfg.decision.budget_s = budget_s;
         cfg.decision.timeout_s = budget_s + 10.0;

@@ -388,3 +388,38 @@ fn a_teacher_with_a_horizon_simulates_that_many_objects_and_the_rollout_of_that_
     one.decide(&w, &seq).unwrap().unwrap();
     assert!(one.outcomes().iter().all(|o| o.packed <= 1));
 }
+
+/// The search's clearance (`Lattice::set_push_gap`): on an empty floor every tight candidate is
+/// pushed into a corner; with a gap of one fine cell each backs off from both walls by one cell
+/// at the same height, and with no gap the candidates are as before.
+#[test]
+fn a_push_gap_backs_each_tight_candidate_off_its_walls_by_one_fine_cell() {
+    use herb_sim::lattice::FINE_CELL_M;
+    let c = common::primitives();
+    let w = common::world(&c);
+    let ty = c.by_id("004").unwrap();
+    let tight = |gap| {
+        let mut l = Lattice::new(&c);
+        l.set_push_gap(gap);
+        l.compute(w.heightmap(), &c, ty);
+        let mut t: Vec<_> = l.candidates().iter().filter(|p| p.tight).copied().collect();
+        t.sort_by_key(|p| (p.yaw, p.node));
+        t
+    };
+    let (none, one) = (tight(0), tight(1));
+    assert!(!none.is_empty());
+    assert_eq!(none.len(), one.len());
+    for (a, b) in none.iter().zip(&one) {
+        assert_eq!((a.yaw, a.node), (b.yaw, b.node));
+        assert!((a.rest_z - b.rest_z).abs() < 1e-6, "{a:?} {b:?}");
+        // One cell nearer the box's centre along each axis.
+        assert!(
+            ((a.x.abs() - b.x.abs()) - FINE_CELL_M).abs() < 1e-5,
+            "{a:?} {b:?}"
+        );
+        assert!(
+            ((a.y.abs() - b.y.abs()) - FINE_CELL_M).abs() < 1e-5,
+            "{a:?} {b:?}"
+        );
+    }
+}

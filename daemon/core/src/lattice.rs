@@ -148,6 +148,8 @@ pub struct Lattice {
     support_ready: bool,
     flags: Vec<u8>,
     candidates: Vec<Placement>,
+    /// Fine cells a tight candidate backs off from what stopped its push ([`Lattice::set_push_gap`]).
+    push_gap: usize,
 }
 
 /// One shape's footprints at one yaw: its bottom min-pooled to the lattice and to the
@@ -243,6 +245,7 @@ impl Lattice {
             lowest: Vec::with_capacity(spec.len()),
             flags: vec![0; n],
             candidates: Vec::with_capacity(4 * MAX_CANDIDATES),
+            push_gap: 0,
         }
     }
 
@@ -329,6 +332,17 @@ impl Lattice {
             self.support_ready = true;
         }
         &self.support
+    }
+
+    /// A clearance for a gripper that does not release exactly: each tight candidate, once
+    /// pushed against what stops it (a neighbour or a wall), backs off by up to `fine_cells`
+    /// cells of [`FINE_CELL_M`] along each axis it was pushed, as far as it stays at its
+    /// height, so that an object released a few millimetres off lands beside its neighbour
+    /// rather than on its edge. 0 (the default, and every rule of Table I): tight against it.
+    /// Takes effect at the next [`Lattice::compute`].
+    pub fn set_push_gap(&mut self, fine_cells: usize) {
+        self.push_gap = fine_cells;
+        self.candidates.clear();
     }
 
     /// Flags `[yaw][row][col]` ([`INSIDE`], [`BELOW_LIMIT`]).
@@ -527,6 +541,20 @@ impl Lattice {
                     Some((_, _, zn)) if zn <= z + 1e-4 => {
                         c += ac;
                         r += ar;
+                        z = zn;
+                    }
+                    _ => break,
+                }
+            }
+        }
+        // A gap left (`push_gap`): back along each axis pushed, as far as the object stays at
+        // its height; less where there is no room (the gap shrinks to what fits).
+        for (ac, ar) in axes.into_iter().rev() {
+            for _ in 0..self.push_gap {
+                match top_at(c - ac, r - ar) {
+                    Some((_, _, zn)) if zn <= z + 1e-4 => {
+                        c -= ac;
+                        r -= ar;
                         z = zn;
                     }
                     _ => break,

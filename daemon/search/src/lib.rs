@@ -137,6 +137,10 @@ pub struct SearchSettings {
     /// order, and a decision keeps the longest run of finished candidates from the first, so
     /// that what a deadline allowed is a count that a replay runs again, on any thread count.
     pub threads: usize,
+    /// The clearance the candidates (and the rollouts' own placements) leave against what
+    /// their push stopped at, in fine lattice cells of 6.25 mm
+    /// ([`Lattice::set_push_gap`]; 0: tight).
+    pub push_gap: usize,
 }
 
 impl Default for SearchSettings {
@@ -151,6 +155,7 @@ impl Default for SearchSettings {
             robust: None,
             rigid_pile: true,
             threads: 1,
+            push_gap: 0,
         }
     }
 }
@@ -277,11 +282,14 @@ impl Search {
     /// of them; the robust search's assumed error is its own setting).
     pub fn new(catalog: SharedCatalog, cfg: WorldConfig, settings: SearchSettings) -> Self {
         let cfg = cfg.without_errors();
+        let lattice = || {
+            let mut l = Lattice::new(&catalog);
+            l.set_push_gap(settings.push_gap);
+            l
+        };
         Self {
-            lattice: Lattice::new(&catalog),
-            rollouts: (0..settings.threads.max(1))
-                .map(|_| Lattice::new(&catalog))
-                .collect(),
+            lattice: lattice(),
+            rollouts: (0..settings.threads.max(1)).map(|_| lattice()).collect(),
             zscratch: ZScratch::for_catalog(&catalog, cfg.heightmap_cell_m),
             settings,
             catalog,
@@ -526,9 +534,11 @@ impl Search {
 /// the deadline, else its outcome.
 type Rolled = Option<Option<CandidateOutcome>>;
 
-/// The rollout of each of `firsts` ([`evaluate`]), in order, on as many threads as `lattices`
-/// (one scratch lattice each). The candidates are handed out in order; each rollout is the same
-/// whichever thread runs it.
+/// The rollout of each of `firsts`, in order, on as many threads as `lattices` (one scratch
+/// lattice each). The unit handed out is one rollout: a candidate's, or, robust, one of its
+/// samples ([`combine`] makes the candidate's outcome of them), in order, candidates first; so
+/// two threads share the work of a few costly candidates too. Each rollout is the same whichever
+/// thread runs it.
 fn roll_out(
     lattices: &mut [Lattice],
     settings: &SearchSettings,
@@ -537,20 +547,34 @@ fn roll_out(
     firsts: &[Placement],
     deadline: Option<Instant>,
 ) -> Result<Vec<Rolled>> {
+    let robust = settings.robust.filter(|r| !r.noise.is_zero());
+    let samples = robust.map_or(1, |r| r.samples.max(1));
+    let tasks = firsts.len() * samples;
     let next = AtomicUsize::new(0);
-    // One thread's share: the next candidate not yet taken, until none is left or the deadline.
+    // One thread's share: the next rollout not yet taken, until none is left or the deadline.
     let work = |lattice: &mut Lattice| -> Result<Vec<(usize, Option<CandidateOutcome>)>> {
         let mut mine = Vec::new();
         loop {
-            let c = next.fetch_add(1, Ordering::Relaxed);
-            if c >= firsts.len() || deadline.is_some_and(|d| Instant::now() >= d) {
+            let t = next.fetch_add(1, Ordering::Relaxed);
+            if t >= tasks || deadline.is_some_and(|d| Instant::now() >= d) {
                 return Ok(mine);
             }
-            let o = evaluate(lattice, settings, world, remaining, firsts[c], deadline)?;
-            mine.push((c, o));
+            let (c, i) = (t / samples, t % samples);
+            let mut rng = ChaCha8Rng::seed_from_u64(ROBUST_SEED ^ i as u64);
+            let noise = robust.map(|r| (r.noise, &mut rng));
+            let o = rollout_until(
+                lattice,
+                settings.reward,
+                world,
+                remaining,
+                firsts[c],
+                deadline,
+                noise,
+            )?;
+            mine.push((t, o));
         }
     };
-    let threads = lattices.len().clamp(1, firsts.len().max(1));
+    let threads = lattices.len().clamp(1, tasks.max(1));
     let results: Vec<Result<_>> = if threads == 1 {
         vec![work(&mut lattices[0])]
     } else {
@@ -565,47 +589,41 @@ fn roll_out(
                 .collect()
         })
     };
-    let mut out = vec![None; firsts.len()];
+    let mut each: Vec<Rolled> = vec![None; tasks];
     for r in results {
-        for (c, o) in r? {
-            out[c] = Some(o);
+        for (t, o) in r? {
+            each[t] = Some(o);
         }
     }
-    Ok(out)
+    Ok(each.chunks(samples).map(combine).collect())
 }
 
-/// `first`'s rollout of `remaining` in `world` by the settings: once, or, robust, the mean of
-/// its noisy samples (the sample whose return is lowest stands for the rest, with the mean
-/// return, and succeeds only when every sample did). `None` when `deadline` cut it.
-fn evaluate(
-    lattice: &mut Lattice,
-    settings: &SearchSettings,
-    world: &PackingWorld,
-    remaining: &[TypeIdx],
-    first: Placement,
-    deadline: Option<Instant>,
-) -> Result<Option<CandidateOutcome>> {
-    let reward = settings.reward;
-    let Some(robust) = settings.robust.filter(|r| !r.noise.is_zero()) else {
-        return rollout_until(lattice, reward, world, remaining, first, deadline, None);
-    };
-    let samples = robust.samples.max(1);
-    let (mut sum, mut all, mut worst) = (0.0f32, true, None::<CandidateOutcome>);
-    for i in 0..samples {
-        let mut rng = ChaCha8Rng::seed_from_u64(ROBUST_SEED ^ i as u64);
-        let noise = Some((robust.noise, &mut rng));
-        let Some(o) = rollout_until(lattice, reward, world, remaining, first, deadline, noise)?
-        else {
-            return Ok(None);
-        };
-        sum += o.ret;
-        all &= o.success;
-        if worst.as_ref().is_none_or(|w| o.ret < w.ret) {
-            worst = Some(o);
+/// A candidate's outcome of its rollouts (one, or, robust, its samples in order): never
+/// started when none started; cut when one was cut or never started; else, robust, the mean
+/// return of the samples, and the sample whose return is lowest standing for the rest, a
+/// success only when every sample succeeded.
+fn combine(rolled: &[Rolled]) -> Rolled {
+    if rolled.iter().all(Option::is_none) {
+        return None;
+    }
+    let mut done = Vec::with_capacity(rolled.len());
+    for r in rolled {
+        match r {
+            Some(Some(o)) => done.push(*o),
+            _ => return Some(None),
         }
     }
-    Ok(worst.map(|mut o| {
-        o.ret = sum / samples as f32;
+    if let [o] = done[..] {
+        return Some(Some(o));
+    }
+    let sum: f32 = done.iter().map(|o| o.ret).sum();
+    let all = done.iter().all(|o| o.success);
+    let worst = done
+        .iter()
+        .copied()
+        .reduce(|w, o| if o.ret < w.ret { o } else { w });
+    Some(worst.map(|mut o| {
+        o.ret = sum / done.len() as f32;
         o.success = all;
         o
     }))

@@ -148,6 +148,11 @@ struct EvalArgs {
     /// rigid one (each object settles alone against the objects before it): for measurements.
     #[arg(long)]
     search_live_pile: bool,
+    /// The search's clearance for a gripper that does not release exactly: its candidates
+    /// (and its rollouts' placements) back off from the neighbour or wall they were pushed
+    /// against by up to this many cells of 6.25 mm, as far as there is room; 0: tight.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=4))]
+    search_gap: u64,
     /// The robust search: rollouts per candidate, every object of each released off its
     /// placement by `--search-noise` (the same draws for every candidate); 0: one rollout,
     /// exact releases.
@@ -539,6 +544,7 @@ impl EvalArgs {
             search_horizon: self.search_horizon.map(|h| h as usize),
             search_world: self.search_world.name().into(),
             search_live_pile: self.search_live_pile,
+            search_gap: self.search_gap as usize,
             search_samples: self.search_samples as usize,
             search_noise: self.search_noise,
             world: self.world.clone(),

@@ -195,6 +195,7 @@ fn probe(
         robust,
         rigid_pile: true,
         threads: 1,
+        push_gap: 0,
     };
     let kind = match mode {
         Mode::Twin | Mode::Blbf => TwinKind::Heightmap,

@@ -88,6 +88,9 @@ pub struct EvalSettings {
     /// The search's rollouts on a live pile instead of a rigid one
     /// (`SearchSettings::rigid_pile`; for measurements).
     pub search_live_pile: bool,
+    /// The search's clearance against what its candidates' pushes stopped at, in fine lattice
+    /// cells of 6.25 mm (`SearchSettings::push_gap`; 0: tight).
+    pub search_gap: usize,
     /// The robust search: rollouts per candidate under `search_noise` (0: one, exact releases).
     pub search_samples: usize,
     /// The release error the robust search assumes: sd in mm (x, y) and degrees (yaw).
@@ -120,6 +123,7 @@ impl Default for EvalSettings {
             search_horizon: None,
             search_world: TwinKind::Job.name().into(),
             search_live_pile: false,
+            search_gap: 0,
             search_samples: 0,
             search_noise: (5.0, 3.0),
             world: "ideal".into(),
@@ -261,6 +265,7 @@ impl EvalSettings {
                 ),
                 rigid_pile: !self.search_live_pile,
                 threads: self.search_threads,
+                push_gap: self.search_gap,
             },
             world: world.clone(),
         })
