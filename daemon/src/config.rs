@@ -161,7 +161,7 @@ pub enum DecisionMethod {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DecisionTwin {
-    /// A twin built from the latest heightmap alone: the pile as static cuboids.
+    /// A twin built from the latest heightmap alone: the pile as static convex pieces.
     Heightmap,
     /// The job's own twin (the default): the objects herbd decided in the job replayed at
     /// their release poses, each fitted to the heightmap that followed it; the heightmap twin
