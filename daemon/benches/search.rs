@@ -7,7 +7,8 @@
 //! budget) and for robust searches of 4 and 16 samples per candidate (16: more work than one
 //! thread finishes in the budget on any state).
 //!
-//! `cargo bench -p herb-daemon --bench search` (BoxED needed: mid-pack heightmaps of the first
+//! `cargo bench -p herb-daemon --bench search [-- TEXT]` (TEXT: only the cases whose label
+//! holds it; BoxED needed: mid-pack heightmaps of the first
 //! sessions, their humans' placements after a quarter, half and three quarters of the episode,
 //! the object after decided with the rest of the episode to come). Prints p50, p95, p99 and
 //! the maximum per budget. A bench binary rather than criterion: a decision takes up to a
@@ -100,6 +101,13 @@ fn main() {
         ("robust, 16 samples, 1.0 s, k = 64", 1.0, None, 64, 1, 16),
         ("robust, 16 samples, 1.0 s, k = 64", 1.0, None, 64, 2, 16),
     ] {
+        // `cargo bench -p herb-daemon --bench search -- TEXT`: only the cases whose label
+        // holds TEXT.
+        if let Some(only) = std::env::args().skip(1).find(|a| !a.starts_with('-'))
+            && !label.contains(&only)
+        {
+            continue;
+        }
         cfg.decision.budget_s = budget_s;
         cfg.decision.timeout_s = budget_s + 10.0;
         cfg.decision.k = k;
@@ -162,7 +170,7 @@ fn main() {
         let both: Vec<_> = one.iter().zip(two).filter(|(a, b)| a.1 && b.1).collect();
         let (a, b): (Vec<_>, Vec<_>) = both.iter().map(|(a, b)| (**a, **b)).unzip();
         println!(
-            "search, 1.0 s, k = 64, {samples} samples: two threads finish {:.2} x the rollouts of one over every decision, {:.2} x over the {} the budget ended on both",
+            "search, 1.0 s, k = 64, {samples} samples: two threads finish {:.3} x the rollouts of one over every decision, {:.3} x over the {} the budget ended on both",
             sum(two) / sum(one).max(f64::MIN_POSITIVE),
             sum(&b) / sum(&a).max(f64::MIN_POSITIVE),
             both.len()

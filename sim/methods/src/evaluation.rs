@@ -330,6 +330,10 @@ impl EvalSettings {
                 if self.search_live_pile {
                     extra += ", live pile";
                 }
+                if self.search_gap > 0 {
+                    let mm = self.search_gap as f32 * herb_sim::lattice::FINE_CELL_M * 1000.0;
+                    extra += &format!(", gap {mm:.2} mm");
+                }
                 format!("search ({budget}, k = {}, {world}{extra})", self.search_k)
             }
             (Method::Lookahead, _) => {
