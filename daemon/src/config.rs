@@ -157,6 +157,9 @@ pub enum DecisionMethod {
     Search,
 }
 
+/// The largest `[decision] gap` (cells of 6.25 mm): the lattice's pushes go 4 cells at most.
+pub const MAX_GAP_CELLS: usize = 4;
+
 /// The world the search's rollouts run in ([`herb_search::TwinKind`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -200,6 +203,10 @@ pub struct DecisionConfig {
     /// The release error the robust search assumes: standard deviation of the yaw (degrees,
     /// 0 to 45).
     pub release_error_deg: f64,
+    /// The search's clearance for a gripper that does not release exactly (0 to 4 cells of
+    /// 6.25 mm; 0: tight): each candidate pushed against a neighbour or a wall backs off by up
+    /// to this many cells, as far as there is room ([`herb_search::SearchSettings::push_gap`]).
+    pub gap: usize,
     /// A decision not back this long after it was asked for (s) faults the job (`Decision`):
     /// a hung worker never holds the arm.
     pub timeout_s: f64,
@@ -217,6 +224,7 @@ impl Default for DecisionConfig {
             samples: 0,
             release_error_mm: 5.0,
             release_error_deg: 3.0,
+            gap: 0,
             timeout_s: 10.0,
         }
     }
@@ -473,6 +481,9 @@ impl ConfigFile for Config {
                 return Err(format!("decision.{name} {v} outside 0..={max}").into());
             }
         }
+        if d.gap > MAX_GAP_CELLS {
+            return Err(format!("decision.gap {} outside 0..={MAX_GAP_CELLS}", d.gap).into());
+        }
         if d.horizon > herb_ipc::MAX_JOB_OBJECTS {
             return Err(format!(
                 "decision.horizon {} above the {} objects of a job",
@@ -584,6 +595,7 @@ mod tests {
             ("[decision]\nk = 65\n", "decision.k"),
             ("[decision]\nthreads = 65\n", "decision.threads"),
             ("[decision]\nsamples = 65\n", "decision.samples"),
+            ("[decision]\ngap = 5\n", "decision.gap"),
             (
                 "[decision]\nrelease_error_mm = -1.0\n",
                 "decision.release_error_mm",

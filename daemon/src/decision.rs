@@ -97,6 +97,7 @@ impl DecisionCore {
                         d.release_error_mm,
                         d.release_error_deg,
                     ),
+                    push_gap: d.gap,
                     ..SearchSettings::default()
                 };
                 // The twins release where the arm does: the same clearance.
