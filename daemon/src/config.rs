@@ -157,9 +157,6 @@ pub enum DecisionMethod {
     Search,
 }
 
-/// The largest `[decision] gap` (cells of 6.25 mm): the lattice's pushes go 4 cells at most.
-pub const MAX_GAP_CELLS: usize = 4;
-
 /// The world the search's rollouts run in ([`herb_search::TwinKind`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -481,8 +478,9 @@ impl ConfigFile for Config {
                 return Err(format!("decision.{name} {v} outside 0..={max}").into());
             }
         }
-        if d.gap > MAX_GAP_CELLS {
-            return Err(format!("decision.gap {} outside 0..={MAX_GAP_CELLS}", d.gap).into());
+        let max_gap = herb_core::lattice::MAX_PUSH_GAP;
+        if d.gap > max_gap {
+            return Err(format!("decision.gap {} outside 0..={max_gap}", d.gap).into());
         }
         if d.horizon > herb_ipc::MAX_JOB_OBJECTS {
             return Err(format!(

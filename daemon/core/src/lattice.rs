@@ -79,6 +79,10 @@ const FULL_CELL_M: f32 = crate::observation::ObsLayout::CELL_M;
 /// Most refinement-grid steps a tight candidate slides along each axis.
 const MAX_PUSH_STEPS: usize = 4;
 
+/// The largest gap [`Lattice::set_push_gap`] is given by herbd's configuration, the CLI and
+/// the sweeps (fine cells): as far as a push goes.
+pub const MAX_PUSH_GAP: usize = MAX_PUSH_STEPS;
+
 /// Flag: the footprint lies inside the walls.
 pub const INSIDE: u8 = 1;
 /// Flag: the estimated top is at most [`HEIGHT_LIMIT_M`].

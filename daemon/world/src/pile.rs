@@ -100,18 +100,9 @@ fn row_runs(g: &PileGrid<'_>, step_m: f32) -> Vec<ColliderBuilder> {
     out
 }
 
-/// Reused buffers of the pieces' growth.
-#[derive(Default)]
-struct Scratch {
-    points: Vec<Vector>,
-}
-
-/// A hull of a rectangle of cells that fits them: its vertices and triangles.
-type Hull = (Vec<Vector>, Vec<[u32; 3]>);
-
 fn pieces(g: &PileGrid<'_>, fit_m: f32) -> Vec<ColliderBuilder> {
     let mut taken = vec![false; g.nx * g.ny];
-    let mut s = Scratch::default();
+    let mut points = Vec::new();
     let mut out = Vec::new();
     let free = |taken: &[bool], row: usize, col: usize| {
         !taken[row * g.nx + col] && g.at(row, col) > PILE_FLOOR_M
@@ -131,7 +122,7 @@ fn pieces(g: &PileGrid<'_>, fit_m: f32) -> Vec<ColliderBuilder> {
                     && c1 - c0 < MAX_PIECE_CELLS
                     && (r0..r1).all(|r| free(&taken, r, c1));
                 if right {
-                    match fit(g, &mut s, r0, r1, c0, c1 + 1, fit_m) {
+                    match fit(g, &mut points, r0, r1, c0, c1 + 1, fit_m) {
                         Some(h) => {
                             hull = Some(h);
                             c1 += 1;
@@ -144,7 +135,7 @@ fn pieces(g: &PileGrid<'_>, fit_m: f32) -> Vec<ColliderBuilder> {
                     && r1 - r0 < MAX_PIECE_CELLS
                     && (c0..c1).all(|c| free(&taken, r1, c));
                 if down {
-                    match fit(g, &mut s, r0, r1 + 1, c0, c1, fit_m) {
+                    match fit(g, &mut points, r0, r1 + 1, c0, c1, fit_m) {
                         Some(h) => {
                             hull = Some(h);
                             r1 += 1;
@@ -159,12 +150,13 @@ fn pieces(g: &PileGrid<'_>, fit_m: f32) -> Vec<ColliderBuilder> {
             // parry touches a face through at most four of its vertices (see
             // `herb_core::hull::quad_faced_hull`): a flat top of many collinear edge points
             // would hold an object on a sliver, so the piece's faces are made quads.
-            let piece = hull.and_then(|(v, _)| {
+            let piece = hull.and_then(|v| {
                 let (_, _, poly) = herb_core::hull::quad_faced_hull(&v).ok()?;
                 Some(ColliderBuilder::new(SharedShape::new(poly)))
             });
             out.push(piece.unwrap_or_else(|| {
-                // One cell (or a hull rapier refused): columns at each cell's own height.
+                // One cell (or a hull that could not be made quad-faced): one cuboid up to the
+                // rectangle's highest cell.
                 let top = (r0..r1)
                     .flat_map(|r| (c0..c1).map(move |c| (r, c)))
                     .map(|(r, c)| g.at(r, c))
@@ -176,21 +168,21 @@ fn pieces(g: &PileGrid<'_>, fit_m: f32) -> Vec<ColliderBuilder> {
     out
 }
 
-/// The convex hull of the cells `r0..r1` x `c0..c1` (their tops: each grid vertex at the
+/// The vertices of the convex hull of the cells `r0..r1` x `c0..c1` (their tops: each grid vertex at the
 /// highest of its cells in the rectangle, and the rectangle's floor corners), if its top is
 /// within `fit_m` of every cell's own height at the cell's centre. It is never below a cell:
 /// the top of a convex body is a concave function, so over each cell it is at least the least
 /// of the cell's corners, each at least the cell's height.
 fn fit(
     g: &PileGrid<'_>,
-    s: &mut Scratch,
+    points: &mut Vec<Vector>,
     r0: usize,
     r1: usize,
     c0: usize,
     c1: usize,
     fit_m: f32,
-) -> Option<Hull> {
-    s.points.clear();
+) -> Option<Vec<Vector>> {
+    points.clear();
     for vr in r0..=r1 {
         for vc in c0..=c1 {
             let mut top = 0.0f32;
@@ -199,13 +191,13 @@ fn fit(
                     top = top.max(g.at(row, col));
                 }
             }
-            s.points.push(Vector::new(g.x(vc), g.y(vr), top));
+            points.push(Vector::new(g.x(vc), g.y(vr), top));
         }
     }
     for (vr, vc) in [(r0, c0), (r0, c1), (r1, c0), (r1, c1)] {
-        s.points.push(Vector::new(g.x(vc), g.y(vr), 0.0));
+        points.push(Vector::new(g.x(vc), g.y(vr), 0.0));
     }
-    let (v, t) = rapier3d::parry::transformation::try_convex_hull(&s.points).ok()?;
+    let (v, t) = rapier3d::parry::transformation::try_convex_hull(points).ok()?;
     if t.is_empty() {
         return None;
     }
@@ -234,7 +226,7 @@ fn fit(
             }
         }
     }
-    Some((v, t))
+    Some(v)
 }
 
 #[cfg(test)]

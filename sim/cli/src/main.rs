@@ -151,7 +151,8 @@ struct EvalArgs {
     /// The search's clearance for a gripper that does not release exactly: its candidates
     /// (and its rollouts' placements) back off from the neighbour or wall they were pushed
     /// against by up to this many cells of 6.25 mm, as far as there is room; 0: tight.
-    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=4))]
+    #[arg(long, default_value_t = 0,
+          value_parser = clap::value_parser!(u64).range(0..=herb_sim::lattice::MAX_PUSH_GAP as u64))]
     search_gap: u64,
     /// The robust search: rollouts per candidate, every object of each released off its
     /// placement by `--search-noise` (the same draws for every candidate); 0: one rollout,

@@ -170,6 +170,10 @@ impl EvalSettings {
             )
             .into());
         }
+        let max_gap = herb_sim::lattice::MAX_PUSH_GAP;
+        if self.search_gap > max_gap {
+            return Err(format!("search_gap {}: need 0 to {max_gap}", self.search_gap).into());
+        }
         if !(1..=64).contains(&self.search_threads) {
             return Err(format!("search_threads {}: need 1 to 64", self.search_threads).into());
         }
