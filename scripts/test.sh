@@ -10,7 +10,10 @@ cd "$(dirname "$0")/.."
 ROOT=$PWD
 # The systemd units' sandbox (exposure) and the sysusers.d/tmpfiles.d files, offline.
 scripts/check-units.sh
-cargo test --workspace
+# Every test target (libraries', binaries' and integration tests), then the doc tests: the
+# examples are not built here (clippy --all-targets checks that they compile).
+cargo test --workspace --tests
+cargo test --workspace --doc
 VENV=${HERB_VENV:-$ROOT/.venv}
 [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
 "$VENV/bin/pip" install -q --disable-pip-version-check maturin numpy gymnasium pytest ray tqdm

@@ -1,7 +1,7 @@
 """The sweep runner (`herb_sim.sweep`) on a local Ray runtime of 2 CPUs.
 
 Its per-episode CSV equals `herb-sim eval`'s for BLBF, the shipped policy cs06 and the search
-with a count of rollouts on 20 BoxED episodes (in batches of 7: the seeds do not depend on the
+with a count of rollouts on 8 BoxED episodes (in batches of 3: the seeds do not depend on the
 batch); a resumed sweep runs no finished task again; a task whose worker is killed is run again
 by Ray with the same result. The `latency_mean_ms` column is a measured time and is left out of
 the comparisons.
@@ -55,18 +55,18 @@ def test_the_sweeps_episodes_are_herb_sim_evals(tmp_path, local_ray):
     boxed = boxed_root()
     cli_csv = tmp_path / "cli.csv"
     cmd = [str(BIN / "herb-sim"), "--boxed", boxed, "--quiet", "eval", "--method", "blbf", "--method", "herb",
-           "--policy", "cs06", "--method", "search", "--search-rollouts", "2", "--limit", "20", "--threads", "2",
+           "--policy", "cs06", "--method", "search", "--search-rollouts", "2", "--limit", "8", "--threads", "2",
            "--out", str(tmp_path / "cli.md"), "--csv", str(cli_csv), "--plots", str(tmp_path / "plots")]
     done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr
-    spec = {"batch": 7, "boxed": boxed, "episodes": [{"set": "boxed", "limit": 20}],
+    spec = {"batch": 3, "boxed": boxed, "episodes": [{"set": "boxed", "limit": 8}],
             "rows": [{"method": "blbf"}, {"method": "herb", "policy": "cs06"},
                      {"method": "search", "settings": {"search_rollouts": 2}}]}
     out = tmp_path / "sweep"
     r = sweep.run_sweep(spec, out, progress=False, base=REPO)
     assert (r["tasks"], r["ran"], r["cached"]) == (9, 9, 0), r
     expected = rows_without_latency(cli_csv)
-    assert len(expected) == 1 + 3 * 20
+    assert len(expected) == 1 + 3 * 8
     got_runs = sorted(out.glob("runs/*/table1.csv"))
     got = [rows_without_latency(p) for p in got_runs]
     assert all(g[0] == expected[0] for g in got)
