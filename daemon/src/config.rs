@@ -204,6 +204,11 @@ pub struct DecisionConfig {
     /// 6.25 mm; 0: tight): each candidate pushed against a neighbour or a wall backs off by up
     /// to this many cells, as far as there is room ([`herb_search::SearchSettings::push_gap`]).
     pub gap: usize,
+    /// The search's clearance from the walls for objects that stand above the box's rim, where
+    /// a wall no longer holds one released off its placement (0 to 4 cells of 6.25 mm; 0:
+    /// none): each candidate within this many cells of a wall moves away from it, as far as
+    /// there is room ([`herb_search::SearchSettings::wall_gap`]).
+    pub wall_gap: usize,
     /// A decision not back this long after it was asked for (s) faults the job (`Decision`):
     /// a hung worker never holds the arm.
     pub timeout_s: f64,
@@ -222,6 +227,7 @@ impl Default for DecisionConfig {
             release_error_mm: 5.0,
             release_error_deg: 3.0,
             gap: 0,
+            wall_gap: 0,
             timeout_s: 10.0,
         }
     }
@@ -482,6 +488,9 @@ impl ConfigFile for Config {
         if d.gap > max_gap {
             return Err(format!("decision.gap {} outside 0..={max_gap}", d.gap).into());
         }
+        if d.wall_gap > max_gap {
+            return Err(format!("decision.wall_gap {} outside 0..={max_gap}", d.wall_gap).into());
+        }
         if d.horizon > herb_ipc::MAX_JOB_OBJECTS {
             return Err(format!(
                 "decision.horizon {} above the {} objects of a job",
@@ -594,6 +603,7 @@ mod tests {
             ("[decision]\nthreads = 65\n", "decision.threads"),
             ("[decision]\nsamples = 65\n", "decision.samples"),
             ("[decision]\ngap = 5\n", "decision.gap"),
+            ("[decision]\nwall_gap = 9\n", "decision.wall_gap"),
             (
                 "[decision]\nrelease_error_mm = -1.0\n",
                 "decision.release_error_mm",

@@ -98,6 +98,7 @@ impl DecisionCore {
                         d.release_error_deg,
                     ),
                     push_gap: d.gap,
+                    wall_gap: d.wall_gap,
                     ..SearchSettings::default()
                 };
                 // The twins release where the arm does: the same clearance.

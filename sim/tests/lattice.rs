@@ -423,3 +423,46 @@ fn a_push_gap_backs_each_tight_candidate_off_its_walls_by_one_fine_cell() {
         );
     }
 }
+
+/// The search's clearance from the walls above the rim (`Lattice::set_wall_gap`): on an empty
+/// floor a tall object (its top above the rim) keeps two fine cells from the walls its tight
+/// candidates were pushed against, at the same height; a short one (below the rim, held by the
+/// walls) is placed as without the clearance.
+#[test]
+fn a_wall_gap_keeps_objects_above_the_rim_off_the_walls_and_leaves_the_others() {
+    use herb_sim::frames::BOX_HEIGHT;
+    use herb_sim::lattice::FINE_CELL_M;
+    let c = common::primitives();
+    let w = common::world(&c);
+    let candidates = |id: &str, gap| {
+        let mut l = Lattice::new(&c);
+        l.set_wall_gap(gap);
+        l.compute(w.heightmap(), &c, c.by_id(id).unwrap());
+        let mut t = l.candidates().to_vec();
+        t.sort_by_key(|p| (p.yaw, p.node, p.tight));
+        t
+    };
+    // The cracker box stands 21.5 cm, above the 16.4 cm rim.
+    let (none, two) = (candidates("003", 0), candidates("003", 2));
+    assert!(none.iter().any(|p| p.tight));
+    assert_eq!(none.len(), two.len());
+    for (a, b) in none.iter().zip(&two) {
+        assert!(a.top > BOX_HEIGHT, "{a:?}");
+        assert_eq!((a.yaw, a.node, a.tight), (b.yaw, b.node, b.tight));
+        assert!((a.rest_z - b.rest_z).abs() < 1e-6, "{a:?} {b:?}");
+        assert!(b.x.abs() <= a.x.abs() + 1e-6 && b.y.abs() <= a.y.abs() + 1e-6);
+        if a.tight {
+            // Against both walls of its corner: two cells nearer the centre along each axis.
+            for (da, db) in [(a.x, b.x), (a.y, b.y)] {
+                assert!(
+                    ((da.abs() - db.abs()) - 2.0 * FINE_CELL_M).abs() < 1e-5,
+                    "{a:?} {b:?}"
+                );
+            }
+        }
+    }
+    // The soup can stands under the rim: the walls hold it, no clearance.
+    let (none, two) = (candidates("005", 0), candidates("005", 2));
+    assert!(!none.is_empty() && none.iter().all(|p| p.top <= BOX_HEIGHT));
+    assert_eq!(none, two);
+}

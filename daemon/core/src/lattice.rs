@@ -49,7 +49,7 @@
 //! Allocation happens in [`Lattice::new`] only.
 
 use crate::catalog::{Catalog, ObjectShape, TypeIdx};
-use crate::frames::{BOX_HALF_X, BOX_HALF_Y, SUCCESS_TOP_Z};
+use crate::frames::{BOX_HALF_X, BOX_HALF_Y, BOX_HEIGHT, SUCCESS_TOP_Z};
 use crate::heightmap::{GridSpec, Heightmap};
 use crate::zestimate::{ZScratch, bottom_footprint, pool_footprint, rest_height, support_fraction};
 use parry3d::math::{Rotation, Vector};
@@ -154,6 +154,9 @@ pub struct Lattice {
     candidates: Vec<Placement>,
     /// Fine cells a tight candidate backs off from what stopped its push ([`Lattice::set_push_gap`]).
     push_gap: usize,
+    /// Fine cells a candidate standing above the rim keeps from the walls
+    /// ([`Lattice::set_wall_gap`]).
+    wall_gap: usize,
 }
 
 /// One shape's footprints at one yaw: its bottom min-pooled to the lattice and to the
@@ -250,6 +253,7 @@ impl Lattice {
             flags: vec![0; n],
             candidates: Vec::with_capacity(4 * MAX_CANDIDATES),
             push_gap: 0,
+            wall_gap: 0,
         }
     }
 
@@ -346,6 +350,19 @@ impl Lattice {
     /// Takes effect at the next [`Lattice::compute`].
     pub fn set_push_gap(&mut self, fine_cells: usize) {
         self.push_gap = fine_cells;
+        self.candidates.clear();
+    }
+
+    /// A clearance from the walls for objects that stand above the box's rim, where a wall no
+    /// longer holds an object released a few millimetres off, nor one that tilts: each
+    /// candidate (loose or tight) whose estimated top is above [`BOX_HEIGHT`] and whose
+    /// footprint is within `fine_cells` cells of [`FINE_CELL_M`] of a wall moves away from that
+    /// wall, a cell at a time up to that distance, as far as its top does not rise (less where
+    /// there is no room). Below the rim the wall itself holds the object: no clearance. 0 (the
+    /// default, and every rule of Table I): none. Takes effect at the next
+    /// [`Lattice::compute`].
+    pub fn set_wall_gap(&mut self, fine_cells: usize) {
+        self.wall_gap = fine_cells;
         self.candidates.clear();
     }
 
@@ -565,6 +582,8 @@ impl Lattice {
                 }
             }
         }
+        // Clear of the walls above the rim (`wall_gap`).
+        let (c, r, _) = self.clear_walls(fp, (lo, hi), c, r, z);
         let (x, y, z) = top_at(c, r)?;
         Some(Placement {
             x,
@@ -616,11 +635,79 @@ impl Lattice {
                 }
             }
         }
-        // Support (not part of the order) for the winner only.
-        best.map(|(p, c, r)| Placement {
-            support: support_fraction(&self.fine, fp, c, r, p.rest_z, SUPPORT_TOL_M),
-            ..p
+        // Clear of the walls above the rim (`wall_gap`), then support (not part of the
+        // order) for the winner only.
+        best.map(|(p, c, r)| {
+            let (c, r, z) = self.clear_walls(fp, (lo, hi), c, r, p.rest_z);
+            let (x, y) = fs.cell_centre(c as usize, r as usize);
+            Placement {
+                x,
+                y,
+                rest_z: z,
+                top: z + fp.top(),
+                support: support_fraction(&self.fine, fp, c, r, z, SUPPORT_TOL_M),
+                ..p
+            }
         })
+    }
+
+    /// Fine cell `(c, r)`, where footprint `fp` with bounds `(lo, hi)` rests at `z`, moved
+    /// away from each wall it is within `wall_gap` cells of when its top stands above the rim
+    /// ([`Lattice::set_wall_gap`]): a cell at a time, while its rest height does not rise.
+    fn clear_walls(
+        &self,
+        fp: &ZScratch,
+        (lo, hi): (Vector, Vector),
+        mut c: isize,
+        mut r: isize,
+        mut z: f32,
+    ) -> (isize, isize, f32) {
+        if self.wall_gap == 0 || z + fp.top() <= BOX_HEIGHT {
+            return (c, r, z);
+        }
+        let fs = self.fine_spec;
+        let m = self.wall_gap as f32 * FINE_CELL_M;
+        // The step away from the wall `(c, r)` is near along each axis (0: near neither, or
+        // both). +x is +column, +y is -row.
+        let away = |c: isize, r: isize| -> (isize, isize) {
+            let (x, y) = fs.cell_centre(c as usize, r as usize);
+            let dc = match (x + lo.x < -BOX_HALF_X + m, x + hi.x > BOX_HALF_X - m) {
+                (true, false) => 1,
+                (false, true) => -1,
+                _ => 0,
+            };
+            let dr = match (y + lo.y < -BOX_HALF_Y + m, y + hi.y > BOX_HALF_Y - m) {
+                (true, false) => -1,
+                (false, true) => 1,
+                _ => 0,
+            };
+            (dc, dr)
+        };
+        let (dc, dr) = away(c, r);
+        for (ac, ar) in [(dc, 0), (0, dr)] {
+            if (ac, ar) == (0, 0) {
+                continue;
+            }
+            for _ in 0..self.wall_gap {
+                let (nc, nr) = away(c, r);
+                if (ac != 0 && nc != ac) || (ar != 0 && nr != ar) {
+                    break; // clear of that wall
+                }
+                let (c2, r2) = (c + ac, r + ar);
+                if c2 < 0 || r2 < 0 || c2 as usize >= fs.nx || r2 as usize >= fs.ny {
+                    break;
+                }
+                let (x2, y2) = fs.cell_centre(c2 as usize, r2 as usize);
+                if !inside_walls(x2, y2, lo, hi) {
+                    break;
+                }
+                match rest_height(&self.fine, fp, c2, r2) {
+                    Some(zn) if zn <= z + 1e-4 => (c, r, z) = (c2, r2, zn),
+                    _ => break,
+                }
+            }
+        }
+        (c, r, z)
     }
 }
 

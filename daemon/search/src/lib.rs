@@ -141,6 +141,10 @@ pub struct SearchSettings {
     /// their push stopped at, in fine lattice cells of 6.25 mm
     /// ([`Lattice::set_push_gap`]; 0: tight).
     pub push_gap: usize,
+    /// The clearance from the walls the candidates (and the rollouts' own placements) keep
+    /// where they stand above the rim, in fine lattice cells of 6.25 mm
+    /// ([`Lattice::set_wall_gap`]; 0: none).
+    pub wall_gap: usize,
 }
 
 impl Default for SearchSettings {
@@ -156,6 +160,7 @@ impl Default for SearchSettings {
             rigid_pile: true,
             threads: 1,
             push_gap: 0,
+            wall_gap: 0,
         }
     }
 }
@@ -285,6 +290,7 @@ impl Search {
         let lattice = || {
             let mut l = Lattice::new(&catalog);
             l.set_push_gap(settings.push_gap);
+            l.set_wall_gap(settings.wall_gap);
             l
         };
         Self {

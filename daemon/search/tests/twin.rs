@@ -81,6 +81,7 @@ fn the_search_is_anytime_and_never_worse_than_its_prior_on_its_own_rollouts() {
         rigid_pile: true,
         threads: 1,
         push_gap: 0,
+        wall_gap: 0,
     };
     let mut s = Search::new(
         c.clone(),
@@ -233,6 +234,7 @@ fn pack_with(
         rigid_pile: true,
         threads: 1,
         push_gap: 0,
+        wall_gap: 0,
     };
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
     let mut out = Vec::new();
@@ -286,6 +288,7 @@ fn the_jobs_twin_replays_its_decisions_and_falls_back_where_the_heightmap_disagr
         rigid_pile: true,
         threads: 1,
         push_gap: 0,
+        wall_gap: 0,
     };
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings(TwinKind::Job));
     let p = s.decide(world.heightmap(), &remaining, None).unwrap();
@@ -322,6 +325,7 @@ fn the_jobs_twin_leaves_out_an_object_never_released_and_forgets_a_finished_job(
         rigid_pile: true,
         threads: 1,
         push_gap: 0,
+        wall_gap: 0,
     };
     let empty = PackingWorld::new(c.clone(), WorldConfig::default()).unwrap();
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
@@ -368,6 +372,7 @@ fn the_robust_search_ranks_by_noisy_rollouts_that_a_replay_draws_again() {
             rigid_pile: true,
             threads: 1,
             push_gap: 0,
+            wall_gap: 0,
         };
         let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
         let p = s.decide(world.heightmap(), &remaining, None).unwrap();
@@ -410,6 +415,7 @@ fn the_candidates_come_from_the_jobs_twin_where_the_camera_agrees_and_from_the_c
         rigid_pile: true,
         threads: 1,
         push_gap: 0,
+        wall_gap: 0,
     };
     let mut world = PackingWorld::new(c.clone(), WorldConfig::default()).unwrap();
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings);

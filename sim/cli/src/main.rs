@@ -154,6 +154,12 @@ struct EvalArgs {
     #[arg(long, default_value_t = 0,
           value_parser = clap::value_parser!(u64).range(0..=herb_sim::lattice::MAX_PUSH_GAP as u64))]
     search_gap: u64,
+    /// The search's clearance from the walls for objects that stand above the rim, where the
+    /// wall no longer holds one released off its placement: candidates within this many cells
+    /// of 6.25 mm of a wall move away from it, as far as there is room; 0: none.
+    #[arg(long, default_value_t = 0,
+          value_parser = clap::value_parser!(u64).range(0..=herb_sim::lattice::MAX_PUSH_GAP as u64))]
+    search_wall_gap: u64,
     /// The robust search: rollouts per candidate, every object of each released off its
     /// placement by `--search-noise` (the same draws for every candidate); 0: one rollout,
     /// exact releases.
@@ -546,6 +552,7 @@ impl EvalArgs {
             search_world: self.search_world.name().into(),
             search_live_pile: self.search_live_pile,
             search_gap: self.search_gap as usize,
+            search_wall_gap: self.search_wall_gap as usize,
             search_samples: self.search_samples as usize,
             search_noise: self.search_noise,
             world: self.world.clone(),

@@ -196,6 +196,7 @@ fn probe(
         rigid_pile: true,
         threads: 1,
         push_gap: 0,
+        wall_gap: 0,
     };
     let kind = match mode {
         Mode::Twin | Mode::Blbf => TwinKind::Heightmap,

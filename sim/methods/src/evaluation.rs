@@ -91,6 +91,9 @@ pub struct EvalSettings {
     /// The search's clearance against what its candidates' pushes stopped at, in fine lattice
     /// cells of 6.25 mm (`SearchSettings::push_gap`; 0: tight).
     pub search_gap: usize,
+    /// The search's clearance from the walls where its candidates stand above the rim, in
+    /// fine lattice cells of 6.25 mm (`SearchSettings::wall_gap`; 0: none).
+    pub search_wall_gap: usize,
     /// The robust search: rollouts per candidate under `search_noise` (0: one, exact releases).
     pub search_samples: usize,
     /// The release error the robust search assumes: sd in mm (x, y) and degrees (yaw).
@@ -124,6 +127,7 @@ impl Default for EvalSettings {
             search_world: TwinKind::Job.name().into(),
             search_live_pile: false,
             search_gap: 0,
+            search_wall_gap: 0,
             search_samples: 0,
             search_noise: (5.0, 3.0),
             world: "ideal".into(),
@@ -173,6 +177,13 @@ impl EvalSettings {
         let max_gap = herb_sim::lattice::MAX_PUSH_GAP;
         if self.search_gap > max_gap {
             return Err(format!("search_gap {}: need 0 to {max_gap}", self.search_gap).into());
+        }
+        if self.search_wall_gap > max_gap {
+            return Err(format!(
+                "search_wall_gap {}: need 0 to {max_gap}",
+                self.search_wall_gap
+            )
+            .into());
         }
         if !(1..=64).contains(&self.search_threads) {
             return Err(format!("search_threads {}: need 1 to 64", self.search_threads).into());
@@ -270,6 +281,7 @@ impl EvalSettings {
                 rigid_pile: !self.search_live_pile,
                 threads: self.search_threads,
                 push_gap: self.search_gap,
+                wall_gap: self.search_wall_gap,
             },
             world: world.clone(),
         })
@@ -337,6 +349,10 @@ impl EvalSettings {
                 if self.search_gap > 0 {
                     let mm = self.search_gap as f32 * herb_sim::lattice::FINE_CELL_M * 1000.0;
                     extra += &format!(", gap {mm:.2} mm");
+                }
+                if self.search_wall_gap > 0 {
+                    let mm = self.search_wall_gap as f32 * herb_sim::lattice::FINE_CELL_M * 1000.0;
+                    extra += &format!(", walls {mm:.2} mm above the rim");
                 }
                 format!("search ({budget}, k = {}, {world}{extra})", self.search_k)
             }
