@@ -536,17 +536,7 @@ impl Lattice {
         let (lo, hi) = fps.bounds;
         let (u, v) = fs.to_pixel(from.x, from.y);
         let (mut c, mut r) = (u.floor() as isize, v.floor() as isize);
-        let top_at = |c: isize, r: isize| -> Option<(f32, f32, f32)> {
-            if c < 0 || r < 0 || c as usize >= fs.nx || r as usize >= fs.ny {
-                return None;
-            }
-            let (x, y) = fs.cell_centre(c as usize, r as usize);
-            if !inside_walls(x, y, lo, hi) {
-                return None;
-            }
-            let z = rest_height(&self.fine, fp, c, r)?;
-            Some((x, y, z))
-        };
+        let top_at = |c: isize, r: isize| self.rest_at(fp, (lo, hi), c, r);
         let (_, _, z0) = top_at(c, r)?;
         let mut z = z0;
         // +x is +column, +y is -row: towards -sx in x, towards -sy in y.
@@ -610,14 +600,7 @@ impl Lattice {
         let mut best: Option<(Placement, isize, isize)> = None;
         for r in r0 - 1..=r0 + 1 {
             for c in c0 - 1..=c0 + 1 {
-                if c < 0 || r < 0 || c as usize >= fs.nx || r as usize >= fs.ny {
-                    continue;
-                }
-                let (fx, fy) = fs.cell_centre(c as usize, r as usize);
-                if !inside_walls(fx, fy, lo, hi) {
-                    continue;
-                }
-                let Some(z) = rest_height(&self.fine, fp, c, r) else {
+                let Some((fx, fy, z)) = self.rest_at(fp, (lo, hi), c, r) else {
                     continue;
                 };
                 let p = Placement {
@@ -649,6 +632,27 @@ impl Lattice {
                 ..p
             }
         })
+    }
+
+    /// Where footprint `fp` with bounds `(lo, hi)` rests with its origin at the centre of fine
+    /// cell `(c, r)`: `(x, y, z)`, or `None` off the grid, across a wall, or with no cell
+    /// centre under the footprint. Shared by the refinement, the push and the clearances.
+    fn rest_at(
+        &self,
+        fp: &ZScratch,
+        (lo, hi): (Vector, Vector),
+        c: isize,
+        r: isize,
+    ) -> Option<(f32, f32, f32)> {
+        let fs = self.fine_spec;
+        if c < 0 || r < 0 || c as usize >= fs.nx || r as usize >= fs.ny {
+            return None;
+        }
+        let (x, y) = fs.cell_centre(c as usize, r as usize);
+        if !inside_walls(x, y, lo, hi) {
+            return None;
+        }
+        Some((x, y, rest_height(&self.fine, fp, c, r)?))
     }
 
     /// Fine cell `(c, r)`, where footprint `fp` with bounds `(lo, hi)` rests at `z`, moved
@@ -693,16 +697,8 @@ impl Lattice {
                 if (ac != 0 && nc != ac) || (ar != 0 && nr != ar) {
                     break; // clear of that wall
                 }
-                let (c2, r2) = (c + ac, r + ar);
-                if c2 < 0 || r2 < 0 || c2 as usize >= fs.nx || r2 as usize >= fs.ny {
-                    break;
-                }
-                let (x2, y2) = fs.cell_centre(c2 as usize, r2 as usize);
-                if !inside_walls(x2, y2, lo, hi) {
-                    break;
-                }
-                match rest_height(&self.fine, fp, c2, r2) {
-                    Some(zn) if zn <= z + 1e-4 => (c, r, z) = (c2, r2, zn),
+                match self.rest_at(fp, (lo, hi), c + ac, r + ar) {
+                    Some((_, _, zn)) if zn <= z + 1e-4 => (c, r, z) = (c + ac, r + ar, zn),
                     _ => break,
                 }
             }
