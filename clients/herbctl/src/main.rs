@@ -49,7 +49,7 @@ enum Cmd {
         picture: Option<PathBuf>,
         /// Give up after this many seconds, submitting included: a running job is cancelled
         /// (exit 1).
-        #[arg(long, default_value_t = 900.0)]
+        #[arg(long, default_value_t = 900.0, value_parser = seconds, allow_negative_numbers = true)]
         timeout: f64,
         /// Print the summary as one JSON line.
         #[arg(long)]
@@ -61,11 +61,11 @@ enum Cmd {
         operator: bool,
         /// With `--operator`: confirm by itself this many seconds after asking, instead of
         /// waiting for Enter.
-        #[arg(long, requires = "operator")]
+        #[arg(long, requires = "operator", value_parser = seconds, allow_negative_numbers = true)]
         operator_wait: Option<f64>,
         /// When herbd goes silent, wait this long (s) for it to come back with the job (a
         /// restarted herbd takes an unfinished job up from its journal); 0 gives up at once.
-        #[arg(long, default_value_t = 60.0)]
+        #[arg(long, default_value_t = 60.0, value_parser = seconds, allow_negative_numbers = true)]
         reconnect: f64,
         /// Return once herbd accepted the job, leaving it running: print its id, how to follow
         /// it (`herbctl watch`) and how to cancel it (`herbctl cancel --job ID`).
@@ -76,7 +76,7 @@ enum Cmd {
     /// while herbd runs a job.
     Reset {
         /// Give up after this many seconds.
-        #[arg(long, default_value_t = 5.0)]
+        #[arg(long, default_value_t = 5.0, value_parser = seconds, allow_negative_numbers = true)]
         timeout: f64,
     },
     /// Cancel the running job: the arm brakes, retreats straight up and the job ends
@@ -86,17 +86,17 @@ enum Cmd {
         #[arg(long)]
         job: Option<u64>,
         /// Give up after this many seconds.
-        #[arg(long, default_value_t = 30.0)]
+        #[arg(long, default_value_t = 30.0, value_parser = seconds, allow_negative_numbers = true)]
         timeout: f64,
     },
     /// A live view of herbd: job progress, the last decision, loop statistics, faults, the
     /// simulated box, recent events. Ctrl-C quits.
     Watch {
         /// Seconds between redraws.
-        #[arg(long, default_value_t = 0.25)]
+        #[arg(long, default_value_t = 0.25, value_parser = seconds, allow_negative_numbers = true)]
         period: f64,
         /// Quit after this many seconds (default: run until Ctrl-C).
-        #[arg(long)]
+        #[arg(long, value_parser = seconds, allow_negative_numbers = true)]
         duration: Option<f64>,
         /// Print each view below the previous one instead of redrawing the screen.
         #[arg(long)]
@@ -110,9 +110,24 @@ enum Cmd {
     /// Print the daemon's next heartbeat.
     Status {
         /// Give up after this many seconds.
-        #[arg(long, default_value_t = 5.0)]
+        #[arg(long, default_value_t = 5.0, value_parser = seconds, allow_negative_numbers = true)]
         timeout: f64,
     },
+}
+
+/// A duration given on the command line: a finite number of seconds, at least 0 and at most a
+/// year (so it always converts to a [`Duration`]). Negative numbers reach this parser (rather
+/// than being taken for flags) so that they are refused by the option's name.
+fn seconds(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| "give a number of seconds".to_string())?;
+    if v.is_finite() && (0.0..=365.0 * 86_400.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err("give a number of seconds from 0 to a year".into())
+    }
 }
 
 /// Type `t`'s catalog id and name (`-` if none).
@@ -353,7 +368,16 @@ fn catalog_json(cli: &Cli) -> Result<bool, String> {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        // --help and --version print to stdout and exit 0, as clap does.
+        Err(e) if !e.use_stderr() => e.exit(),
+        Err(e) => {
+            // clap's message names the option and the value ("error: invalid value ...").
+            eprint!("herbctl: {e}");
+            return ExitCode::from(2);
+        }
+    };
     let catalog = match Catalog::builtin(&paths::MeshSource::None("herbctl needs no meshes".into()))
     {
         Ok(c) => c,
