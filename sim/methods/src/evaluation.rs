@@ -346,6 +346,9 @@ impl EvalSettings {
                 if self.search_live_pile {
                     extra += ", live pile";
                 }
+                if self.lookahead_reward != Self::default().lookahead_reward {
+                    extra += &format!(", ranked by {}", self.lookahead_reward);
+                }
                 if self.search_gap > 0 {
                     let mm = self.search_gap as f32 * herb_sim::lattice::FINE_CELL_M * 1000.0;
                     extra += &format!(", gap {mm:.2} mm");
