@@ -219,14 +219,14 @@ impl Default for DecisionConfig {
         Self {
             method: DecisionMethod::Search,
             budget_s: 1.0,
-            k: 8,
+            k: herb_search::DEFAULT_K,
             horizon: 0,
             twin: DecisionTwin::Job,
             threads: 0,
             samples: 0,
             release_error_mm: 5.0,
             release_error_deg: 3.0,
-            gap: 0,
+            gap: herb_search::DEFAULT_GAP,
             wall_gap: 0,
             timeout_s: 10.0,
         }

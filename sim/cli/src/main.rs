@@ -123,13 +123,13 @@ struct EvalArgs {
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     lookahead_horizon: Option<u64>,
     /// Rollouts the search may run per decision (its budget as a count: rows reproduce).
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = herb_search::DEFAULT_K)]
     search_rollouts: usize,
     /// The search's budget as a time per decision (s) instead of a count of rollouts.
     #[arg(long)]
     search_time_s: Option<f64>,
     /// Candidates the search considers at most, in lattice BLBF's order.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = herb_search::DEFAULT_K)]
     search_k: usize,
     /// Threads each search decision's rollouts run on (episodes already run in parallel on
     /// `--threads`): the rows are the same whatever the count with a budget of rollouts.
@@ -151,7 +151,7 @@ struct EvalArgs {
     /// The search's clearance for a gripper that does not release exactly: its candidates
     /// (and its rollouts' placements) back off from the neighbour or wall they were pushed
     /// against by up to this many cells of 6.25 mm, as far as there is room; 0: tight.
-    #[arg(long, default_value_t = 0,
+    #[arg(long, default_value_t = herb_search::DEFAULT_GAP as u64,
           value_parser = clap::value_parser!(u64).range(0..=herb_sim::lattice::MAX_PUSH_GAP as u64))]
     search_gap: u64,
     /// The search's clearance from the walls for objects that stand above the rim, where the
