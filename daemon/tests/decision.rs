@@ -62,7 +62,8 @@ fn request(objects: &[u16]) -> DecisionRequest {
 #[test]
 fn a_search_with_no_budget_takes_the_priors_first_and_says_so() {
     let c = catalog();
-    let mut core = DecisionCore::new(&config(DecisionMethod::Search, 0.0), c.clone()).unwrap();
+    let cfg = config(DecisionMethod::Search, 0.0);
+    let mut core = DecisionCore::new(&cfg, c.clone()).unwrap();
     let f = frame(0.04);
     let d = core.decide(&request(&[5, 9, 11]), &f, None);
     assert_eq!(d.allowed, 0, "no rollout finished");
@@ -71,6 +72,8 @@ fn a_search_with_no_budget_takes_the_priors_first_and_says_so() {
     let spec = GridSpec::for_box(ObsLayout::CELL_M).unwrap();
     let hm = Heightmap::from_data(spec, f.cells().to_vec()).unwrap();
     let mut lattice = Lattice::new(&c);
+    // The search's lattice leaves its configured gap.
+    lattice.set_push_gap(cfg.decision.gap);
     lattice.compute(&hm, &c, TypeIdx(5));
     let first = lattice.candidates()[0];
     assert!((pose[0] - first.x).abs() < 1e-5 && (pose[1] - first.y).abs() < 1e-5);
