@@ -279,6 +279,14 @@ impl DecisionCore {
         }
     }
 
+    /// The search's settings (`None` for a policy).
+    pub fn search_settings(&self) -> Option<&SearchSettings> {
+        match &self.method {
+            Method::Search(s) => Some(s.policy().settings()),
+            Method::Policy(_) => None,
+        }
+    }
+
     /// The method's name (`search`, or the policy's).
     pub fn name(&self) -> &str {
         match &self.method {

@@ -2,7 +2,6 @@
 //! on bad and edge inputs: a budget of zero, a method that panics, heightmaps that are not the
 //! box's or not finite, and a search replayed from the count of rollouts its budget allowed.
 
-use herb_core::lattice::Lattice;
 use herb_core::observation::ObsLayout;
 use herb_core::paths::MeshSource;
 use herb_core::{Catalog, GridSpec, Heightmap, TypeIdx};
@@ -62,8 +61,7 @@ fn request(objects: &[u16]) -> DecisionRequest {
 #[test]
 fn a_search_with_no_budget_takes_the_priors_first_and_says_so() {
     let c = catalog();
-    let cfg = config(DecisionMethod::Search, 0.0);
-    let mut core = DecisionCore::new(&cfg, c.clone()).unwrap();
+    let mut core = DecisionCore::new(&config(DecisionMethod::Search, 0.0), c.clone()).unwrap();
     let f = frame(0.04);
     let d = core.decide(&request(&[5, 9, 11]), &f, None);
     assert_eq!(d.allowed, 0, "no rollout finished");
@@ -71,9 +69,8 @@ fn a_search_with_no_budget_takes_the_priors_first_and_says_so() {
     // The prior: lattice BLBF's first candidate on this heightmap.
     let spec = GridSpec::for_box(ObsLayout::CELL_M).unwrap();
     let hm = Heightmap::from_data(spec, f.cells().to_vec()).unwrap();
-    let mut lattice = Lattice::new(&c);
-    // The search's lattice leaves its configured gap.
-    lattice.set_push_gap(cfg.decision.gap);
+    // The search's own lattice, with its clearances.
+    let mut lattice = core.search_settings().unwrap().lattice(&c);
     lattice.compute(&hm, &c, TypeIdx(5));
     let first = lattice.candidates()[0];
     assert!((pose[0] - first.x).abs() < 1e-5 && (pose[1] - first.y).abs() < 1e-5);

@@ -119,7 +119,8 @@ impl Default for EvalSettings {
             lookahead_k: 8,
             lookahead_reward: "cs0.6".into(),
             lookahead_horizon: None,
-            search_rollouts: herb_search::DEFAULT_K,
+            // One rollout a candidate: the reproducible budget.
+            search_rollouts: search.k,
             search_time_s: None,
             search_k: search.k,
             search_threads: 1,
