@@ -25,7 +25,7 @@ pub use herb_world::{CandidateOutcome, PackingWorld, ReleaseNoise, RewardMode, W
 
 use herb_core::catalog::{Catalog, SharedCatalog, TypeIdx};
 use herb_core::error::{Result, SimError};
-use herb_core::heightmap::Heightmap;
+use herb_core::heightmap::{CAMERA_FILL_RADIUS_CELLS, Heightmap};
 use herb_core::lattice::{Lattice, Placement};
 use herb_core::zestimate::{ZScratch, release_pose_on};
 use herb_decide::DecideError;
@@ -110,6 +110,13 @@ pub const JOB_FIT_GOOD_M: f64 = 0.0005;
 pub const JOB_CELL_OFF_M: f32 = 0.01;
 /// The job's twin is used while at most this share of the heightmap's cells disagree.
 pub const JOB_MAX_OFF: f32 = 0.2;
+/// A camera cell agrees with the job's twin when its height lies within the twin's heights
+/// around it, [`JOB_CELL_OFF_M`] either way: at most the highest twin cell within
+/// [`herb_core::heightmap::CAMERA_FILL_RADIUS_CELLS`] (a camera fills the cells it did not see
+/// with the highest seen cell that near), at least the lowest within this many cells (about
+/// 5 mm: a twin's object a few millimetres from where the real one lies does not make its edge
+/// disagree).
+pub const JOB_SHIFT_CELLS: usize = 3;
 
 /// The search's settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -145,7 +152,50 @@ pub struct SearchSettings {
     /// where they stand above the rim, in fine lattice cells of 6.25 mm
     /// ([`Lattice::set_wall_gap`]; 0: none).
     pub wall_gap: usize,
+    /// The release check (`None`: off): the best candidates are each released on the live
+    /// pile off their placement by the four corners of an assumed release error, before the
+    /// live check, and a candidate that one of those releases leaves outside the box is passed
+    /// over ([`ReleaseCheck`]). Not in the heightmap twin.
+    pub release_check: Option<ReleaseCheck>,
 }
+
+/// The release check ([`SearchSettings::release_check`]): a candidate's release offset by
+/// `(+e, +e, +a)`, `(-e, -e, +a)`, `(+e, -e, -a)` and `(-e, +e, -a)` (`e` in x and in y, `a` in
+/// yaw), the same four for every candidate, each settled on the live pile; the candidate
+/// passes when its object ends inside the box after all four. Of the best
+/// [`RELEASE_CHECK_WINDOW`] candidates by return, those that pass are live-checked in order
+/// (at most [`LIVE_CHECKS`]) and the first whose live rollout succeeds is chosen; when none
+/// is, the one with the most releases inside (ties to the better return). It aims at the
+/// failure the field model shows most: the object just released ending over a wall.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReleaseCheck {
+    /// The offset in x and in y (m) of each corner.
+    pub offset_m: f32,
+    /// The yaw offset (degrees) of each corner.
+    pub yaw_deg: f32,
+}
+
+impl ReleaseCheck {
+    /// The check of a release error of `error_mm` in x and y and `error_deg` in yaw; `None`
+    /// when both are 0. The values are the caller's, checked against
+    /// [`RobustRollouts::MAX_ERROR_MM`] and [`RobustRollouts::MAX_ERROR_DEG`].
+    pub fn assumed(error_mm: f64, error_deg: f64) -> Option<Self> {
+        (error_mm > 0.0 || error_deg > 0.0).then(|| Self {
+            offset_m: (error_mm * 1e-3) as f32,
+            yaw_deg: error_deg as f32,
+        })
+    }
+
+    /// The four offsets: x, y (m) and yaw (rad).
+    pub fn offsets(&self) -> [[f32; 3]; 4] {
+        let (e, a) = (self.offset_m, self.yaw_deg.to_radians());
+        [[e, e, a], [-e, -e, a], [e, -e, -a], [-e, e, -a]]
+    }
+}
+
+/// The best candidates by return at most that the release check tries
+/// ([`SearchSettings::release_check`]).
+pub const RELEASE_CHECK_WINDOW: usize = 6;
 
 /// Candidates herbd's search rolls out by default, and the evaluation's reproducible budget
 /// (one rollout each). Under the field model, with one cell of gap, 16 packed 3.91 points more
@@ -184,6 +234,7 @@ impl Default for SearchSettings {
             threads: 1,
             push_gap: DEFAULT_GAP,
             wall_gap: 0,
+            release_check: None,
         }
     }
 }
@@ -255,6 +306,11 @@ pub struct SearchReport {
     /// Of those, the ones whose rollout failed there (an object pushed out, or one that went
     /// out where the rigid pile held it): passed over for the next best.
     pub live_rejected: usize,
+    /// With the release check: the candidates it tried, and those it passed over (one of the
+    /// four releases left the object outside).
+    pub release_checked: usize,
+    /// See [`Self::release_checked`].
+    pub release_rejected: usize,
     /// With [`TwinKind::Job`]: where the job's twin will replay the chosen placement's release
     /// at the next decision (the one release pose, [`release_pose_on`]: the z estimate on this
     /// heightmap plus the world's clearance, herbd's `[models] clearance_m`).
@@ -302,6 +358,8 @@ pub struct Search {
     zscratch: ZScratch,
     /// The heightmap the candidates are found on when the job's twin agrees ([`fuse`]).
     fused: Option<Heightmap>,
+    /// Scratch of the job twin's agreement ([`Window::off_cells`]).
+    window: Window,
 }
 
 impl Search {
@@ -322,6 +380,7 @@ impl Search {
             report: SearchReport::default(),
             job: None,
             fused: None,
+            window: Window::default(),
         }
     }
 
@@ -460,10 +519,37 @@ impl Search {
             if self.settings.rigid_pile && !in_heightmap_twin {
                 // A rigid pile cannot be pushed: the best candidates are rolled out once more
                 // on the live pile, every object released exactly, and the first whose rollout
-                // succeeds there is chosen (the best when none does). Deterministic: a replay
-                // checks alike. Not in the heightmap twin, whose pile is rigid in any case
-                // (and whose live rollouts are the slowest).
-                for &(c, _) in ranked.iter().take(LIVE_CHECKS) {
+                // succeeds there is chosen. With the release check, a candidate is first
+                // released off its placement four times on the live pile, and passed over when
+                // one of those leaves it outside. When none is chosen: the one with the most
+                // releases inside, ties to the better return (the best, without the check).
+                // Deterministic: a replay checks alike. Not in the heightmap twin, whose pile is
+                // rigid in any case (and whose live rollouts are the slowest).
+                let check = self.settings.release_check;
+                let window = if check.is_some() {
+                    RELEASE_CHECK_WINDOW
+                } else {
+                    LIVE_CHECKS
+                };
+                let mut fallback: Option<(usize, usize)> = None;
+                for &(c, _) in ranked.iter().take(window) {
+                    let inside = match check {
+                        Some(rc) => {
+                            self.report.release_checked += 1;
+                            release_check(live, remaining[0], firsts[c], &rc)?
+                        }
+                        None => 4,
+                    };
+                    if fallback.is_none_or(|(_, n)| inside > n) {
+                        fallback = Some((c, inside));
+                    }
+                    if inside < 4 {
+                        self.report.release_rejected += 1;
+                        continue;
+                    }
+                    if self.report.live_checked == LIVE_CHECKS {
+                        break;
+                    }
                     let o = rollout_until(
                         &mut self.rollouts[0],
                         self.settings.reward,
@@ -475,10 +561,14 @@ impl Search {
                     )?;
                     self.report.live_checked += 1;
                     if o.is_some_and(|o| o.success) {
+                        fallback = None;
                         best = Some(c);
                         break;
                     }
                     self.report.live_rejected += 1;
+                }
+                if let Some((c, _)) = fallback {
+                    best = Some(c);
                 }
             }
         }
@@ -541,7 +631,8 @@ impl Search {
         j.remaining.clear();
         j.remaining.extend_from_slice(remaining);
         j.release = None;
-        let (sum, off) = compare(j.world.heightmap(), heightmap);
+        let sum = compare(j.world.heightmap(), heightmap).0;
+        let off = self.window.off_cells(j.world.heightmap(), heightmap);
         let cells = heightmap.data().len().max(1);
         let agreement = JobAgreement {
             objects: j.world.placed().len(),
@@ -654,6 +745,24 @@ fn combine(rolled: &[Rolled]) -> Rolled {
     }))
 }
 
+/// How many of the release check's four releases of `ty` at `p` ([`ReleaseCheck::offsets`]),
+/// each on a clone of `world` from the world's own release pose, leave it inside the box.
+fn release_check(
+    world: &PackingWorld,
+    ty: TypeIdx,
+    p: Placement,
+    check: &ReleaseCheck,
+) -> Result<usize> {
+    let rot = Rotation::from_rotation_z(p.theta());
+    let mut inside = 0;
+    for [dx, dy, dyaw] in check.offsets() {
+        let mut w = world.clone();
+        let pose = w.checked_release_pose(ty, p.x, p.y, rot)?;
+        inside += w.place_pose(ty, offset_pose(pose, dx, dy, dyaw))?.inside as usize;
+    }
+    Ok(inside)
+}
+
 /// Writes into `out` the twin's heightmap where it is within [`JOB_CELL_OFF_M`] of the camera's,
 /// and the camera's elsewhere. In a world that is its own model the two are equal, and so is
 /// `out`. All three on one grid (the twin's is the camera's grid).
@@ -672,6 +781,79 @@ fn fuse(twin: &Heightmap, camera: &Heightmap, out: &mut Heightmap) {
         } else {
             c
         };
+    }
+}
+
+/// The twin's heights around each cell ([`JOB_SHIFT_CELLS`]), to tell where a camera frame
+/// disagrees with it.
+#[derive(Debug, Clone, Default)]
+struct Window {
+    tmp: Vec<f32>,
+    hi: Vec<f32>,
+    lo: Vec<f32>,
+}
+
+impl Window {
+    /// The cells of `camera` higher than the highest cell of `twin` within
+    /// [`CAMERA_FILL_RADIUS_CELLS`] by more than [`JOB_CELL_OFF_M`], or lower than its lowest
+    /// within [`JOB_SHIFT_CELLS`] by more (both on one grid).
+    fn off_cells(&mut self, twin: &Heightmap, camera: &Heightmap) -> usize {
+        let spec = *camera.spec();
+        let n = spec.nx * spec.ny;
+        for v in [&mut self.tmp, &mut self.hi, &mut self.lo] {
+            v.resize(n, 0.0);
+        }
+        let t = twin.data();
+        extreme(
+            t,
+            (spec.nx, spec.ny),
+            CAMERA_FILL_RADIUS_CELLS,
+            f32::max,
+            &mut self.tmp,
+            &mut self.hi,
+        );
+        extreme(
+            t,
+            (spec.nx, spec.ny),
+            JOB_SHIFT_CELLS,
+            f32::min,
+            &mut self.tmp,
+            &mut self.lo,
+        );
+        camera
+            .data()
+            .iter()
+            .zip(self.hi.iter().zip(&self.lo))
+            .filter(|&(&c, (&hi, &lo))| c > hi + JOB_CELL_OFF_M || c < lo - JOB_CELL_OFF_M)
+            .count()
+    }
+}
+
+/// `out[i]`: `pick` over the cells of `src` (an `nx` by `ny` grid, row-major) within `r` cells
+/// of cell `i` (a square window, cut at the edges), in two passes through `tmp`.
+fn extreme(
+    src: &[f32],
+    (nx, ny): (usize, usize),
+    r: usize,
+    pick: fn(f32, f32) -> f32,
+    tmp: &mut [f32],
+    out: &mut [f32],
+) {
+    for row in 0..ny {
+        let line = &src[row * nx..(row + 1) * nx];
+        for col in 0..nx {
+            let (a, b) = (col.saturating_sub(r), (col + r).min(nx - 1));
+            tmp[row * nx + col] = line[a..=b].iter().copied().reduce(pick).unwrap_or(0.0);
+        }
+    }
+    for row in 0..ny {
+        let (a, b) = (row.saturating_sub(r), (row + r).min(ny - 1));
+        for col in 0..nx {
+            out[row * nx + col] = (a..=b)
+                .map(|rr| tmp[rr * nx + col])
+                .reduce(pick)
+                .unwrap_or(0.0);
+        }
     }
 }
 

@@ -197,6 +197,7 @@ fn probe(
         threads: 1,
         push_gap: 0,
         wall_gap: 0,
+        release_check: None,
     };
     let kind = match mode {
         Mode::Twin | Mode::Blbf => TwinKind::Heightmap,

@@ -10,7 +10,7 @@
 
 use crate::{Method, MethodSettings};
 use herb_decide::{Order, PolicySpec, SequenceModel};
-use herb_search::{Budget, RobustRollouts, SearchSettings, TwinKind};
+use herb_search::{Budget, ReleaseCheck, RobustRollouts, SearchSettings, TwinKind};
 use herb_sim::boxed::Episode;
 use herb_sim::eval::{self, EpisodeOutcome, EvalError, Summary};
 use herb_sim::field::FieldModel;
@@ -96,8 +96,12 @@ pub struct EvalSettings {
     pub search_wall_gap: usize,
     /// The robust search: rollouts per candidate under `search_noise` (0: one, exact releases).
     pub search_samples: usize,
-    /// The release error the robust search assumes: sd in mm (x, y) and degrees (yaw).
+    /// The release error the robust search assumes: sd in mm (x, y) and degrees (yaw); also
+    /// the corners the release check tries.
     pub search_noise: (f32, f32),
+    /// The search's release check (`SearchSettings::release_check`): each of its best
+    /// candidates released off its placement by the four corners of `search_noise` first.
+    pub search_check: bool,
     /// The evaluation's world: `ideal` (no error), `field` (the shipped field model,
     /// `models/field.toml`) or a field model file.
     pub world: String,
@@ -131,6 +135,7 @@ impl Default for EvalSettings {
             search_wall_gap: 0,
             search_samples: 0,
             search_noise: (5.0, 3.0),
+            search_check: false,
             world: "ideal".into(),
             release_noise: None,
             world_set: Vec::new(),
@@ -283,6 +288,15 @@ impl EvalSettings {
                 threads: self.search_threads,
                 push_gap: self.search_gap,
                 wall_gap: self.search_wall_gap,
+                release_check: self
+                    .search_check
+                    .then(|| {
+                        ReleaseCheck::assumed(
+                            self.search_noise.0.into(),
+                            self.search_noise.1.into(),
+                        )
+                    })
+                    .flatten(),
             },
             world: world.clone(),
         })
@@ -343,6 +357,10 @@ impl EvalSettings {
                 if self.search_samples > 0 {
                     let (mm, deg) = self.search_noise;
                     extra += &format!(", {} samples of {mm} mm / {deg} deg", self.search_samples);
+                }
+                if self.search_check {
+                    let (mm, deg) = self.search_noise;
+                    extra += &format!(", release check of {mm} mm / {deg} deg");
                 }
                 if self.search_live_pile {
                     extra += ", live pile";
