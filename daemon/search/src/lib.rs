@@ -25,7 +25,7 @@ pub use herb_world::{CandidateOutcome, PackingWorld, ReleaseNoise, RewardMode, W
 
 use herb_core::catalog::{Catalog, SharedCatalog, TypeIdx};
 use herb_core::error::{Result, SimError};
-use herb_core::heightmap::{CAMERA_FILL_RADIUS_CELLS, Heightmap};
+use herb_core::heightmap::Heightmap;
 use herb_core::lattice::{Lattice, Placement};
 use herb_core::zestimate::{ZScratch, release_pose_on};
 use herb_decide::DecideError;
@@ -110,13 +110,6 @@ pub const JOB_FIT_GOOD_M: f64 = 0.0005;
 pub const JOB_CELL_OFF_M: f32 = 0.01;
 /// The job's twin is used while at most this share of the heightmap's cells disagree.
 pub const JOB_MAX_OFF: f32 = 0.2;
-/// A camera cell agrees with the job's twin when its height lies within the twin's heights
-/// around it, [`JOB_CELL_OFF_M`] either way: at most the highest twin cell within
-/// [`herb_core::heightmap::CAMERA_FILL_RADIUS_CELLS`] (a camera fills the cells it did not see
-/// with the highest seen cell that near), at least the lowest within this many cells (about
-/// 5 mm: a twin's object a few millimetres from where the real one lies does not make its edge
-/// disagree).
-pub const JOB_SHIFT_CELLS: usize = 3;
 
 /// The search's settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -358,8 +351,6 @@ pub struct Search {
     zscratch: ZScratch,
     /// The heightmap the candidates are found on when the job's twin agrees ([`fuse`]).
     fused: Option<Heightmap>,
-    /// Scratch of the job twin's agreement ([`Window::off_cells`]).
-    window: Window,
 }
 
 impl Search {
@@ -380,7 +371,6 @@ impl Search {
             report: SearchReport::default(),
             job: None,
             fused: None,
-            window: Window::default(),
         }
     }
 
@@ -631,8 +621,7 @@ impl Search {
         j.remaining.clear();
         j.remaining.extend_from_slice(remaining);
         j.release = None;
-        let sum = compare(j.world.heightmap(), heightmap).0;
-        let off = self.window.off_cells(j.world.heightmap(), heightmap);
+        let (sum, off) = compare(j.world.heightmap(), heightmap);
         let cells = heightmap.data().len().max(1);
         let agreement = JobAgreement {
             objects: j.world.placed().len(),
@@ -781,79 +770,6 @@ fn fuse(twin: &Heightmap, camera: &Heightmap, out: &mut Heightmap) {
         } else {
             c
         };
-    }
-}
-
-/// The twin's heights around each cell ([`JOB_SHIFT_CELLS`]), to tell where a camera frame
-/// disagrees with it.
-#[derive(Debug, Clone, Default)]
-struct Window {
-    tmp: Vec<f32>,
-    hi: Vec<f32>,
-    lo: Vec<f32>,
-}
-
-impl Window {
-    /// The cells of `camera` higher than the highest cell of `twin` within
-    /// [`CAMERA_FILL_RADIUS_CELLS`] by more than [`JOB_CELL_OFF_M`], or lower than its lowest
-    /// within [`JOB_SHIFT_CELLS`] by more (both on one grid).
-    fn off_cells(&mut self, twin: &Heightmap, camera: &Heightmap) -> usize {
-        let spec = *camera.spec();
-        let n = spec.nx * spec.ny;
-        for v in [&mut self.tmp, &mut self.hi, &mut self.lo] {
-            v.resize(n, 0.0);
-        }
-        let t = twin.data();
-        extreme(
-            t,
-            (spec.nx, spec.ny),
-            CAMERA_FILL_RADIUS_CELLS,
-            f32::max,
-            &mut self.tmp,
-            &mut self.hi,
-        );
-        extreme(
-            t,
-            (spec.nx, spec.ny),
-            JOB_SHIFT_CELLS,
-            f32::min,
-            &mut self.tmp,
-            &mut self.lo,
-        );
-        camera
-            .data()
-            .iter()
-            .zip(self.hi.iter().zip(&self.lo))
-            .filter(|&(&c, (&hi, &lo))| c > hi + JOB_CELL_OFF_M || c < lo - JOB_CELL_OFF_M)
-            .count()
-    }
-}
-
-/// `out[i]`: `pick` over the cells of `src` (an `nx` by `ny` grid, row-major) within `r` cells
-/// of cell `i` (a square window, cut at the edges), in two passes through `tmp`.
-fn extreme(
-    src: &[f32],
-    (nx, ny): (usize, usize),
-    r: usize,
-    pick: fn(f32, f32) -> f32,
-    tmp: &mut [f32],
-    out: &mut [f32],
-) {
-    for row in 0..ny {
-        let line = &src[row * nx..(row + 1) * nx];
-        for col in 0..nx {
-            let (a, b) = (col.saturating_sub(r), (col + r).min(nx - 1));
-            tmp[row * nx + col] = line[a..=b].iter().copied().reduce(pick).unwrap_or(0.0);
-        }
-    }
-    for row in 0..ny {
-        let (a, b) = (row.saturating_sub(r), (row + r).min(ny - 1));
-        for col in 0..nx {
-            out[row * nx + col] = (a..=b)
-                .map(|rr| tmp[rr * nx + col])
-                .reduce(pick)
-                .unwrap_or(0.0);
-        }
     }
 }
 
