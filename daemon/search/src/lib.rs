@@ -504,28 +504,7 @@ impl Search {
                 .iter()
                 .map(|(c, o)| (*c, o.ret))
                 .collect();
-            let outcome = |c: usize| {
-                self.report
-                    .finished
-                    .iter()
-                    .find(|(i, _)| *i == c)
-                    .map(|(_, o)| *o)
-            };
-            let key = |c: usize| {
-                let o = outcome(c).expect("finished");
-                let level = if o.success {
-                    (o.top / 0.01).floor() as i32
-                } else {
-                    i32::MAX
-                };
-                (!o.success, level)
-            };
-            ranked.sort_by(|a, b| {
-                key(a.0)
-                    .cmp(&key(b.0))
-                    .then(b.1.total_cmp(&a.1))
-                    .then(a.0.cmp(&b.0))
-            });
+            ranked.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
             best = ranked.first().map(|r| r.0);
             if self.settings.rigid_pile && !in_heightmap_twin {
                 // A rigid pile cannot be pushed: the best candidates are rolled out once more

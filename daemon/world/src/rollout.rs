@@ -33,9 +33,6 @@ pub struct CandidateOutcome {
     /// Where and why the rollout failed (an object outside, or no feasible placement), when
     /// it did.
     pub failure: Option<RolloutFailure>,
-    /// The highest cell of the rollout's pile where it ended (m, the box's floor 0): what it
-    /// leaves of the success volume's height.
-    pub top: f32,
 }
 
 impl CandidateOutcome {
@@ -93,7 +90,6 @@ pub fn rollout_until(
         sum_c: 0.0,
         sum_s: 0.0,
         failure: None,
-        top: 0.0,
     };
     let earlier = w.placed().len();
     for (i, &ty) in remaining.iter().enumerate() {
@@ -108,7 +104,6 @@ pub fn rollout_until(
                 Some(p) => p,
                 None => {
                     out.ret -= 1.0;
-                    out.top = w.heightmap().max();
                     out.failure = Some(RolloutFailure {
                         step: i,
                         bound: None,
@@ -132,7 +127,6 @@ pub fn rollout_until(
         }
         out.ret += r;
         if !o.inside {
-            out.top = w.heightmap().max();
             out.failure = Some(RolloutFailure {
                 step: i,
                 bound: o.violation.map(|v| v.0),
@@ -145,6 +139,5 @@ pub fn rollout_until(
         out.packed += 1;
     }
     out.success = true;
-    out.top = w.heightmap().max();
     Ok(Some(out))
 }
