@@ -173,7 +173,7 @@ impl ReleaseCheck {
     /// when both are 0. The values are the caller's, checked against
     /// [`RobustRollouts::MAX_ERROR_MM`] and [`RobustRollouts::MAX_ERROR_DEG`].
     pub fn assumed(error_mm: f64, error_deg: f64) -> Option<Self> {
-        (error_mm > 0.0 || error_deg > 0.0).then(|| Self {
+        (error_mm > 0.0 || error_deg > 0.0).then_some(Self {
             offset_m: (error_mm * 1e-3) as f32,
             yaw_deg: error_deg as f32,
         })

@@ -165,9 +165,15 @@ struct EvalArgs {
     /// exact releases.
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=64))]
     search_samples: u64,
-    /// The release error the robust search assumes: MM,DEG (sd of x and y, of yaw).
+    /// The release error the robust search assumes: MM,DEG (sd of x and y, of yaw); also the
+    /// corners `--search-check` tries.
     #[arg(long, default_value = "5,3", value_parser = parse_noise)]
     search_noise: (f32, f32),
+    /// The search's release check: each of its best candidates is first released on the live
+    /// pile off its placement by the four corners of `--search-noise`, and passed over when one
+    /// of those leaves it outside (for measurements: no gain measured, docs/table1.md).
+    #[arg(long)]
+    search_check: bool,
     /// The evaluation's world: `ideal` (every object released where it was decided), `field`
     /// (the shipped field model, models/field.toml: a real cell's release error, seeded per
     /// episode, told to no twin or method) or a field model file.
@@ -555,6 +561,7 @@ impl EvalArgs {
             search_wall_gap: self.search_wall_gap as usize,
             search_samples: self.search_samples as usize,
             search_noise: self.search_noise,
+            search_check: self.search_check,
             world: self.world.clone(),
             release_noise: self.release_noise,
             world_set: self.world_set.clone(),
