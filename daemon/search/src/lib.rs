@@ -158,8 +158,9 @@ pub struct SearchSettings {
 /// passes when its object ends inside the box after all four. Of the best
 /// [`RELEASE_CHECK_WINDOW`] candidates by return, those that pass are live-checked in order
 /// (at most [`LIVE_CHECKS`]) and the first whose live rollout succeeds is chosen; when none
-/// is, the one with the most releases inside (ties to the better return). It aims at the
-/// failure the field model shows most: the object just released ending over a wall.
+/// is, the one with the most releases inside (ties to the better return). It aims at an object
+/// released a few millimetres off its placement ending over a wall; under field-v1 it gained
+/// nothing that 256 paired episodes separate (`docs/table1.md`), so it is off by default.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ReleaseCheck {
     /// The offset in x and in y (m) of each corner.
@@ -179,12 +180,15 @@ impl ReleaseCheck {
         })
     }
 
-    /// The four offsets: x, y (m) and yaw (rad).
-    pub fn offsets(&self) -> [[f32; 3]; 4] {
+    /// The [`CHECK_RELEASES`] offsets: x, y (m) and yaw (rad).
+    pub fn offsets(&self) -> [[f32; 3]; CHECK_RELEASES] {
         let (e, a) = (self.offset_m, self.yaw_deg.to_radians());
         [[e, e, a], [-e, -e, a], [e, -e, -a], [-e, e, -a]]
     }
 }
+
+/// Releases the release check tries per candidate ([`ReleaseCheck::offsets`]).
+pub const CHECK_RELEASES: usize = 4;
 
 /// The best candidates by return at most that the release check tries
 /// ([`SearchSettings::release_check`]).
@@ -528,12 +532,12 @@ impl Search {
                             self.report.release_checked += 1;
                             release_check(live, remaining[0], firsts[c], &rc)?
                         }
-                        None => 4,
+                        None => CHECK_RELEASES,
                     };
                     if fallback.is_none_or(|(_, n)| inside > n) {
                         fallback = Some((c, inside));
                     }
-                    if inside < 4 {
+                    if inside < CHECK_RELEASES {
                         self.report.release_rejected += 1;
                         continue;
                     }
