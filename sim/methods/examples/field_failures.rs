@@ -6,8 +6,8 @@
 //!     cargo run --release -p herb-methods --example field_failures -- \
 //!         [EPISODES] [SEED] [WORLD] [THREADS]
 //!
-//! The episodes are the sweeps' `set = "sample"` ones (seeds `SEED` to `SEED + EPISODES - 1`,
-//! default 777, 10 to 25 catalog objects each), in HERB's order, in the evaluation's world
+//! The episodes are the sweeps' `set = "sample"` ones (`evaluation::sampled_episodes`: seeds
+//! `SEED` to `SEED + EPISODES - 1`, default 777, 10 to 25 catalog objects each), in HERB's order, in the evaluation's world
 //! `WORLD` (default `field`: `models/field.toml`; a field model file), each decided as Table I's
 //! search row decides (herbd's decision path, the default search settings, count budget). For
 //! each failure it prints one line: the episode, the step, the object and its catalog size, the
@@ -20,14 +20,12 @@
 //! and the meshes from BoxED when it is found (`HERB_BOXED`, `../shared/boxed`).
 
 use herb_decide::{Decider, Order, SequenceModel};
-use herb_methods::evaluation::EvalSettings;
+use herb_methods::evaluation::{self, EvalSettings, SAMPLED_OBJECTS};
 use herb_search::Search;
 use herb_sim::catalog::{Catalog, SharedCatalog};
 use herb_sim::env::{PackingEnv, RewardMode};
 use herb_sim::frames::BOX_HEIGHT;
 use herb_sim::paths;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Arc;
@@ -68,6 +66,7 @@ fn main() -> Result<(), Error> {
         root.as_deref(),
     ))?);
     let model = SequenceModel::load(Path::new("models/sequence.json"), &catalog)?;
+    let episodes = evaluation::sampled_episodes(catalog.len(), seed, n, SAMPLED_OBJECTS);
     let next = AtomicUsize::new(0);
     let run = |i: usize| -> Result<Probe, Error> {
         let mut probe = Probe {
@@ -77,10 +76,9 @@ fn main() -> Result<(), Error> {
             off: 0.0,
         };
         let s = seed.wrapping_add(i as u64);
-        let mut rng = ChaCha8Rng::seed_from_u64(s);
-        let objects = herb_sim::sample_objects(&mut rng, catalog.len(), 10..=25);
+        let objects = &episodes[i].objects;
         // The sweep's episode i: the environment's and the order's seed is its index.
-        let order = Order::HERB.order(&catalog, Some(&model), &objects, i as u64)?;
+        let order = Order::HERB.order(&catalog, Some(&model), objects, i as u64)?;
         let mut env = PackingEnv::new(catalog.clone(), cfg.clone(), RewardMode::Simple)?;
         env.reset(&order, i as u64)?;
         let search = Search::new(catalog.clone(), cfg.clone(), ms.search);

@@ -54,6 +54,34 @@ impl std::str::FromStr for Row {
     }
 }
 
+/// Objects per episode of a sampled episode set, at least and at most by default (the HERB
+/// paper's training distribution): the sweeps' `set = "sample"`.
+pub const SAMPLED_OBJECTS: std::ops::RangeInclusive<usize> = 10..=25;
+
+/// A sampled episode set: `count` episodes of the training distribution, episode `i` named
+/// `sample-{seed + i}` and its objects drawn ([`herb_sim::sample_objects`]) from a generator
+/// seeded with `seed + i`, `objects` objects each. The one definition of the sweeps'
+/// `set = "sample"` (the bindings) and of the diagnostics that replay it.
+pub fn sampled_episodes(
+    catalog_len: usize,
+    seed: u64,
+    count: usize,
+    objects: std::ops::RangeInclusive<usize>,
+) -> Vec<Episode> {
+    use rand::SeedableRng;
+    (0..count)
+        .map(|i| {
+            let s = seed.wrapping_add(i as u64);
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(s);
+            Episode {
+                name: format!("sample-{s}"),
+                objects: herb_sim::sample_objects(&mut rng, catalog_len, objects.clone()),
+                human: Vec::new(),
+            }
+        })
+        .collect()
+}
+
 /// The settings every row of an evaluation shares: the flags of `herb-sim eval` other than
 /// the rows, the data and the outputs, with the same names and defaults. A sweep's
 /// configuration gives them by these names (`deny_unknown_fields`: a misspelt key is an error).

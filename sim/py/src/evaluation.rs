@@ -32,11 +32,11 @@ enum EpisodeSet {
 }
 
 fn min_objects() -> usize {
-    10
+    *evaluation::SAMPLED_OBJECTS.start()
 }
 
 fn max_objects() -> usize {
-    25
+    *evaluation::SAMPLED_OBJECTS.end()
 }
 
 /// Loaded episodes and what the report says about the set.
@@ -90,21 +90,12 @@ impl Evaluation {
                          min <= max <= 64"
                     ));
                 }
-                let episodes = (0..count)
-                    .map(|i| {
-                        let s = seed.wrapping_add(i as u64);
-                        let mut rng = ChaCha8Rng::seed_from_u64(s);
-                        Episode {
-                            name: format!("sample-{s}"),
-                            objects: herb_sim::sample_objects(
-                                &mut rng,
-                                self.catalog.len(),
-                                min_objects..=max_objects,
-                            ),
-                            human: Vec::new(),
-                        }
-                    })
-                    .collect();
+                let episodes = evaluation::sampled_episodes(
+                    self.catalog.len(),
+                    seed,
+                    count,
+                    min_objects..=max_objects,
+                );
                 Loaded {
                     episodes,
                     skipped: Vec::new(),
