@@ -7,8 +7,10 @@
 //!         [EPISODES] [SEED] [WORLD] [THREADS]
 //!
 //! The episodes are the sweeps' `set = "sample"` ones (`evaluation::sampled_episodes`: seeds
-//! `SEED` to `SEED + EPISODES - 1`, default 777, 10 to 25 catalog objects each), in HERB's order, in the evaluation's world
-//! `WORLD` (default `field`: `models/field.toml`; a field model file), each decided as Table I's
+//! `SEED` to `SEED + EPISODES - 1`, default 777, 10 to 25 catalog objects each), in HERB's
+//! order, in the evaluation's world `WORLD` (default `field`: `models/field.toml`; a field model
+//! file). As in a sweep, the environment's and the order's seed is the episode's index in the
+//! set, so a run from a later `SEED` is not a slice of a longer run. Each is decided as Table I's
 //! search row decides (herbd's decision path, the default search settings, count budget). For
 //! each failure it prints one line: the episode, the step, the object and its catalog size, the
 //! search's prediction for the chosen candidate (its rollout's success, the live check), the job
@@ -75,8 +77,7 @@ fn main() -> Result<(), Error> {
             job_used: 0,
             off: 0.0,
         };
-        let s = seed.wrapping_add(i as u64);
-        let objects = &episodes[i].objects;
+        let (name, objects) = (&episodes[i].name, &episodes[i].objects);
         // The sweep's episode i: the environment's and the order's seed is its index.
         let order = Order::HERB.order(&catalog, Some(&model), objects, i as u64)?;
         let mut env = PackingEnv::new(catalog.clone(), cfg.clone(), RewardMode::Simple)?;
@@ -96,7 +97,7 @@ fn main() -> Result<(), Error> {
                     });
                     probe.failure = Some(Failure {
                         line: format!(
-                            "sample-{s} step {}/{} {}: no feasible placement (job twin {job})",
+                            "{name} step {}/{} {}: no feasible placement (job twin {job})",
                             step + 1,
                             order.len(),
                             catalog.spec(object).id
@@ -144,7 +145,7 @@ fn main() -> Result<(), Error> {
             });
             let top = chosen.map_or(f32::NAN, |o| o.placement.top);
             let line = format!(
-                "sample-{s} step {}/{} {} ({:.0} x {:.0} x {:.0} mm): {bound} by {:.1} mm ({}), \
+                "{name} step {}/{} {} ({:.0} x {:.0} x {:.0} mm): {bound} by {:.1} mm ({}), \
                  top {:+.0} mm over the rim (decided {:+.0}), {predicted}, live {}/{}, job twin \
                  {job}, exact release {}",
                 step + 1,
