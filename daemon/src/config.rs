@@ -194,12 +194,18 @@ pub struct DecisionConfig {
     /// object of each rollout released off its placement by the release error below (the same
     /// draws for every candidate), ranked by the mean return.
     pub samples: usize,
-    /// The release error the robust search assumes: standard deviation of x and of y (mm, 0
-    /// to 50). Measure your cell's: release an object at known poses and read where it lands.
+    /// The release error the robust search and the release check assume: standard deviation of
+    /// x and of y (mm, 0 to 50). Measure your cell's: release an object at known poses and read
+    /// where it lands.
     pub release_error_mm: f64,
-    /// The release error the robust search assumes: standard deviation of the yaw (degrees,
-    /// 0 to 45).
+    /// The release error the robust search and the release check assume: standard deviation
+    /// of the yaw (degrees, 0 to 45).
     pub release_error_deg: f64,
+    /// The release check (on by default): each of the search's best candidates is first
+    /// released on the job twin's live pile off its placement by the four corners of
+    /// `release_error_mm` and `release_error_deg`, and passed over when one of those releases
+    /// leaves it outside the box ([`herb_search::SearchSettings::release_check`]).
+    pub release_check: bool,
     /// The search's clearance for a gripper that does not release exactly (0 to 4 cells of
     /// 6.25 mm; 0: tight): each candidate pushed against a neighbour or a wall backs off by up
     /// to this many cells, as far as there is room ([`herb_search::SearchSettings::push_gap`]).
@@ -226,6 +232,7 @@ impl Default for DecisionConfig {
             samples: 0,
             release_error_mm: 5.0,
             release_error_deg: 3.0,
+            release_check: true,
             gap: herb_search::DEFAULT_GAP,
             wall_gap: 0,
             timeout_s: 10.0,

@@ -29,7 +29,8 @@ use herb_ipc::{
     Services,
 };
 use herb_search::{
-    Budget, RobustRollouts, Search, SearchReport, SearchSettings, TwinKind, WorldConfig,
+    Budget, ReleaseCheck, RobustRollouts, Search, SearchReport, SearchSettings, TwinKind,
+    WorldConfig,
 };
 use iceoryx2::prelude::ipc;
 use iceoryx2::sample::Sample;
@@ -99,6 +100,11 @@ impl DecisionCore {
                     ),
                     push_gap: d.gap,
                     wall_gap: d.wall_gap,
+                    release_check: if d.release_check {
+                        ReleaseCheck::assumed(d.release_error_mm, d.release_error_deg)
+                    } else {
+                        None
+                    },
                     ..SearchSettings::default()
                 };
                 // The twins release where the arm does: the same clearance.

@@ -169,10 +169,11 @@ struct EvalArgs {
     /// corners `--search-check` tries.
     #[arg(long, default_value = "5,3", value_parser = parse_noise)]
     search_noise: (f32, f32),
-    /// The search's release check: each of its best candidates is first released on the live
-    /// pile off its placement by the four corners of `--search-noise`, and passed over when one
-    /// of those leaves it outside (for measurements: no gain measured, docs/table1.md).
-    #[arg(long)]
+    /// The search's release check (on, as herbd's; `--search-check false`: off): each of its
+    /// best candidates is first released on the live pile off its placement by the four
+    /// corners of `--search-noise`, and passed over when one of those leaves it outside.
+    #[arg(long, default_value_t = true, num_args = 0..=1, default_missing_value = "true",
+          action = clap::ArgAction::Set)]
     search_check: bool,
     /// The evaluation's world: `ideal` (every object released where it was decided), `field`
     /// (the shipped field model, models/field.toml: a real cell's release error, seeded per

@@ -127,8 +127,9 @@ pub struct EvalSettings {
     /// The release error the robust search assumes: sd in mm (x, y) and degrees (yaw); also
     /// the corners the release check tries.
     pub search_noise: (f32, f32),
-    /// The search's release check (`SearchSettings::release_check`): each of its best
-    /// candidates released off its placement by the four corners of `search_noise` first.
+    /// The search's release check (`SearchSettings::release_check`; on, as herbd's): each of
+    /// its best candidates released off its placement by the four corners of `search_noise`
+    /// first.
     pub search_check: bool,
     /// The evaluation's world: `ideal` (no error), `field` (the shipped field model,
     /// `models/field.toml`) or a field model file.
@@ -163,7 +164,7 @@ impl Default for EvalSettings {
             search_wall_gap: 0,
             search_samples: 0,
             search_noise: (5.0, 3.0),
-            search_check: false,
+            search_check: true,
             world: "ideal".into(),
             release_noise: None,
             world_set: Vec::new(),
