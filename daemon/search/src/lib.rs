@@ -200,9 +200,16 @@ pub const RELEASE_CHECK_WINDOW: usize = 6;
 /// only with it, 2 only without; +0.25 to +2.09): `docs/table1.md`, "The release check out of
 /// sample".
 pub const DEFAULT_RELEASE_CHECK: ReleaseCheck = ReleaseCheck {
-    offset_m: 0.005,
-    yaw_deg: 3.0,
+    offset_m: (DEFAULT_RELEASE_ERROR_MM * 1e-3) as f32,
+    yaw_deg: DEFAULT_RELEASE_ERROR_DEG as f32,
 };
+
+/// The release error (one standard deviation) the search assumes by default, for its release
+/// check and its robust rollouts: x and y (mm), field-v1's. herbd's `[decision]
+/// release_error_mm` and the evaluation's `search_noise` default to it.
+pub const DEFAULT_RELEASE_ERROR_MM: f64 = 5.0;
+/// The yaw (degrees) of [`DEFAULT_RELEASE_ERROR_MM`]'s release error.
+pub const DEFAULT_RELEASE_ERROR_DEG: f64 = 3.0;
 
 /// Candidates herbd's search rolls out by default, and the evaluation's reproducible budget
 /// (one rollout each). Under the field model, with one cell of gap, 16 packed 3.91 points more

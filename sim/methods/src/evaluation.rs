@@ -163,7 +163,10 @@ impl Default for EvalSettings {
             search_gap: search.push_gap,
             search_wall_gap: 0,
             search_samples: 0,
-            search_noise: (5.0, 3.0),
+            search_noise: (
+                herb_search::DEFAULT_RELEASE_ERROR_MM as f32,
+                herb_search::DEFAULT_RELEASE_ERROR_DEG as f32,
+            ),
             search_check: true,
             world: "ideal".into(),
             release_noise: None,
