@@ -232,7 +232,9 @@ impl Default for DecisionConfig {
             samples: 0,
             release_error_mm: herb_search::DEFAULT_RELEASE_ERROR_MM,
             release_error_deg: herb_search::DEFAULT_RELEASE_ERROR_DEG,
-            release_check: true,
+            release_check: herb_search::SearchSettings::default()
+                .release_check
+                .is_some(),
             gap: herb_search::DEFAULT_GAP,
             wall_gap: 0,
             timeout_s: 10.0,

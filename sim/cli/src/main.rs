@@ -172,8 +172,8 @@ struct EvalArgs {
     /// The search's release check (on, as herbd's; `--search-check false`: off): each of its
     /// best candidates is first released on the live pile off its placement by the four
     /// corners of `--search-noise`, and passed over when one of those leaves it outside.
-    #[arg(long, default_value_t = true, num_args = 0..=1, default_missing_value = "true",
-          action = clap::ArgAction::Set)]
+    #[arg(long, default_value_t = herb_search::SearchSettings::default().release_check.is_some(),
+          num_args = 0..=1, default_missing_value = "true", action = clap::ArgAction::Set)]
     search_check: bool,
     /// The evaluation's world: `ideal` (every object released where it was decided), `field`
     /// (the shipped field model, models/field.toml: a real cell's release error, seeded per

@@ -167,7 +167,7 @@ impl Default for EvalSettings {
                 herb_search::DEFAULT_RELEASE_ERROR_MM as f32,
                 herb_search::DEFAULT_RELEASE_ERROR_DEG as f32,
             ),
-            search_check: true,
+            search_check: search.release_check.is_some(),
             world: "ideal".into(),
             release_noise: None,
             world_set: Vec::new(),
