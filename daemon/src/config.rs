@@ -215,6 +215,11 @@ pub struct DecisionConfig {
     /// none): each candidate within this many cells of a wall moves away from it, as far as
     /// there is room ([`herb_search::SearchSettings::wall_gap`]).
     pub wall_gap: usize,
+    /// The search's support rule (0 to 1; 0: off): a candidate that stands above the box's
+    /// rim on less than this share of its footprint, which a release a few millimetres off
+    /// can slide or tip off the pile, is ranked as a failed rollout is
+    /// ([`herb_search::SearchSettings::min_support`]; measured at 0.3).
+    pub min_support: f32,
     /// A decision not back this long after it was asked for (s) faults the job (`Decision`):
     /// a hung worker never holds the arm.
     pub timeout_s: f64,
@@ -237,6 +242,9 @@ impl Default for DecisionConfig {
                 .is_some(),
             gap: herb_search::DEFAULT_GAP,
             wall_gap: 0,
+            min_support: herb_search::SearchSettings::default()
+                .min_support
+                .unwrap_or(0.0),
             timeout_s: 10.0,
         }
     }
@@ -500,6 +508,9 @@ impl ConfigFile for Config {
         if d.wall_gap > max_gap {
             return Err(format!("decision.wall_gap {} outside 0..={max_gap}", d.wall_gap).into());
         }
+        if !(d.min_support.is_finite() && (0.0..=1.0).contains(&d.min_support)) {
+            return Err(format!("decision.min_support {} outside 0..=1", d.min_support).into());
+        }
         if d.horizon > herb_ipc::MAX_JOB_OBJECTS {
             return Err(format!(
                 "decision.horizon {} above the {} objects of a job",
@@ -613,6 +624,8 @@ mod tests {
             ("[decision]\nsamples = 65\n", "decision.samples"),
             ("[decision]\ngap = 5\n", "decision.gap"),
             ("[decision]\nwall_gap = 9\n", "decision.wall_gap"),
+            ("[decision]\nmin_support = -0.1\n", "decision.min_support"),
+            ("[decision]\nmin_support = 1.5\n", "decision.min_support"),
             (
                 "[decision]\nrelease_error_mm = -1.0\n",
                 "decision.release_error_mm",

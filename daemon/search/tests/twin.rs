@@ -83,6 +83,7 @@ fn the_search_is_anytime_and_never_worse_than_its_prior_on_its_own_rollouts() {
         push_gap: 0,
         wall_gap: 0,
         release_check: None,
+        min_support: None,
     };
     let mut s = Search::new(
         c.clone(),
@@ -237,6 +238,7 @@ fn pack_with(
         push_gap: 0,
         wall_gap: 0,
         release_check: None,
+        min_support: None,
     };
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
     let mut out = Vec::new();
@@ -292,6 +294,7 @@ fn the_jobs_twin_replays_its_decisions_and_falls_back_where_the_heightmap_disagr
         push_gap: 0,
         wall_gap: 0,
         release_check: None,
+        min_support: None,
     };
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings(TwinKind::Job));
     let p = s.decide(world.heightmap(), &remaining, None).unwrap();
@@ -330,6 +333,7 @@ fn the_jobs_twin_leaves_out_an_object_never_released_and_forgets_a_finished_job(
         push_gap: 0,
         wall_gap: 0,
         release_check: None,
+        min_support: None,
     };
     let empty = PackingWorld::new(c.clone(), WorldConfig::default()).unwrap();
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
@@ -378,6 +382,7 @@ fn the_robust_search_ranks_by_noisy_rollouts_that_a_replay_draws_again() {
             push_gap: 0,
             wall_gap: 0,
             release_check: None,
+            min_support: None,
         };
         let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
         let p = s.decide(world.heightmap(), &remaining, None).unwrap();
@@ -422,6 +427,7 @@ fn the_candidates_come_from_the_jobs_twin_where_the_camera_agrees_and_from_the_c
         push_gap: 0,
         wall_gap: 0,
         release_check: None,
+        min_support: None,
     };
     let mut world = PackingWorld::new(c.clone(), WorldConfig::default()).unwrap();
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
@@ -500,6 +506,7 @@ fn the_release_check_passes_over_a_candidate_that_a_release_off_its_placement_le
             push_gap: 0,
             wall_gap: 0,
             release_check: check,
+            min_support: None,
         };
         let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
         let p = s

@@ -175,6 +175,12 @@ struct EvalArgs {
     #[arg(long, default_value_t = herb_search::SearchSettings::default().release_check.is_some(),
           num_args = 0..=1, default_missing_value = "true", action = clap::ArgAction::Set)]
     search_check: bool,
+    /// The search's support rule (0 to 1; 0: off): a candidate standing above the rim on less
+    /// than this share of its footprint, which a release a few millimetres off can slide off
+    /// the pile, is ranked as a failed rollout.
+    #[arg(long, default_value_t = herb_search::SearchSettings::default().min_support.unwrap_or(0.0),
+          value_parser = parse_share)]
+    search_min_support: f32,
     /// The evaluation's world: `ideal` (every object released where it was decided), `field`
     /// (the shipped field model, models/field.toml: a real cell's release error, seeded per
     /// episode, told to no twin or method) or a field model file.
@@ -563,6 +569,7 @@ impl EvalArgs {
             search_samples: self.search_samples as usize,
             search_noise: self.search_noise,
             search_check: self.search_check,
+            search_min_support: self.search_min_support,
             world: self.world.clone(),
             release_noise: self.release_noise,
             world_set: self.world_set.clone(),
@@ -734,6 +741,14 @@ fn parse_noise(s: &str) -> Result<(f32, f32), String> {
         }
     };
     Ok((num(mm, "MM")?, num(deg, "DEG")?))
+}
+
+/// A share from 0 to 1 (`--search-min-support`).
+fn parse_share(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(x) if x.is_finite() && (0.0..=1.0).contains(&x) => Ok(x),
+        _ => Err(format!("{s:?}: expected a share from 0 to 1 (e.g. 0.3)")),
+    }
 }
 
 #[cfg(test)]

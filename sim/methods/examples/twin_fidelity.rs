@@ -198,6 +198,7 @@ fn probe(
         push_gap: 0,
         wall_gap: 0,
         release_check: None,
+        min_support: None,
     };
     let kind = match mode {
         Mode::Twin | Mode::Blbf => TwinKind::Heightmap,

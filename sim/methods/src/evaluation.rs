@@ -131,6 +131,10 @@ pub struct EvalSettings {
     /// its best candidates released off its placement by the four corners of `search_noise`
     /// first.
     pub search_check: bool,
+    /// The search's support rule (`SearchSettings::min_support`; 0: off, as herbd's): a
+    /// candidate standing above the rim on less than this share of its footprint is ranked as
+    /// a failed rollout.
+    pub search_min_support: f32,
     /// The evaluation's world: `ideal` (no error), `field` (the shipped field model,
     /// `models/field.toml`) or a field model file.
     pub world: String,
@@ -168,6 +172,7 @@ impl Default for EvalSettings {
                 herb_search::DEFAULT_RELEASE_ERROR_DEG as f32,
             ),
             search_check: search.release_check.is_some(),
+            search_min_support: search.min_support.unwrap_or(0.0),
             world: "ideal".into(),
             release_noise: None,
             world_set: Vec::new(),
@@ -220,6 +225,14 @@ impl EvalSettings {
             return Err(format!(
                 "search_wall_gap {}: need 0 to {max_gap}",
                 self.search_wall_gap
+            )
+            .into());
+        }
+        if !(self.search_min_support.is_finite() && (0.0..=1.0).contains(&self.search_min_support))
+        {
+            return Err(format!(
+                "search_min_support {}: need 0 to 1",
+                self.search_min_support
             )
             .into());
         }
@@ -329,6 +342,7 @@ impl EvalSettings {
                         )
                     })
                     .flatten(),
+                min_support: (self.search_min_support > 0.0).then_some(self.search_min_support),
             },
             world: world.clone(),
         })
@@ -393,6 +407,10 @@ impl EvalSettings {
                 if self.search_check {
                     let (mm, deg) = self.search_noise;
                     extra += &format!(", release check of {mm} mm / {deg} deg");
+                }
+                if self.search_min_support > 0.0 {
+                    let pct = 100.0 * self.search_min_support;
+                    extra += &format!(", support {pct:.0} % above the rim");
                 }
                 if self.search_live_pile {
                     extra += ", live pile";

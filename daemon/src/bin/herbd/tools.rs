@@ -247,6 +247,12 @@ pub(crate) fn explain(
                 }
             );
         }
+        if rep.unsupported > 0 {
+            println!(
+                "support rule: {} ranked as failures (above the rim on too little of their footprint)",
+                rep.unsupported
+            );
+        }
         if rep.live_checked > 0 {
             println!(
                 "rigid pile: the best {} rolled out again on the live pile, {} passed over (an object pushed out or gone out there)",
