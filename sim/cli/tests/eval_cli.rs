@@ -181,3 +181,14 @@ fn release_noise_is_said_in_the_table_and_bad_noise_is_refused() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn a_support_share_outside_0_to_1_is_refused() {
+    for bad in ["-0.1", "1.5", "nan", "x"] {
+        let arg = format!("--search-min-support={bad}");
+        let out = herb_sim(&["eval", "--method", "search", &arg]);
+        assert!(!out.status.success(), "{bad} was accepted");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("--search-min-support"), "{bad}: {err}");
+    }
+}
