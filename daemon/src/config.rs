@@ -508,9 +508,8 @@ impl ConfigFile for Config {
         if d.wall_gap > max_gap {
             return Err(format!("decision.wall_gap {} outside 0..={max_gap}", d.wall_gap).into());
         }
-        if !(d.min_support.is_finite() && (0.0..=1.0).contains(&d.min_support)) {
-            return Err(format!("decision.min_support {} outside 0..=1", d.min_support).into());
-        }
+        herb_search::support_rule(d.min_support)
+            .map_err(|e| format!("decision.min_support {e}"))?;
         if d.horizon > herb_ipc::MAX_JOB_OBJECTS {
             return Err(format!(
                 "decision.horizon {} above the {} objects of a job",

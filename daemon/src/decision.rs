@@ -100,7 +100,8 @@ impl DecisionCore {
                     ),
                     push_gap: d.gap,
                     wall_gap: d.wall_gap,
-                    min_support: (d.min_support > 0.0).then_some(d.min_support),
+                    // Checked when the configuration was read.
+                    min_support: herb_search::support_rule(d.min_support).unwrap_or(None),
                     release_check: if d.release_check {
                         ReleaseCheck::assumed(d.release_error_mm, d.release_error_deg)
                     } else {

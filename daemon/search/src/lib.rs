@@ -218,6 +218,17 @@ pub const DEFAULT_RELEASE_CHECK: ReleaseCheck = ReleaseCheck {
 /// -0.7 to +2.0, not separated, so herbd keeps it off (`docs/table1.md`, "The support rule").
 pub const SUPPORT_RULE_SHARE: f32 = 0.3;
 
+/// The support rule of a configured share ([`SearchSettings::min_support`]), as herbd's
+/// `[decision] min_support`, the CLI and the sweeps give it: 0 is off, a share up to 1 is the
+/// rule; anything else (negative, above 1, not a number) is refused, naming the range.
+pub fn support_rule(share: f32) -> std::result::Result<Option<f32>, String> {
+    if share.is_finite() && (0.0..=1.0).contains(&share) {
+        Ok((share > 0.0).then_some(share))
+    } else {
+        Err(format!("{share} outside 0..=1"))
+    }
+}
+
 /// The release error (one standard deviation) the search assumes by default, for its release
 /// check and its robust rollouts: x and y (mm), field-v1's. herbd's `[decision]
 /// release_error_mm` and the evaluation's `search_noise` default to it.

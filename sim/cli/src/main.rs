@@ -745,10 +745,11 @@ fn parse_noise(s: &str) -> Result<(f32, f32), String> {
 
 /// A share from 0 to 1 (`--search-min-support`).
 fn parse_share(s: &str) -> Result<f32, String> {
-    match s.trim().parse::<f32>() {
-        Ok(x) if x.is_finite() && (0.0..=1.0).contains(&x) => Ok(x),
-        _ => Err(format!("{s:?}: expected a share from 0 to 1 (e.g. 0.3)")),
-    }
+    let x = s
+        .trim()
+        .parse::<f32>()
+        .map_err(|_| format!("{s:?}: expected a share from 0 to 1 (e.g. 0.3)"))?;
+    herb_search::support_rule(x).map(|_| x)
 }
 
 #[cfg(test)]

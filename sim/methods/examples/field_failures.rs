@@ -4,14 +4,15 @@
 //! under field-v1").
 //!
 //!     cargo run --release -p herb-methods --example field_failures -- \
-//!         [EPISODES] [SEED] [WORLD] [THREADS]
+//!         [EPISODES] [SEED] [WORLD] [THREADS] [MIN_SUPPORT]
 //!
 //! The episodes are the sweeps' `set = "sample"` ones (`evaluation::sampled_episodes`: seeds
 //! `SEED` to `SEED + EPISODES - 1`, default 777, 10 to 25 catalog objects each), in HERB's
 //! order, in the evaluation's world `WORLD` (default `field`: `models/field.toml`; a field model
 //! file). As in a sweep, the environment's and the order's seed is the episode's index in the
 //! set, so a run from a later `SEED` is not a slice of a longer run. Each is decided as Table I's
-//! search row decides (herbd's decision path, the default search settings, count budget). For
+//! search row decides (herbd's decision path, the default search settings, count budget;
+//! `MIN_SUPPORT` turns on the support rule, `--search-min-support`'s share). For
 //! each failure it prints one line: the episode, the step, the object and its catalog size, the
 //! search's prediction for the chosen candidate (its rollout's success, the live check), the job
 //! twin's agreement with the camera, whether the same decided pose released exactly in the true
@@ -56,10 +57,13 @@ fn main() -> Result<(), Error> {
     let seed: u64 = arg(2).map_or(Ok(777), |v| v.parse())?;
     let world = arg(3).unwrap_or_else(|| "field".into());
     let threads: usize = arg(4).map_or(Ok(2), |v| v.parse())?;
+    let defaults = EvalSettings::default();
     let settings = EvalSettings {
         world,
-        ..EvalSettings::default()
+        search_min_support: arg(5).map_or(Ok(defaults.search_min_support), |v| v.parse())?,
+        ..defaults
     };
+    settings.validate()?;
     let cfg = settings.world()?;
     let ms = settings.method_settings(&cfg)?;
     let root = paths::boxed_root(None);

@@ -228,14 +228,8 @@ impl EvalSettings {
             )
             .into());
         }
-        if !(self.search_min_support.is_finite() && (0.0..=1.0).contains(&self.search_min_support))
-        {
-            return Err(format!(
-                "search_min_support {}: need 0 to 1",
-                self.search_min_support
-            )
-            .into());
-        }
+        herb_search::support_rule(self.search_min_support)
+            .map_err(|e| format!("search_min_support {e}"))?;
         if !(1..=64).contains(&self.search_threads) {
             return Err(format!("search_threads {}: need 1 to 64", self.search_threads).into());
         }
@@ -342,7 +336,8 @@ impl EvalSettings {
                         )
                     })
                     .flatten(),
-                min_support: (self.search_min_support > 0.0).then_some(self.search_min_support),
+                min_support: herb_search::support_rule(self.search_min_support)
+                    .map_err(|e| format!("search_min_support {e}"))?,
             },
             world: world.clone(),
         })
