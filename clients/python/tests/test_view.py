@@ -170,13 +170,25 @@ def test_a_recording_holds_every_placed_object_the_arm_and_the_landings(cell, tm
     assert paths.get("/job/landing_mm", 0) >= 3, paths
 
 
-def pixels_of(png: Path, rgb: tuple, tolerance: int = 60) -> int:
-    """Pixels near colour ``rgb`` in the 3D panel (the left 60 % of the window)."""
+def pixels_of(png: Path, rgb: tuple, hue_tolerance: float = 0.04) -> int:
+    """Pixels of colour ``rgb``'s hue in the 3D panel (the left 60 % of the window, below the
+    viewer's toolbar and the panel's title): within ``hue_tolerance`` of its hue, saturated and
+    bright enough not to be the grey box, the floor or the background. By hue, not by the exact
+    colour: the panel shades each face, and an object seen through the box's translucent wall
+    keeps its hue but not its colour. The toolbar is left out: its warning sign is orange."""
+    import colorsys
+
     from PIL import Image  # a dependency of rerun-sdk
 
-    img = np.asarray(Image.open(png).convert("RGB"), dtype=np.int16)
-    panel = img[:, : int(0.6 * img.shape[1])]
-    return int((np.abs(panel - np.array(rgb)).sum(axis=2) < tolerance).sum())
+    img = Image.open(png).convert("RGB")
+    w, h = img.size
+    panel = img.crop((0, int(0.07 * h), int(0.6 * w), h))
+    hsv = np.asarray(panel.convert("HSV"), dtype=np.float64)
+    hue, sat, val = hsv[..., 0] / 255.0, hsv[..., 1] / 255.0, hsv[..., 2] / 255.0
+    want = colorsys.rgb_to_hsv(*(c / 255.0 for c in rgb))[0]
+    off = np.abs(hue - want)
+    off = np.minimum(off, 1.0 - off)
+    return int(((off < hue_tolerance) & (sat >= 0.35) & (val >= 0.25)).sum())
 
 
 def test_the_live_view_in_a_browser_shows_the_packed_objects(cell, tmp_path):
