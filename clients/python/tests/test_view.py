@@ -10,6 +10,7 @@ Needs ``rerun-sdk`` (the test command installs it) and, for the browser test, ``
 they fail.
 """
 
+import colorsys
 import math
 import os
 import shutil
@@ -176,8 +177,6 @@ def pixels_of(png: Path, rgb: tuple, hue_tolerance: float = 0.04) -> int:
     bright enough not to be the grey box, the floor or the background. By hue, not by the exact
     colour: the panel shades each face, and an object seen through the box's translucent wall
     keeps its hue but not its colour. The toolbar is left out: its warning sign is orange."""
-    import colorsys
-
     from PIL import Image  # a dependency of rerun-sdk
 
     img = Image.open(png).convert("RGB")
