@@ -1,11 +1,13 @@
 """A screenshot of a web page after it has run for a while, in headless Chromium.
 
-    python -m herb_client.screenshot URL out.png [--wait 20] [--size 1400x900]
+    python -m herb_client.screenshot URL out.png [--wait 20] [--size 1400x900] [--scale 1]
 
 Chromium's own ``--screenshot`` shoots as soon as the page has loaded, before a WebAssembly
 application such as Rerun's web viewer has started. This drives Chromium over its DevTools
 protocol on a pipe (``--remote-debugging-pipe``: standard library only, no browser driver) and
-shoots after ``--wait`` seconds. Software rendering (SwiftShader), so it needs no GPU.
+shoots after ``--wait`` seconds. Software rendering (SwiftShader), so it needs no GPU. The page
+is laid out at ``--size`` and drawn at ``--scale`` times it: a scale of 0.5 gives the same
+picture at a quarter of the pixels, which a software renderer draws about four times as fast.
 """
 
 from __future__ import annotations
@@ -21,9 +23,12 @@ import time
 
 
 class Chromium:
-    """A headless Chromium driven over the DevTools pipe."""
+    """A headless Chromium driven over the DevTools pipe: pages laid out at ``width`` x
+    ``height`` CSS pixels, drawn at ``scale`` device pixels per CSS pixel."""
 
-    def __init__(self, width: int, height: int, exe: str | None = None):
+    def __init__(self, width: int, height: int, exe: str | None = None, scale: float = 1.0):
+        if not scale > 0.0:
+            raise ValueError(f"scale must be positive, not {scale}")
         exe = exe or shutil.which("chromium") or shutil.which("chromium-browser")
         if exe is None:
             raise SystemExit("chromium not found (Debian: apt install chromium)")
@@ -38,6 +43,7 @@ class Chromium:
             "--use-angle=swiftshader",
             "--no-first-run",
             f"--window-size={width},{height}",
+            f"--force-device-scale-factor={scale}",
             "about:blank",
         ]
         # Chromium reads the protocol on fd 3 and writes on fd 4: a trampoline puts the pipes
@@ -109,9 +115,11 @@ class Page:
             f.write(base64.b64decode(shot["data"]))
 
 
-def screenshot(url: str, out: str, wait_s: float = 20.0, width: int = 1400, height: int = 900) -> None:
+def screenshot(
+    url: str, out: str, wait_s: float = 20.0, width: int = 1400, height: int = 900, scale: float = 1.0
+) -> None:
     """Opens ``url``, lets it run ``wait_s`` seconds, writes a PNG of the page to ``out``."""
-    c = Chromium(width, height)
+    c = Chromium(width, height, scale=scale)
     try:
         page = Page(c, url)
         time.sleep(wait_s)
@@ -126,9 +134,15 @@ def main(argv=None) -> int:
     ap.add_argument("out")
     ap.add_argument("--wait", type=float, default=20.0, help="seconds to let the page run")
     ap.add_argument("--size", default="1400x900", help="window size, WIDTHxHEIGHT")
+    ap.add_argument("--scale", type=float, default=1.0, help="device pixels per CSS pixel (0.5: a quarter of the pixels)")
     a = ap.parse_args(argv)
-    w, h = (int(v) for v in a.size.split("x"))
-    screenshot(a.url, a.out, a.wait, w, h)
+    try:
+        w, h = (int(v) for v in a.size.split("x"))
+    except ValueError:
+        ap.error(f"--size: not WIDTHxHEIGHT: {a.size!r}")
+    if not a.scale > 0.0:
+        ap.error(f"--scale: must be positive, not {a.scale}")
+    screenshot(a.url, a.out, a.wait, w, h, a.scale)
     return 0
 
 

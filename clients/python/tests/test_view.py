@@ -90,10 +90,16 @@ def view(prefix: str, logs: Path, *args: str) -> subprocess.Popen:
     )
 
 
+# Jobs the module's cell has packed to their end: herbd's run log holds every one of them.
+packed_jobs = 0
+
+
 def pack(herb: Herb, ids: list[str]) -> None:
+    global packed_jobs
     all_ids = catalog_ids(REPO / "models" / "objects.toml")
     result = herb.pack([all_ids.index(i) for i in ids], timeout_s=300.0)
     assert result.ok, [StatusEvent(s.event).name for s in result.statuses]
+    packed_jobs += 1
 
 
 def rows(rrd: Path) -> dict[str, int]:
@@ -203,12 +209,16 @@ def test_the_live_view_in_a_browser_shows_the_packed_objects(cell, tmp_path):
         line = v.stdout.readline()
         assert line.startswith("viewer: "), (line, (logs / "view.log").read_text())
         url = line.split()[1]
-        browser = Chromium(1400, 900)
+        # Laid out at 1400 x 900, drawn at half scale: the same picture at a quarter of the
+        # pixels, which the software renderer draws about four times as fast (the viewer ingests
+        # the stream between frames: at full scale it fell more than a minute behind the job).
+        browser = Chromium(1400, 900, scale=0.5)
         try:
             page = Page(browser, url)
             pack(herb, ["003", "005"])
             # The browser renders in software and catches up at its own pace: shots until both
-            # objects are drawn in their colours, and the arm in its red, or the deadline.
+            # objects are drawn in their colours, and the arm in its red, or the deadline. More
+            # than 100 pixels each at half scale (the smallest, the soup can, draws about 650).
             shot = tmp_path / "view.png"
             deadline = time.monotonic() + 150
             seen = {}
@@ -220,9 +230,9 @@ def test_the_live_view_in_a_browser_shows_the_packed_objects(cell, tmp_path):
                     "object 2": pixels_of(shot, hv.colour(1)),
                     "the arm": pixels_of(shot, hv.ARM),
                 }
-                if all(n > 300 for n in seen.values()):
+                if all(n > 100 for n in seen.values()):
                     break
-            assert all(n > 300 for n in seen.values()), f"pixels in the 3D panel: {seen} ({shot})"
+            assert all(n > 100 for n in seen.values()), f"pixels in the 3D panel: {seen} ({shot})"
         finally:
             browser.close()
     finally:
@@ -235,7 +245,10 @@ def test_a_finished_job_is_recorded_from_herbds_run_log(cell, tmp_path):
         pytest.importorskip("rerun")
 
     herb, prefix, logs = cell
-    pack(herb, ["004", "002"])
+    # The jobs the tests before this one packed are in the run log (each takes half a minute of
+    # arm motion); a job is packed here only when this test runs alone.
+    if packed_jobs == 0:
+        pack(herb, ["004", "002"])
     time.sleep(1.0)  # the run log's writer flushes every 100 ms
     log = sorted((logs / "runs").glob("RUN-*.log"))[0]
     events = tmp_path / "job.jsonl"
