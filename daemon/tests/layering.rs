@@ -5,11 +5,15 @@
 //! never reaches the learned policies; the wire types reach no other HERB crate. Only normal and
 //! build dependencies count (a test may link whatever it checks against).
 //!
+//! A library or binary built without its unit-test harness (`test = false`, to spare the test
+//! build a second compile of it) must hold no unit test, since one added there would never run.
+//!
 //! `PENDING` lists the violations the restructuring has not removed yet. Each entry must still be
 //! a violation: once a step removes one, this test fails until the entry is deleted, so the list
 //! only shrinks.
 
 use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use serde_json::Value;
@@ -391,5 +395,70 @@ fn the_rules_name_real_workspace_packages() {
     assert!(
         missing.is_empty(),
         "rules name packages the workspace does not have: {missing:?}"
+    );
+}
+
+/// The `.rs` files under `dir`, recursively.
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for entry in std::fs::read_dir(dir).expect("a source folder reads") {
+        let path = entry.expect("a source folder entry").path();
+        if path.is_dir() {
+            rust_files(&path, out);
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            out.push(path);
+        }
+    }
+}
+
+#[test]
+fn targets_built_without_a_test_harness_hold_no_unit_tests() {
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
+    let out = Command::new(env!("CARGO"))
+        .args([
+            "metadata",
+            "--no-deps",
+            "--offline",
+            "--format-version",
+            "1",
+        ])
+        .current_dir(root)
+        .output()
+        .expect("cargo metadata runs");
+    assert!(
+        out.status.success(),
+        "cargo metadata failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let meta: Value = serde_json::from_slice(&out.stdout).expect("cargo metadata prints JSON");
+    let (mut skipped, mut tests) = (Vec::new(), Vec::new());
+    for target in meta["packages"]
+        .as_array()
+        .expect("packages")
+        .iter()
+        .flat_map(|p| p["targets"].as_array().expect("targets"))
+    {
+        let kinds = target["kind"].as_array().expect("kind");
+        let lib_or_bin = kinds.iter().any(|k| k == "lib" || k == "bin");
+        if !lib_or_bin || target["test"] != Value::Bool(false) {
+            continue;
+        }
+        skipped.push(target["name"].as_str().unwrap().to_owned());
+        // The target's folder: a library's src/ (with its modules), a binary's own folder.
+        let src = Path::new(target["src_path"].as_str().expect("src_path"));
+        let mut files = Vec::new();
+        rust_files(src.parent().unwrap(), &mut files);
+        for file in files {
+            let text = std::fs::read_to_string(&file).unwrap();
+            if text.contains("#[test]") || text.contains("#[cfg(test)]") {
+                tests.push(file);
+            }
+        }
+    }
+    // The manifests mark some (herbd, the loopback, herb-sim, ...): the check checks something.
+    assert!(skipped.iter().any(|t| t == "herbd"), "{skipped:?}");
+    assert!(
+        tests.is_empty(),
+        "unit tests in targets built without a test harness ({skipped:?}), which never run: \
+         {tests:?}; remove `test = false` from their manifest"
     );
 }
