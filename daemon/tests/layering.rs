@@ -266,13 +266,12 @@ const ROBOT_SIDE_NEVER: &[&str] = &["tract-onnx", "herb-decide", "herb-daemon", 
 /// empty since the loopback left herb-daemon.
 const PENDING: &[(&str, &str)] = &[];
 
-/// Package name -> names of its normal and build dependencies, as cargo resolves them. Not
-/// `--offline`: `cargo metadata` reads the manifests of every platform's packages (Windows-only
-/// ones included), which a Linux build never downloads, so a fresh cargo home must fetch them.
-fn resolved_graph() -> BTreeMap<String, BTreeSet<String>> {
+/// `cargo metadata` of the workspace, with `args`, as JSON.
+fn cargo_metadata(args: &[&str]) -> Value {
     let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
     let out = Command::new(env!("CARGO"))
         .args(["metadata", "--format-version", "1"])
+        .args(args)
         .current_dir(root)
         .output()
         .expect("cargo metadata runs");
@@ -281,7 +280,14 @@ fn resolved_graph() -> BTreeMap<String, BTreeSet<String>> {
         "cargo metadata failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let meta: Value = serde_json::from_slice(&out.stdout).expect("cargo metadata prints JSON");
+    serde_json::from_slice(&out.stdout).expect("cargo metadata prints JSON")
+}
+
+/// Package name -> names of its normal and build dependencies, as cargo resolves them. Not
+/// `--offline`: `cargo metadata` reads the manifests of every platform's packages (Windows-only
+/// ones included), which a Linux build never downloads, so a fresh cargo home must fetch them.
+fn resolved_graph() -> BTreeMap<String, BTreeSet<String>> {
+    let meta = cargo_metadata(&[]);
     let names: BTreeMap<&str, &str> = meta["packages"]
         .as_array()
         .expect("packages")
@@ -412,24 +418,7 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
 
 #[test]
 fn targets_built_without_a_test_harness_hold_no_unit_tests() {
-    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
-    let out = Command::new(env!("CARGO"))
-        .args([
-            "metadata",
-            "--no-deps",
-            "--offline",
-            "--format-version",
-            "1",
-        ])
-        .current_dir(root)
-        .output()
-        .expect("cargo metadata runs");
-    assert!(
-        out.status.success(),
-        "cargo metadata failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let meta: Value = serde_json::from_slice(&out.stdout).expect("cargo metadata prints JSON");
+    let meta = cargo_metadata(&["--no-deps", "--offline"]);
     let (mut skipped, mut tests) = (Vec::new(), Vec::new());
     for target in meta["packages"]
         .as_array()
