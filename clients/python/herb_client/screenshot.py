@@ -7,7 +7,8 @@ application such as Rerun's web viewer has started. This drives Chromium over it
 protocol on a pipe (``--remote-debugging-pipe``: standard library only, no browser driver) and
 shoots after ``--wait`` seconds. Software rendering (SwiftShader), so it needs no GPU. The page
 is laid out at ``--size`` and drawn at ``--scale`` times it: a scale of 0.5 gives the same
-picture at a quarter of the pixels, which a software renderer draws about four times as fast.
+picture at a quarter of the pixels, which the software renderer draws faster (Rerun's viewer at
+1400 x 900 on 2 cores: a screenshot in 1.4 to 2.0 s instead of about 4.5 s).
 """
 
 from __future__ import annotations

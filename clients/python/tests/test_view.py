@@ -210,8 +210,8 @@ def test_the_live_view_in_a_browser_shows_the_packed_objects(cell, tmp_path):
         assert line.startswith("viewer: "), (line, (logs / "view.log").read_text())
         url = line.split()[1]
         # Laid out at 1400 x 900, drawn at half scale: the same picture at a quarter of the
-        # pixels, which the software renderer draws about four times as fast (the viewer ingests
-        # the stream between frames: at full scale it fell more than a minute behind the job).
+        # pixels, which the software renderer draws faster (the viewer ingests the stream
+        # between frames: at full scale it fell more than a minute behind the job).
         browser = Chromium(1400, 900, scale=0.5)
         try:
             page = Page(browser, url)
