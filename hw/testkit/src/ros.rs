@@ -5,6 +5,7 @@ use crate::{Proc, spawn_env};
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::{Condvar, Mutex};
 use std::time::{Duration, Instant};
 
 /// The Python with rospy (Debian's; another `python3` may come first on PATH).
@@ -50,11 +51,45 @@ pub struct RosWorld {
     /// The master's port.
     pub port: u16,
     env: Vec<(String, String)>,
+    _slot: CoreSlot,
+}
+
+/// ROS worlds alive in this test process, and the signal that one ended.
+static WORLDS: (Mutex<usize>, Condvar) = (Mutex::new(0), Condvar::new());
+
+/// One of at most as many ROS worlds at once in a test process as the machine has cores, held
+/// for the world's life. Their peers (rosmaster, rospy fakes, herbd's loop) are CPU-bound, and
+/// `scripts/test.sh` runs one test thread more than the cores: with three worlds on two cores
+/// the fake Baxter's joint states came late enough for herbd to fault `RobotSilent` (once in
+/// four CI runs).
+struct CoreSlot;
+
+impl CoreSlot {
+    fn take() -> Self {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let (count, ended) = &WORLDS;
+        let alive = count.lock().unwrap_or_else(|e| e.into_inner());
+        let mut alive = ended
+            .wait_while(alive, |n| *n >= cores)
+            .unwrap_or_else(|e| e.into_inner());
+        *alive += 1;
+        Self
+    }
+}
+
+impl Drop for CoreSlot {
+    fn drop(&mut self) {
+        let (count, ended) = &WORLDS;
+        *count.lock().unwrap_or_else(|e| e.into_inner()) -= 1;
+        ended.notify_one();
+    }
 }
 
 impl RosWorld {
-    /// A world in `dir` on a free port; `python_path`: extra modules for rospy peers.
+    /// A world in `dir` on a free port; `python_path`: extra modules for rospy peers. Waits while
+    /// as many worlds as cores are alive in this process.
     pub fn new(dir: &Path, python_path: Option<&Path>) -> Self {
+        let slot = CoreSlot::take();
         let port = free_port();
         let home = dir.join("roshome");
         std::fs::create_dir_all(&home).unwrap();
@@ -70,6 +105,7 @@ impl RosWorld {
             dir: dir.into(),
             port,
             env,
+            _slot: slot,
         }
     }
 
