@@ -15,11 +15,24 @@ scripts/check-units.sh
 # more than the cores: the end-to-end tests mostly wait on the arm's real-time motion (on 2
 # cores, the loopback's 27 took 253 s on 2 threads and 185 s on 3).
 export RUST_TEST_THREADS=${RUST_TEST_THREADS:-$(($(nproc) + 1))}
+# The Python packages install while the Rust tests build (pip waits on the network, cargo on
+# the cores), and are waited for before any test runs; pip's output is shown if it fails.
+VENV=${HERB_VENV:-$ROOT/.venv}
+pip_log=$(mktemp)
+(
+  set -e
+  [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
+  "$VENV/bin/pip" install -q --disable-pip-version-check maturin numpy gymnasium pytest ray tqdm
+  "$VENV/bin/pip" install -q --disable-pip-version-check -e "clients/python[view]"
+) >"$pip_log" 2>&1 &
+pip_pid=$!
+cargo test --workspace --tests --no-run
+if ! wait "$pip_pid"; then
+  echo "installing the Python packages into $VENV failed:" >&2
+  cat "$pip_log" >&2
+  exit 1
+fi
 cargo test --workspace --tests
 cargo test --workspace --doc
-VENV=${HERB_VENV:-$ROOT/.venv}
-[ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
-"$VENV/bin/pip" install -q --disable-pip-version-check maturin numpy gymnasium pytest ray tqdm
-"$VENV/bin/pip" install -q --disable-pip-version-check -e "clients/python[view]"
 (cd sim/py && VIRTUAL_ENV="$VENV" PATH="$VENV/bin:$PATH" maturin develop -q)
 "$VENV/bin/python" -m pytest -q sim/py/tests clients/python/tests
