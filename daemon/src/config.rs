@@ -220,6 +220,10 @@ pub struct DecisionConfig {
     /// can slide or tip off the pile, is ranked as a failed rollout is
     /// ([`herb_search::SearchSettings::min_support`]; measured at 0.3).
     pub min_support: f32,
+    /// The search finds its candidates on the camera's heightmap filtered by a 3 x 3 median
+    /// (off by default): the camera's per-cell depth noise then no longer decides between
+    /// positions of the same top ([`herb_search::SearchSettings::median`]).
+    pub median: bool,
     /// A decision not back this long after it was asked for (s) faults the job (`Decision`):
     /// a hung worker never holds the arm.
     pub timeout_s: f64,
@@ -245,6 +249,7 @@ impl Default for DecisionConfig {
             min_support: herb_search::SearchSettings::default()
                 .min_support
                 .unwrap_or(0.0),
+            median: herb_search::SearchSettings::default().median,
             timeout_s: 10.0,
         }
     }

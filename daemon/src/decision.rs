@@ -102,6 +102,7 @@ impl DecisionCore {
                     wall_gap: d.wall_gap,
                     // Checked when the configuration was read.
                     min_support: herb_search::support_rule(d.min_support).unwrap_or(None),
+                    median: d.median,
                     release_check: if d.release_check {
                         ReleaseCheck::assumed(d.release_error_mm, d.release_error_deg)
                     } else {

@@ -353,6 +353,35 @@ impl Heightmap {
         }
     }
 
+    /// Writes into `dst` each cell's median over its 3 x 3 neighbourhood (clipped at the grid's
+    /// edges, where the upper median of the cells inside is taken): a depth camera's per-cell
+    /// noise and lone outliers filtered out, a straight step kept where it is. `dst` takes
+    /// `self`'s grid (it allocates only when its grid differs). Used by the search to find its
+    /// candidates (herb-search's `SearchSettings::median`).
+    pub fn median3_into(&self, dst: &mut Heightmap) {
+        if dst.spec != self.spec {
+            *dst = self.clone();
+        }
+        let (nx, ny) = (self.spec.nx, self.spec.ny);
+        let mut window = [0.0f32; 9];
+        for row in 0..ny {
+            let rows = row.saturating_sub(1)..(row + 2).min(ny);
+            for col in 0..nx {
+                let cols = col.saturating_sub(1)..(col + 2).min(nx);
+                let mut n = 0;
+                for r in rows.clone() {
+                    for &h in &self.data[r * nx + cols.start..r * nx + cols.end] {
+                        window[n] = h;
+                        n += 1;
+                    }
+                }
+                let w = &mut window[..n];
+                w.sort_unstable_by(f32::total_cmp);
+                dst.data[row * nx + col] = w[n / 2];
+            }
+        }
+    }
+
     /// Highest value.
     pub fn max(&self) -> f32 {
         self.data.iter().copied().fold(0.0, f32::max)
@@ -514,6 +543,33 @@ fn floor_i(x: f32) -> isize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A 3 x 3 median on a heightmap with a straight step and one outlier: only the outlier
+    /// changes (a step's cells have more of their side in every window, the box's corners
+    /// too).
+    #[test]
+    fn the_median_filter_takes_out_a_lone_outlier_and_keeps_a_step() {
+        let spec = GridSpec::for_box(0.00625).unwrap();
+        let mut h = Heightmap::new(spec);
+        // A step of 5 cm along a column, and one cell 3 cm up on the low side (an outlier).
+        for row in 0..spec.ny {
+            for col in 0..spec.nx {
+                h.data_mut()[row * spec.nx + col] = if col >= spec.nx / 2 { 0.05 } else { 0.0 };
+            }
+        }
+        let (orow, ocol) = (spec.ny / 2, spec.nx / 4);
+        h.data_mut()[orow * spec.nx + ocol] = 0.03;
+        let mut m = Heightmap::new(GridSpec::for_box(0.0125).unwrap());
+        h.median3_into(&mut m);
+        assert_eq!(m.spec(), h.spec(), "the output takes the input's grid");
+        let mut expected = h.clone();
+        expected.data_mut()[orow * spec.nx + ocol] = 0.0;
+        assert_eq!(
+            m.data(),
+            expected.data(),
+            "the outlier goes, the step and the corners stay"
+        );
+    }
 
     /// The run-by-run pooling equals the cell-by-cell definition, bit for bit, for the grids
     /// the lattice and BLBF use, on a rough heightmap.

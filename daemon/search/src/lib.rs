@@ -158,6 +158,13 @@ pub struct SearchSettings {
     /// rollout's is, so that it is chosen only when nothing better finished. Off by default;
     /// [`SUPPORT_RULE_SHARE`] is the share measured.
     pub min_support: Option<f32>,
+    /// The camera's heightmap filtered by a 3 x 3 median ([`Heightmap::median3_into`]) before
+    /// the candidates are found on it, and before the job twin's heights are fused into it
+    /// where they agree: the camera's per-cell depth noise otherwise decides the lattice's ties
+    /// between positions of the same top, and lifts every footprint's resting height by its
+    /// highest noisy cell. The job twin's agreement and the release heights are still read
+    /// from the camera's own heightmap. Off by default.
+    pub median: bool,
 }
 
 /// The release check ([`SearchSettings::release_check`]): a candidate's release offset by
@@ -275,6 +282,7 @@ impl Default for SearchSettings {
             wall_gap: 0,
             release_check: Some(DEFAULT_RELEASE_CHECK),
             min_support: None,
+            median: false,
         }
     }
 }
@@ -401,6 +409,8 @@ pub struct Search {
     zscratch: ZScratch,
     /// The heightmap the candidates are found on when the job's twin agrees ([`fuse`]).
     fused: Option<Heightmap>,
+    /// The camera's heightmap filtered ([`SearchSettings::median`]), kept between decisions.
+    filtered: Option<Heightmap>,
 }
 
 impl Search {
@@ -421,6 +431,7 @@ impl Search {
             report: SearchReport::default(),
             job: None,
             fused: None,
+            filtered: None,
         }
     }
 
@@ -479,14 +490,22 @@ impl Search {
             self.settings.twin == TwinKind::Job && self.follow_job(heightmap, remaining)?;
         // The candidates on the job's twin's heightmap where it agrees with the camera's
         // (within JOB_CELL_OFF_M: the decisions replayed, without the camera's noise and
-        // dropouts), on the camera's where it does not (what the twin does not know).
+        // dropouts), on the camera's where it does not (what the twin does not know); with the
+        // median, on the camera's filtered.
+        let camera = if self.settings.median {
+            let filtered = self.filtered.get_or_insert_with(|| heightmap.clone());
+            heightmap.median3_into(filtered);
+            &*filtered
+        } else {
+            heightmap
+        };
         let seen = match (&self.job, agreed) {
             (Some(j), true) => {
                 let fused = self.fused.get_or_insert_with(|| heightmap.clone());
-                fuse(j.world.heightmap(), heightmap, fused);
+                fuse(j.world.heightmap(), camera, fused);
                 &*fused
             }
-            _ => heightmap,
+            _ => camera,
         };
         self.lattice.compute(seen, &self.catalog, next);
         let n = self.lattice.candidates().len();

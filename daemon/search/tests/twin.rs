@@ -84,6 +84,7 @@ fn the_search_is_anytime_and_never_worse_than_its_prior_on_its_own_rollouts() {
         wall_gap: 0,
         release_check: None,
         min_support: None,
+        median: false,
     };
     let mut s = Search::new(
         c.clone(),
@@ -239,6 +240,7 @@ fn pack_with(
         wall_gap: 0,
         release_check: None,
         min_support: None,
+        median: false,
     };
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
     let mut out = Vec::new();
@@ -295,6 +297,7 @@ fn the_jobs_twin_replays_its_decisions_and_falls_back_where_the_heightmap_disagr
         wall_gap: 0,
         release_check: None,
         min_support: None,
+        median: false,
     };
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings(TwinKind::Job));
     let p = s.decide(world.heightmap(), &remaining, None).unwrap();
@@ -334,6 +337,7 @@ fn the_jobs_twin_leaves_out_an_object_never_released_and_forgets_a_finished_job(
         wall_gap: 0,
         release_check: None,
         min_support: None,
+        median: false,
     };
     let empty = PackingWorld::new(c.clone(), WorldConfig::default()).unwrap();
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
@@ -383,6 +387,7 @@ fn the_robust_search_ranks_by_noisy_rollouts_that_a_replay_draws_again() {
             wall_gap: 0,
             release_check: None,
             min_support: None,
+            median: false,
         };
         let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
         let p = s.decide(world.heightmap(), &remaining, None).unwrap();
@@ -428,6 +433,7 @@ fn the_candidates_come_from_the_jobs_twin_where_the_camera_agrees_and_from_the_c
         wall_gap: 0,
         release_check: None,
         min_support: None,
+        median: false,
     };
     let mut world = PackingWorld::new(c.clone(), WorldConfig::default()).unwrap();
     let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
@@ -507,6 +513,7 @@ fn the_release_check_passes_over_a_candidate_that_a_release_off_its_placement_le
             wall_gap: 0,
             release_check: check,
             min_support: None,
+            median: false,
         };
         let mut s = Search::new(c.clone(), WorldConfig::default(), settings);
         let p = s
@@ -551,5 +558,46 @@ fn the_release_check_passes_over_a_candidate_that_a_release_off_its_placement_le
         (again.0, again.1.chosen, again.1.release_rejected),
         (p, r.chosen, r.release_rejected),
         "a replay checks alike"
+    );
+}
+
+#[test]
+fn the_median_filter_keeps_a_camera_outlier_from_moving_the_candidates() {
+    let c = common::primitives();
+    let clean = PackingWorld::new(c.clone(), WorldConfig::default())
+        .unwrap()
+        .heightmap()
+        .clone();
+    let remaining = [c.by_id("005").unwrap()];
+    let decide = |hm: &Heightmap, median: bool| {
+        let settings = SearchSettings {
+            k: 1,
+            budget: Budget::Rollouts(1),
+            twin: TwinKind::Heightmap,
+            median,
+            ..SearchSettings::default()
+        };
+        Search::new(c.clone(), WorldConfig::default(), settings)
+            .decide(hm, &remaining, None)
+            .unwrap()
+            .expect("an empty box has room")
+    };
+    // The empty box's first choice, and the same box seen with one cell 4 mm high under it
+    // (a depth camera's outlier).
+    let p = decide(&clean, false);
+    let mut seen = clean.clone();
+    let spec = *seen.spec();
+    let (u, v) = spec.to_pixel(p.x, p.y);
+    seen.data_mut()[v as usize * spec.nx + u as usize] = 0.004;
+    assert_ne!(
+        decide(&seen, false),
+        p,
+        "the outlier moves the unfiltered choice"
+    );
+    assert_eq!(decide(&seen, true), p, "the filtered choice stays");
+    assert_eq!(
+        decide(&clean, true),
+        p,
+        "an exact empty box is its own median"
     );
 }

@@ -181,6 +181,12 @@ struct EvalArgs {
     #[arg(long, default_value_t = herb_search::SearchSettings::default().min_support.unwrap_or(0.0),
           value_parser = parse_share)]
     search_min_support: f32,
+    /// The search finds its candidates on the camera's heightmap filtered by a 3 x 3 median
+    /// (off, as herbd's; `--search-median` or `--search-median true`: on), so that the
+    /// camera's depth noise no longer decides between positions of the same top.
+    #[arg(long, default_value_t = herb_search::SearchSettings::default().median,
+          num_args = 0..=1, default_missing_value = "true", action = clap::ArgAction::Set)]
+    search_median: bool,
     /// The evaluation's world: `ideal` (every object released where it was decided), `field`
     /// (the shipped field model, models/field.toml: a real cell's release error, seeded per
     /// episode, told to no twin or method) or a field model file.
@@ -570,6 +576,7 @@ impl EvalArgs {
             search_noise: self.search_noise,
             search_check: self.search_check,
             search_min_support: self.search_min_support,
+            search_median: self.search_median,
             world: self.world.clone(),
             release_noise: self.release_noise,
             world_set: self.world_set.clone(),

@@ -4,7 +4,7 @@
 //! under field-v1").
 //!
 //!     cargo run --release -p herb-methods --example field_failures -- \
-//!         [EPISODES] [SEED] [WORLD] [THREADS] [MIN_SUPPORT]
+//!         [EPISODES] [SEED] [WORLD] [THREADS] [MIN_SUPPORT] [MEDIAN]
 //!
 //! The episodes are the sweeps' `set = "sample"` ones (`evaluation::sampled_episodes`: seeds
 //! `SEED` to `SEED + EPISODES - 1`, default 777, 10 to 25 catalog objects each), in HERB's
@@ -12,7 +12,8 @@
 //! file). As in a sweep, the environment's and the order's seed is the episode's index in the
 //! set, so a run from a later `SEED` is not a slice of a longer run. Each is decided as Table I's
 //! search row decides (herbd's decision path, the default search settings, count budget;
-//! `MIN_SUPPORT` turns on the support rule, `--search-min-support`'s share). For
+//! `MIN_SUPPORT` turns on the support rule, `--search-min-support`'s share; `MEDIAN` `true` the
+//! median-filtered camera, `--search-median`). For
 //! each failure it prints one line: the episode, the step, the object and its catalog size, the
 //! search's prediction for the chosen candidate (its rollout's success, the live check), the job
 //! twin's agreement with the camera, whether the same decided pose released exactly in the true
@@ -61,6 +62,7 @@ fn main() -> Result<(), Error> {
     let settings = EvalSettings {
         world,
         search_min_support: arg(5).map_or(Ok(defaults.search_min_support), |v| v.parse())?,
+        search_median: arg(6).map_or(Ok(defaults.search_median), |v| v.parse())?,
         ..defaults
     };
     settings.validate()?;

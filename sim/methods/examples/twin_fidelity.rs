@@ -199,6 +199,7 @@ fn probe(
         wall_gap: 0,
         release_check: None,
         min_support: None,
+        median: false,
     };
     let kind = match mode {
         Mode::Twin | Mode::Blbf => TwinKind::Heightmap,

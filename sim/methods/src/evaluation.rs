@@ -135,6 +135,9 @@ pub struct EvalSettings {
     /// candidate standing above the rim on less than this share of its footprint is ranked as
     /// a failed rollout.
     pub search_min_support: f32,
+    /// The search finds its candidates on the camera's heightmap filtered by a 3 x 3 median
+    /// (`SearchSettings::median`; off, as herbd's).
+    pub search_median: bool,
     /// The evaluation's world: `ideal` (no error), `field` (the shipped field model,
     /// `models/field.toml`) or a field model file.
     pub world: String,
@@ -173,6 +176,7 @@ impl Default for EvalSettings {
             ),
             search_check: search.release_check.is_some(),
             search_min_support: search.min_support.unwrap_or(0.0),
+            search_median: search.median,
             world: "ideal".into(),
             release_noise: None,
             world_set: Vec::new(),
@@ -338,6 +342,7 @@ impl EvalSettings {
                     .flatten(),
                 min_support: herb_search::support_rule(self.search_min_support)
                     .map_err(|e| format!("search_min_support {e}"))?,
+                median: self.search_median,
             },
             world: world.clone(),
         })
@@ -406,6 +411,9 @@ impl EvalSettings {
                 if self.search_min_support > 0.0 {
                     let pct = 100.0 * self.search_min_support;
                     extra += &format!(", support {pct:.0} % above the rim");
+                }
+                if self.search_median {
+                    extra += ", median-filtered camera";
                 }
                 if self.search_live_pile {
                     extra += ", live pile";
