@@ -119,7 +119,9 @@ pub struct SearchSettings {
     /// where they agree: the camera's per-cell depth noise otherwise decides the lattice's ties
     /// between positions of the same top, and lifts every footprint's resting height by its
     /// highest noisy cell. The job twin's agreement and the release heights are still read
-    /// from the camera's own heightmap. Off by default.
+    /// from the camera's own heightmap. On by default since 2026-12-02 (herbd's, the CLI's and
+    /// the bindings'): under the field model it gained +5.86 points over the search without it
+    /// on 512 paired episodes, and packs the same episodes in the ideal world.
     pub median: bool,
 }
 
@@ -238,7 +240,7 @@ impl Default for SearchSettings {
             wall_gap: 0,
             release_check: Some(DEFAULT_RELEASE_CHECK),
             min_support: None,
-            median: false,
+            median: true,
         }
     }
 }

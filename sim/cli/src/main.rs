@@ -182,7 +182,7 @@ struct EvalArgs {
           value_parser = parse_share)]
     search_min_support: f32,
     /// The search finds its candidates on the camera's heightmap filtered by a 3 x 3 median
-    /// (off, as herbd's; `--search-median` or `--search-median true`: on), so that the
+    /// (on, as herbd's; `--search-median false`: off), so that the
     /// camera's depth noise no longer decides between positions of the same top.
     #[arg(long, default_value_t = herb_search::SearchSettings::default().median,
           num_args = 0..=1, default_missing_value = "true", action = clap::ArgAction::Set)]

@@ -136,7 +136,7 @@ pub struct EvalSettings {
     /// a failed rollout.
     pub search_min_support: f32,
     /// The search finds its candidates on the camera's heightmap filtered by a 3 x 3 median
-    /// (`SearchSettings::median`; off, as herbd's).
+    /// (`SearchSettings::median`; on, as herbd's).
     pub search_median: bool,
     /// The evaluation's world: `ideal` (no error), `field` (the shipped field model,
     /// `models/field.toml`) or a field model file.
