@@ -121,7 +121,7 @@ pub struct SearchSettings {
     /// highest noisy cell. The job twin's agreement and the release heights are still read
     /// from the camera's own heightmap. On by default since 2026-12-02 (herbd's, the CLI's and
     /// the bindings'): under the field model it gained +5.86 points over the search without it
-    /// on 512 paired episodes, and packs the same episodes in the ideal world.
+    /// on 512 paired episodes; in the ideal world it packs within one episode of it.
     pub median: bool,
 }
 
