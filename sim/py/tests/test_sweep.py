@@ -76,7 +76,7 @@ def test_the_sweeps_episodes_are_herb_sim_evals(tmp_path, local_ray):
         every = [row[1:-1] for row in list(csv.reader(f))[1:]]
     assert every == expected[1:]
     summary = (out / "sweep.md").read_text()
-    assert "| c3 | search (2 rollouts, k = 16, job, release check of 5 mm / 3 deg, gap 6.25 mm) (beam3) |" in summary, summary
+    assert "| c3 | search (2 rollouts, k = 16, job, release check of 5 mm / 3 deg, median-filtered camera, gap 6.25 mm) (beam3) |" in summary, summary
     for chart in ("success.png", "objects.png"):
         assert (out / chart).stat().st_size > 1000
 
