@@ -227,12 +227,14 @@ struct EvalArgs {
     /// Write the table (Markdown) here.
     #[arg(long, default_value = "results/table1.md")]
     out: PathBuf,
-    /// Write per-episode results (CSV) here.
-    #[arg(long, default_value = "results/table1.csv")]
-    csv: PathBuf,
-    /// Write the plots (compactness per step, objects packed) into this folder.
-    #[arg(long, default_value = "results")]
-    plots: PathBuf,
+    /// Write per-episode results (CSV) here; by default beside `--out`, with its name and the
+    /// extension `.csv` (results/table1.csv for the default table).
+    #[arg(long)]
+    csv: Option<PathBuf>,
+    /// Write the plots (compactness per step, objects packed) into this folder; by default the
+    /// folder of `--out`, so that a table written elsewhere leaves the checkout's results alone.
+    #[arg(long)]
+    plots: Option<PathBuf>,
 }
 
 /// Arguments of `herb-sim pack`.
@@ -537,10 +539,11 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
     }
     let table = evaluation::report(&all_results, target, episodes.len(), &notes);
     println!("{table}");
+    let (csv, plots) = (a.csv_path(), a.plots_dir());
     write_file(&a.out, &table)?;
-    write_file(&a.csv, &csv_text)?;
-    eprintln!("wrote {} and {}", a.out.display(), a.csv.display());
-    match plot::write_plots(&a.plots, &all_results) {
+    write_file(&csv, &csv_text)?;
+    eprintln!("wrote {} and {}", a.out.display(), csv.display());
+    match plot::write_plots(&plots, &all_results) {
         Ok(files) => {
             for f in files {
                 eprintln!("wrote {}", f.display());
@@ -553,6 +556,23 @@ fn eval_cmd(data: &DataArgs, a: EvalArgs) -> AnyResult<()> {
 }
 
 impl EvalArgs {
+    /// Where the per-episode CSV goes: `--csv`, or `--out` with the extension `.csv`.
+    fn csv_path(&self) -> PathBuf {
+        self.csv
+            .clone()
+            .unwrap_or_else(|| self.out.with_extension("csv"))
+    }
+
+    /// Where the plots go: `--plots`, or the folder `--out` is written in.
+    fn plots_dir(&self) -> PathBuf {
+        self.plots
+            .clone()
+            .unwrap_or_else(|| match self.out.parent() {
+                Some(dir) if !dir.as_os_str().is_empty() => dir.to_path_buf(),
+                _ => PathBuf::from("."),
+            })
+    }
+
     /// The settings every row shares, as the library names them (one conversion; a sweep's
     /// configuration gives the same settings by the same names).
     fn settings(&self) -> EvalSettings {
@@ -772,5 +792,30 @@ mod tests {
             panic!("not eval")
         };
         assert_eq!(a.settings(), EvalSettings::default());
+    }
+
+    fn eval_args(args: &[&str]) -> EvalArgs {
+        let cli = Cli::try_parse_from(["herb-sim", "eval"].iter().chain(args)).unwrap();
+        let Cmd::Eval(a) = cli.cmd else {
+            panic!("not eval")
+        };
+        *a
+    }
+
+    /// The CSV and the plots go beside the table: a table written elsewhere does not overwrite
+    /// the checkout's results/table1.csv or its plots; the defaults stay results/.
+    #[test]
+    fn the_csv_and_plots_follow_the_table() {
+        let a = eval_args(&[]);
+        assert_eq!(a.csv_path(), PathBuf::from("results/table1.csv"));
+        assert_eq!(a.plots_dir(), PathBuf::from("results"));
+        let a = eval_args(&["--out", "/tmp/run/s.md"]);
+        assert_eq!(a.csv_path(), PathBuf::from("/tmp/run/s.csv"));
+        assert_eq!(a.plots_dir(), PathBuf::from("/tmp/run"));
+        let a = eval_args(&["--out", "s.md"]);
+        assert_eq!(a.plots_dir(), PathBuf::from("."));
+        let a = eval_args(&["--out", "s.md", "--csv", "x/e.csv", "--plots", "p"]);
+        assert_eq!(a.csv_path(), PathBuf::from("x/e.csv"));
+        assert_eq!(a.plots_dir(), PathBuf::from("p"));
     }
 }
