@@ -170,7 +170,7 @@ pub const RELEASE_CHECK_WINDOW: usize = 6;
 /// herbd's release check by default ([`SearchSettings::release_check`]): the corners of 5 mm
 /// and 3 deg, field-v1's release error. Under field-v1 it packed more than the search without
 /// it on each of four draws of 256 validation episodes (1,024 paired: 13 episodes only with it,
-/// 2 only without; +1.07 points, +0.3 to +1.8): `docs/table1.md`, "The release check out of
+/// 2 only without; +1.07 points, +0.3 to +1.8): `docs/field-variants.md`, "The release check out of
 /// sample" and "The release check on the fresh draw".
 pub const DEFAULT_RELEASE_CHECK: ReleaseCheck = ReleaseCheck {
     offset_m: (DEFAULT_RELEASE_ERROR_MM * 1e-3) as f32,
@@ -180,7 +180,7 @@ pub const DEFAULT_RELEASE_CHECK: ReleaseCheck = ReleaseCheck {
 /// The share the support rule was measured with ([`SearchSettings::min_support`]): a candidate
 /// above the rim on less than 30 % of its footprint is ranked as a failure. Under field-v1,
 /// against the default on four draws of 256 validation episodes (1,024 paired): +0.68 points,
-/// -0.7 to +2.0, not separated, so herbd keeps it off (`docs/table1.md`, "The support rule").
+/// -0.7 to +2.0, not separated, so herbd keeps it off (`docs/field-variants.md`, "The support rule").
 pub const SUPPORT_RULE_SHARE: f32 = 0.3;
 
 /// The support rule of a configured share ([`SearchSettings::min_support`]), as herbd's
@@ -204,12 +204,12 @@ pub const DEFAULT_RELEASE_ERROR_DEG: f64 = 3.0;
 /// Candidates herbd's search rolls out by default, and the evaluation's reproducible budget
 /// (one rollout each). Under the field model, with one cell of gap, 16 packed 3.91 points more
 /// than 8 over two draws of 256 validation episodes (separated) and 5.70 less of BoxED's 263
-/// (not separated); 24 packed less than 16 on both draws: `docs/table1.md`, "How many
+/// (not separated); 24 packed less than 16 on both draws: `docs/field-variants.md`, "How many
 /// candidates, and how they are ranked".
 pub const DEFAULT_K: usize = 16;
 
 /// The search's default clearance ([`SearchSettings::push_gap`]): one fine cell of 6.25 mm, for
-/// a gripper that does not release exactly (`docs/table1.md`, "A clearance for the release
+/// a gripper that does not release exactly (`docs/field-variants.md`, "A clearance for the release
 /// error").
 pub const DEFAULT_GAP: usize = 1;
 
