@@ -178,9 +178,9 @@ pub const DEFAULT_RELEASE_CHECK: ReleaseCheck = ReleaseCheck {
 };
 
 /// The share the support rule was measured with ([`SearchSettings::min_support`]): a candidate
-/// above the rim on less than 30 % of its footprint is ranked as a failure. Under field-v1,
-/// against the default on four draws of 256 validation episodes (1,024 paired): +0.68 points,
-/// -0.7 to +2.0, not separated, so herbd keeps it off (`docs/field-variants.md`, "The support rule").
+/// above the rim on less than 30 % of its footprint is ranked as a failure. Under field-v1, against
+/// the default on four draws of 256 validation episodes (1,024 paired): +0.68 points, -0.7 to +2.0,
+/// not separated, so herbd keeps it off (`docs/field-variants.md`, "The support rule").
 pub const SUPPORT_RULE_SHARE: f32 = 0.3;
 
 /// The support rule of a configured share ([`SearchSettings::min_support`]), as herbd's

@@ -565,12 +565,11 @@ impl EvalArgs {
 
     /// Where the plots go: `--plots`, or the folder `--out` is written in.
     fn plots_dir(&self) -> PathBuf {
-        self.plots
-            .clone()
-            .unwrap_or_else(|| match self.out.parent() {
-                Some(dir) if !dir.as_os_str().is_empty() => dir.to_path_buf(),
-                _ => PathBuf::from("."),
-            })
+        let beside = || {
+            let dir = self.out.parent().filter(|d| !d.as_os_str().is_empty());
+            dir.unwrap_or(Path::new(".")).to_path_buf()
+        };
+        self.plots.clone().unwrap_or_else(beside)
     }
 
     /// The settings every row shares, as the library names them (one conversion; a sweep's

@@ -1,6 +1,6 @@
 //! Why herbd's default search fails under a field model: each failed episode's last decision,
-//! beside what the search predicted for it and what the same release would have done without
-//! the field's errors (a diagnostic; its figures are in docs/field-variants.md, "Where the search fails
+//! beside what the search predicted for it and what the same release would have done without the
+//! field's errors (a diagnostic; its figures are in docs/field-variants.md, "Where the search fails
 //! under field-v1").
 //!
 //!     cargo run --release -p herb-methods --example field_failures -- \
