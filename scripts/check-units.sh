@@ -35,6 +35,8 @@ else
     [ -e "$herb/docs/$l" ] || install_fail "docs/real-cell.md links $l: not installed"
   done
   grep -qs '^#ROS_IP=' "$stage/etc/herb/ros.env" || install_fail "no ros.env template in /etc/herb"
+  grep -qs 'KERNEL=="cpu_dma_latency".*GROUP="herb"' "$stage/usr/local/lib/udev/rules.d/60-herb.rules" \
+    || install_fail "no udev rule giving group herb /dev/cpu_dma_latency (herbd's [rt] cpu_latency)"
   grep -q 'ros.env' <<<"$said" || install_fail "its last message does not mention /etc/herb/ros.env"
   echo 'ROS_IP=10.0.0.5' >"$stage/etc/herb/ros.env"
   systemd/install.sh --dest "$stage" --bin "$scratch/bin" >/dev/null 2>&1 || install_fail "staging again failed"

@@ -2,7 +2,7 @@
 # Lays out HERB on the robot PC (systemd/README.md): binaries, models and the documentation
 # (README.md, docs/, systemd/README.md) under /opt/herb, the configuration under /etc/herb
 # (existing files are kept; ros.env is a commented template), the units, sysusers.d and
-# tmpfiles.d under /usr/local/lib, then creates the user and /tmp/iceoryx2 and reloads systemd.
+# tmpfiles.d and the udev rule under /usr/local/lib, then creates the user and /tmp/iceoryx2 and reloads systemd.
 #
 #   cargo build --release --bins && sudo systemd/install.sh
 #   systemd/install.sh --dest /tmp/stage     # stage into a folder (packaging, tests): no
@@ -54,6 +54,8 @@ done
 for u in systemd/*.service; do install -m 0644 "$u" "$D/usr/local/lib/systemd/system/"; done
 install -m 0644 systemd/sysusers.d/herb.conf "$D/usr/local/lib/sysusers.d/herb.conf"
 install -m 0644 systemd/tmpfiles.d/herb.conf "$D/usr/local/lib/tmpfiles.d/herb.conf"
+install -d "$D/usr/local/lib/udev/rules.d"
+install -m 0644 systemd/udev/60-herb.rules "$D/usr/local/lib/udev/rules.d/60-herb.rules"
 if [ -n "$BOXED" ]; then
   install -d "$D/opt/herb/boxed"
   for part in meshes sessions catalog.json; do
@@ -72,6 +74,9 @@ real_cell="on a real cell, before enabling herb-baxter and herb-camera:
 if [ "$D" = "" ]; then
   systemd-sysusers /usr/local/lib/sysusers.d/herb.conf
   systemd-tmpfiles --create /usr/local/lib/tmpfiles.d/herb.conf
+  # /dev/cpu_dma_latency to group herb now (udev applies the rule at every boot).
+  udevadm control --reload 2>/dev/null && udevadm trigger --subsystem-match=misc --sysname-match=cpu_dma_latency 2>/dev/null \
+    || echo "install.sh: udev not reloaded; /dev/cpu_dma_latency gets group herb at the next boot"
   systemctl daemon-reload
   echo "installed; next: sudo systemctl enable --now herb-loopback herbd   (or herb-baxter herb-camera herbd on a real cell)"
 else

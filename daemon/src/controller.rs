@@ -24,7 +24,7 @@ use herb_ipc::{
     GripperAction, GripperCommand, GripperState, Header, HeightmapFrame, JointCommand, JointState,
     PackJobReply, PackJobRequest, Payload, RejectReason, Status, StatusEvent, monotonic_ns,
 };
-use herb_process::rt::{set_timer_slack, sleep_until};
+use herb_process::rt::{ThreadCounters, set_timer_slack, sleep_until};
 use herb_robot::motion::Setpoint;
 use iceoryx2::active_request::ActiveRequest;
 use iceoryx2::prelude::ipc;
@@ -61,6 +61,30 @@ pub struct LoopStats {
     pub misses: u64,
     /// Cycles in the interval.
     pub cycles: u64,
+    /// The interval's longest cycle, taken apart (where a slow cycle spent its time).
+    pub slowest: SlowCycle,
+}
+
+/// One cycle's work taken apart: how long each stage took and what the loop thread met on
+/// the way (page faults, blocking, preemption). Kept for the longest cycle of each interval.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SlowCycle {
+    /// The cycle's number since start.
+    pub cycle: u64,
+    /// Its work, wake-up to end (ns).
+    pub work_ns: u64,
+    /// Its stages (ns): the sensor inputs read, the planner's and the decision worker's
+    /// answers and the clients' requests handled, the job machine's tick with its outputs
+    /// published, the journal and the statistics.
+    pub stages_ns: [u64; 4],
+    /// What the loop thread met during the cycle: page faults, voluntary context switches
+    /// (it blocked: on a lock, on I/O) and involuntary ones (it was preempted).
+    pub met: ThreadCounters,
+}
+
+impl SlowCycle {
+    /// The names of [`SlowCycle::stages_ns`], in order.
+    pub const STAGES: [&'static str; 4] = ["inputs", "answers_requests", "tick_publish", "journal"];
 }
 
 impl LoopStats {
@@ -75,6 +99,7 @@ impl LoopStats {
             jobs: 0,
             misses: 0,
             cycles: 0,
+            slowest: SlowCycle::default(),
         }
     }
 
@@ -87,6 +112,7 @@ impl LoopStats {
         self.jobs = 0;
         self.misses = 0;
         self.cycles = 0;
+        self.slowest = SlowCycle::default();
     }
 
     /// Adds `other` into `self` (reporter thread).
@@ -98,6 +124,9 @@ impl LoopStats {
         self.jobs += other.jobs;
         self.misses += other.misses;
         self.cycles += other.cycles;
+        if other.slowest.work_ns > self.slowest.work_ns {
+            self.slowest = other.slowest;
+        }
     }
 }
 
@@ -370,6 +399,8 @@ pub struct Controller {
     journal: Option<rtrb::Producer<JobRecord>>,
     /// The last record handed to the writer.
     journaled: JobRecord,
+    /// When each stage of the current cycle ended ([`SlowCycle::stages_ns`]).
+    marks: [u64; 4],
 }
 
 /// The reporter's ends of the statistics rings, and of the log's.
@@ -425,6 +456,7 @@ impl Controller {
             received: Sent::default(),
             journal: None,
             journaled: JobRecord::NONE,
+            marks: [0; 4],
         };
         (
             c,
@@ -464,6 +496,7 @@ impl Controller {
         loop {
             sleep_until(next, self.spin_ns);
             let wake = monotonic_ns();
+            let met = ThreadCounters::now();
             self.stats
                 .jitter_ns
                 .saturating_record(wake.saturating_sub(next).max(1));
@@ -471,6 +504,20 @@ impl Controller {
             let end = monotonic_ns();
             let work = end.saturating_sub(wake);
             self.stats.cycle_ns.saturating_record(work.max(1));
+            if work > self.stats.slowest.work_ns {
+                let mut at = wake;
+                let stages_ns = self.marks.map(|m| {
+                    let d = m.saturating_sub(at);
+                    at = at.max(m);
+                    d
+                });
+                self.stats.slowest = SlowCycle {
+                    cycle: self.counters.cycles,
+                    work_ns: work,
+                    stages_ns,
+                    met: ThreadCounters::now().since(met),
+                };
+            }
             self.counters.max_cycle = self.counters.max_cycle.max(work);
             self.counters.cycles += 1;
             self.stats.cycles += 1;
@@ -575,6 +622,7 @@ impl Controller {
             }
             job.heightmap(f, now);
         }
+        self.marks[0] = monotonic_ns();
         let mut fx = Outbox::new(
             now,
             &mut self.seq,
@@ -622,12 +670,14 @@ impl Controller {
             job.confirm_request(&r, &mut fx);
             fx.confirm = None;
         }
+        self.marks[1] = monotonic_ns();
         let stop = self.shared.stop.load(Ordering::Relaxed);
         let finished = job.tick(now, stop, &mut fx);
         log(LoopRec::Tick {
             stop,
             digest: fx.digest.finish(),
         });
+        self.marks[2] = monotonic_ns();
         if fx.log_dropped > 0 {
             self.shared
                 .log_dropped
@@ -640,6 +690,7 @@ impl Controller {
                 self.journaled = r;
             }
         }
+        self.marks[3] = monotonic_ns();
         finished
     }
 }

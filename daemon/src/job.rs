@@ -72,8 +72,8 @@ use crate::plan::{DecisionRequest, DecisionResponse, Motion, MotionPlan, Request
 use herb_ipc::{
     ARM_STATUS_PERIOD_NS, ArmBlocker, ArmStatus, CancelJobRequest, ConfirmPickRequest, Fault,
     GRIPPER_REPEAT_NS, GripperAction, GripperState, HEARTBEAT_PERIOD_NS, Header, HeightmapFrame,
-    InOrder, JobState, JointState, MAX_FUTURE_STAMP_NS, MAX_JOB_OBJECTS, NO_JOINT, NO_OBJECT,
-    PackJobRequest, RejectReason, Status, StatusEvent,
+    InOrder, JobState, JobWait, JointState, MAX_FUTURE_STAMP_NS, MAX_JOB_OBJECTS, NO_JOINT,
+    NO_OBJECT, PackJobRequest, RejectReason, Status, StatusEvent,
 };
 use herb_robot::kinematics::DOF;
 use herb_robot::motion::{Excess, Setpoint, excess_of};
@@ -319,6 +319,12 @@ struct Run {
     confirm_picks: bool,
     /// The current try of the current object's pick is confirmed.
     confirmed: bool,
+    /// herbd asked for the current try's object (`AwaitingObject` sent) and no confirmation
+    /// was accepted since: only now is one taken ([`Job::confirm_request`]).
+    awaiting: bool,
+    /// The last confirmation accepted (object index, try): a repeat of it is answered as
+    /// accepted again and changes nothing.
+    last_confirmed: Option<(u32, u32)>,
     /// A client cancelled it: it brakes, retreats and ends `JobCancelled`. Carried by the job,
     /// not by one phase: a cancelled job still passes through the motion's phases (its brake,
     /// its retreat's stream, a fault on the way up).
@@ -340,6 +346,8 @@ impl Run {
             announced: false,
             confirm_picks,
             confirmed: false,
+            awaiting: false,
+            last_confirmed: None,
             cancelled: false,
         }
     }
@@ -373,7 +381,15 @@ pub struct Job {
     spare: Option<Box<MotionPlan>>,
     brake: Option<Box<MotionPlan>>,
     out: Commands,
+    /// When the daemon's stop was first seen (0: not stopping yet).
+    stop_since: u64,
 }
+
+/// The longest herbd's stop waits for a moving arm to brake to a standstill (ns): a brake at
+/// Baxter's limits takes under a second; a brake that has not ended by then (its plan stuck
+/// behind a long one at the planner) is cut, the arm held where the last command put it, so
+/// that herbd exits within 2 s of SIGTERM whatever it is doing.
+pub const STOP_LIMIT_NS: u64 = 1_500_000_000;
 
 /// The machine's latched inputs: the newest valid sample of each source, the order checks that
 /// admitted them, and how many were rejected.
@@ -528,6 +544,7 @@ impl Job {
             spare: Some(b),
             brake: None,
             out: Commands::default(),
+            stop_since: 0,
         }
     }
 
@@ -536,10 +553,18 @@ impl Job {
     /// (stopped: the arm no longer braking).
     pub fn tick(&mut self, now: u64, stop: bool, fx: &mut impl Effects) -> bool {
         if stop && !self.stopping() {
+            self.stop_since = now;
             self.begin_stop(fx);
         }
         self.check_health(now, fx);
         self.step(now, fx);
+        if self.stopping()
+            && !matches!(self.phase, Phase::Stopped { .. })
+            && now.saturating_sub(self.stop_since) > STOP_LIMIT_NS
+        {
+            // The stop's brake did not end in time: held where it is.
+            self.halt(fx, AfterBrake::Stop);
+        }
         self.publish(now, fx);
         matches!(self.phase, Phase::Stopped { .. })
     }

@@ -8,7 +8,7 @@ use iceoryx2::prelude::*;
 /// Measured arm joints, published by the hardware adapter every cycle.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::JointState")]
+#[type_name("herb::v2::JointState")]
 pub struct JointState {
     /// Header; the stamp is the measurement time.
     pub header: Header,
@@ -41,7 +41,7 @@ impl JointState {
 /// A joint setpoint, streamed by `herbd` every cycle while it controls the arm.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::JointCommand")]
+#[type_name("herb::v2::JointCommand")]
 pub struct JointCommand {
     /// Header; the stamp is the cycle's start.
     pub header: Header,
@@ -89,7 +89,7 @@ wire_enum! {
 /// A gripper command from `herbd`, published when it changes and repeated every 100 ms.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::GripperCommand")]
+#[type_name("herb::v2::GripperCommand")]
 pub struct GripperCommand {
     /// Header.
     pub header: Header,
@@ -117,7 +117,7 @@ impl GripperCommand {
 /// The gripper as measured, published by the adapter every cycle.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::GripperState")]
+#[type_name("herb::v2::GripperState")]
 pub struct GripperState {
     /// Header.
     pub header: Header,
@@ -182,7 +182,7 @@ impl ArmBlocker {
 /// it changes: whether it passes joint states and commands on, and if not, why.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::ArmStatus")]
+#[type_name("herb::v2::ArmStatus")]
 pub struct ArmStatus {
     /// Header.
     pub header: Header,

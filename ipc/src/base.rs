@@ -6,8 +6,24 @@ use iceoryx2::prelude::*;
 
 use std::mem::MaybeUninit;
 
-/// Protocol version carried in every header; a receiver rejects any other.
-pub const PROTOCOL_VERSION: u32 = 1;
+/// The contract's wire version, carried in every header (a receiver rejects any other) and in
+/// every payload's iceoryx2 type name (`herb::v2::<Name>`), so that a process built for another
+/// version cannot open HERB's services and is told both versions ([`crate::bus::BusError`]).
+/// Any change to a payload's layout or to what a field means raises it (`ipc/CONTRACT.md`,
+/// "Versions"); the contract's test fails on a layout that changed under the same version.
+/// Version 1 was the contract until 2026-12; version 2 added `Status.waiting_for`.
+pub const PROTOCOL_VERSION: u32 = 2;
+
+/// The wire version an iceoryx2 type name of the contract says (`herb::v<N>::<Name>`), if it
+/// is one.
+pub fn wire_version_of(type_name: &str) -> Option<u32> {
+    type_name
+        .strip_prefix("herb::v")?
+        .split_once("::")?
+        .0
+        .parse()
+        .ok()
+}
 /// Arm joints carried in joint messages (Baxter left arm).
 pub const DOF: usize = 7;
 /// Most cells a [`HeightmapFrame`] can carry (the 224 x 224 observation grid).
@@ -59,7 +75,7 @@ pub fn zeroed_in_place<T: Payload>(slot: &mut MaybeUninit<T>) -> &mut T {
 /// The common first field of every payload.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::Header")]
+#[type_name("herb::v2::Header")]
 pub struct Header {
     /// [`PROTOCOL_VERSION`].
     pub version: u32,

@@ -16,6 +16,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::{client::Client, server::Server};
 use iceoryx2::prelude::*;
+use iceoryx2::service::static_config::messaging_pattern::MessagingPattern as StaticPattern;
 
 /// A publisher of HERB payload `T`.
 pub type Pub<T> = Publisher<ipc::Service, T, ()>;
@@ -40,15 +41,81 @@ pub type ConfirmClient = Client<ipc::Service, ConfirmPickRequest, (), ConfirmPic
 pub struct BusError {
     /// What was being opened.
     pub what: String,
-    /// iceoryx2's error.
+    /// iceoryx2's error, or the versions that do not match.
     pub message: String,
+    /// The service was created by a process of another wire version: (this process's, the
+    /// service's) [`crate::PROTOCOL_VERSION`].
+    pub versions: Option<(u32, u32)>,
 }
 
 fn err(what: &str, e: impl std::fmt::Debug) -> BusError {
     BusError {
         what: what.to_owned(),
         message: format!("{e:?}"),
+        versions: None,
     }
+}
+
+/// The payload type names of the existing service `name` with messaging `pattern` (the
+/// request's and the response's for request-response), as its creator registered them.
+fn existing_type_names(name: &ServiceName, pattern: MessagingPattern) -> Vec<String> {
+    let Ok(Some(d)) = ipc::Service::details(name, Config::global_config(), pattern) else {
+        return Vec::new();
+    };
+    match d.static_details.messaging_pattern() {
+        StaticPattern::PublishSubscribe(p) => {
+            vec![p.message_type_details().payload.type_name().to_string()]
+        }
+        StaticPattern::RequestResponse(r) => vec![
+            r.request_message_type_details()
+                .payload
+                .type_name()
+                .to_string(),
+            r.response_message_type_details()
+                .payload
+                .type_name()
+                .to_string(),
+        ],
+        _ => Vec::new(),
+    }
+}
+
+/// The iceoryx2 type name of payload `T` (`herb::v2::Status`).
+fn type_name<T: Payload>() -> &'static str {
+    // SAFETY: `type_name` reads a constant; it is unsafe only because the trait as a whole is.
+    unsafe { <T as ZeroCopySend>::type_name() }
+}
+
+/// `e`, iceoryx2's failure to open service `name`, made into the versions' mismatch when the
+/// service's payloads carry another wire version than ours (`our_type`'s): e.g. "herbd and this program
+/// speak different versions of HERB's wire: this program 2, the service 1 (type
+/// herb::v1::Status)".
+fn open_err(
+    name: &str,
+    sn: &ServiceName,
+    pattern: MessagingPattern,
+    our_type: &str,
+    e: impl std::fmt::Debug,
+) -> BusError {
+    let ours = crate::wire_version_of(our_type).unwrap_or(crate::PROTOCOL_VERSION);
+    for t in existing_type_names(sn, pattern) {
+        match crate::wire_version_of(&t) {
+            Some(theirs) if theirs != ours => {
+                return BusError {
+                    what: name.to_owned(),
+                    message: format!(
+                        "wire version mismatch: this program speaks HERB wire version {ours}, the \
+                         service was created by a process of version {theirs} (payload type \
+                         {t}); run herbd, the adapters and the clients of one release \
+                         (ipc/CONTRACT.md, \"Versions\")"
+                    ),
+                    versions: Some((ours, theirs)),
+                };
+            }
+            _ => {}
+        }
+    }
+    err(name, e)
 }
 
 /// The quality of service of a publish-subscribe service, which every process opening it must
@@ -248,7 +315,15 @@ impl Bus {
             .max_nodes(q.max_nodes)
             .enable_safe_overflow(q.safe_overflow)
             .open_or_create()
-            .map_err(|e| err(name, e))
+            .map_err(|e| {
+                open_err(
+                    name,
+                    &sn,
+                    MessagingPattern::PublishSubscribe,
+                    type_name::<T>(),
+                    e,
+                )
+            })
     }
 
     /// A publisher on service `name` (one of [`Services`]'s names).
@@ -294,7 +369,15 @@ impl Bus {
             .enable_safe_overflow_for_requests(q.safe_overflow)
             .enable_safe_overflow_for_responses(q.safe_overflow)
             .open_or_create()
-            .map_err(|e| err(name, e))
+            .map_err(|e| {
+                open_err(
+                    name,
+                    &sn,
+                    MessagingPattern::RequestResponse,
+                    type_name::<Q>(),
+                    e,
+                )
+            })
     }
 
     /// The pack-job server.

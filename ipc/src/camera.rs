@@ -7,7 +7,7 @@ use iceoryx2::prelude::*;
 /// at +y, column 0 at -x, cells of `cell_m` centred on the box (`herb_sim::GridSpec`).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::HeightmapFrame")]
+#[type_name("herb::v2::HeightmapFrame")]
 pub struct HeightmapFrame {
     /// Header; the stamp is the capture time.
     pub header: Header,

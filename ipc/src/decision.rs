@@ -10,7 +10,7 @@ pub const MAX_REPORTED_CANDIDATES: usize = 64;
 /// radians.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::CandidateReport")]
+#[type_name("herb::v2::CandidateReport")]
 pub struct CandidateReport {
     /// B x of the object's canonical origin.
     pub x: f32,
@@ -30,7 +30,7 @@ pub struct CandidateReport {
 /// decision; informational: the job's course is in [`Status`]).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::DecisionReport")]
+#[type_name("herb::v2::DecisionReport")]
 pub struct DecisionReport {
     /// Header; the stamp is the decision's end.
     pub header: Header,

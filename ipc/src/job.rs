@@ -144,7 +144,7 @@ impl Fault {
 /// Job progress, per-object results and faults from `herbd`, to any client.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::Status")]
+#[type_name("herb::v2::Status")]
 pub struct Status {
     /// Header.
     pub header: Header,
@@ -197,8 +197,30 @@ pub struct Status {
     /// The try of the current object's pick this event is about (0: the first; a missed grasp
     /// adds one).
     pub attempt: u32,
+    /// What the running job waits for now ([`JobWait`] code), in every status and heartbeat:
+    /// a client that (re)connects at any time sees the wait, not only the event that began it.
+    pub waiting_for: u32,
+    /// Reserved, zero.
+    pub reserved: u32,
 }
 payload!(Status);
+
+wire_enum! {
+    /// What a running job waits for ([`Status::waiting_for`]).
+    pub enum JobWait ("wait") {
+        /// Nothing: the job runs on by itself (or no job runs).
+        None = 0,
+        /// A client's [`ConfirmPickRequest`] for `object_index`, try `attempt`: the job was
+        /// submitted with [`PackJobRequest::CONFIRM_PICKS`] and asked for the object
+        /// ([`StatusEvent::AwaitingObject`]); the arm goes to, or waits at, its pre-grasp pose
+        /// above the station. It lasts through a fault (the confirmation is still taken) and
+        /// ends when the confirmation is accepted or the job ends.
+        Confirmation = 1,
+        /// The placement of object `object_index`: the arm holds it at the lift pose until
+        /// its decision comes (`decision_wait_ms` grows meanwhile).
+        Decision = 2,
+    }
+}
 
 /// [`Status::limit_joint`] when no joint is named.
 pub const NO_JOINT: u32 = u32::MAX;
@@ -226,6 +248,9 @@ impl Status {
         }
         if self.limit_joint != NO_JOINT && self.limit_joint as usize >= DOF {
             return Err(Invalid::new("limit_joint", Reason::OutOfRange));
+        }
+        if JobWait::from_code(self.waiting_for).is_none() {
+            return Err(Invalid::new("waiting_for", Reason::UnknownCode));
         }
         finite_all("limit_position_rad", &[self.limit_position_rad])?;
         finite_all("limit_bound_rad", &[self.limit_bound_rad])?;
@@ -277,7 +302,7 @@ impl Status {
 /// request-response service.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::PackJobRequest")]
+#[type_name("herb::v2::PackJobRequest")]
 pub struct PackJobRequest {
     /// Header.
     pub header: Header,
@@ -379,7 +404,7 @@ impl PackJobRequest {
 /// The reply to a [`PackJobRequest`].
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::PackJobReply")]
+#[type_name("herb::v2::PackJobReply")]
 pub struct PackJobReply {
     /// Header.
     pub header: Header,
@@ -424,7 +449,7 @@ pub(crate) fn reply_reason(
 /// [`StatusEvent::JobCancelled`]. Answered by a [`CancelJobReply`].
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::CancelJobRequest")]
+#[type_name("herb::v2::CancelJobRequest")]
 pub struct CancelJobRequest {
     /// Header.
     pub header: Header,
@@ -460,7 +485,7 @@ fn control_request(header: &Header, job_id: u64) -> Result<(), RejectReason> {
 /// The reply to a [`CancelJobRequest`].
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::CancelJobReply")]
+#[type_name("herb::v2::CancelJobReply")]
 pub struct CancelJobReply {
     /// Header.
     pub header: Header,
@@ -484,7 +509,7 @@ impl CancelJobReply {
 /// pick station: the arm descends and grasps it. Answered by a [`ConfirmPickReply`].
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::ConfirmPickRequest")]
+#[type_name("herb::v2::ConfirmPickRequest")]
 pub struct ConfirmPickRequest {
     /// Header.
     pub header: Header,
@@ -517,7 +542,7 @@ impl ConfirmPickRequest {
 /// The reply to a [`ConfirmPickRequest`].
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::ConfirmPickReply")]
+#[type_name("herb::v2::ConfirmPickReply")]
 pub struct ConfirmPickReply {
     /// Header.
     pub header: Header,

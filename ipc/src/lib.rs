@@ -140,7 +140,7 @@ mod tests {
             Err(Invalid::at("position", Reason::NotFinite, 3))
         );
         let mut m = js();
-        m.header.version = 2;
+        m.header.version = PROTOCOL_VERSION + 1;
         assert_eq!(m.validate().unwrap_err().reason, Reason::WrongVersion);
         let mut m = js();
         m.velocity[0] = 100.0;
@@ -291,23 +291,34 @@ mod tests {
         // the trait as a whole is.
         let names = unsafe {
             [
+                Header::type_name(),
                 HeightmapFrame::type_name(),
                 JointState::type_name(),
                 JointCommand::type_name(),
+                GripperCommand::type_name(),
+                GripperState::type_name(),
+                ArmStatus::type_name(),
                 Status::type_name(),
                 PackJobRequest::type_name(),
+                PackJobReply::type_name(),
+                CancelJobRequest::type_name(),
+                CancelJobReply::type_name(),
+                ConfirmPickRequest::type_name(),
+                ConfirmPickReply::type_name(),
+                CandidateReport::type_name(),
+                DecisionReport::type_name(),
+                SimReset::type_name(),
+                SimObject::type_name(),
+                CommandChecks::type_name(),
+                SimOutcome::type_name(),
             ]
         };
-        assert_eq!(
-            names,
-            [
-                "herb::v1::HeightmapFrame",
-                "herb::v1::JointState",
-                "herb::v1::JointCommand",
-                "herb::v1::Status",
-                "herb::v1::PackJobRequest"
-            ]
-        );
+        for n in names {
+            let name = n.rsplit("::").next().unwrap();
+            assert_eq!(n, format!("herb::v{PROTOCOL_VERSION}::{name}"));
+            assert_eq!(wire_version_of(n), Some(PROTOCOL_VERSION));
+        }
+        assert_eq!(names[7], "herb::v2::Status");
     }
 
     #[test]

@@ -8,7 +8,7 @@ use iceoryx2::prelude::*;
 /// and confirms by publishing a heightmap with no object in the box.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::SimReset")]
+#[type_name("herb::v2::SimReset")]
 pub struct SimReset {
     /// Header; the stamp is the request's time.
     pub header: Header,
@@ -26,7 +26,7 @@ impl SimReset {
 /// evaluation; a real cell has no such service).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::SimOutcome")]
+#[type_name("herb::v2::SimOutcome")]
 pub struct SimOutcome {
     /// Header.
     pub header: Header,
@@ -58,7 +58,7 @@ payload!(SimOutcome);
 /// What the simulated arm found of the joint commands it received (part of [`SimOutcome`]).
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::CommandChecks")]
+#[type_name("herb::v2::CommandChecks")]
 pub struct CommandChecks {
     /// Largest joint-limit excess seen in received commands (rad; 0 when none).
     pub max_limit_excess_rad: f64,
@@ -76,7 +76,7 @@ pub const SIM_BOUNDS: [&str; 7] = [
 /// One object in the simulated box (part of [`SimOutcome`]). Frame B, metres, radians.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("herb::v1::SimObject")]
+#[type_name("herb::v2::SimObject")]
 pub struct SimObject {
     /// Catalog type.
     pub object_type: u32,

@@ -115,8 +115,8 @@ fn layout_table(payloads: &[Payload]) -> String {
         }
         writeln!(
             s,
-            "| `{0}` | (whole) | align {1} | 0 | {2} | type name `herb::v1::{0}` |",
-            p.name, p.align, p.size
+            "| `{0}` | (whole) | align {1} | 0 | {2} | type name `herb::v{3}::{0}` |",
+            p.name, p.align, p.size, PROTOCOL_VERSION
         )
         .unwrap();
     }
@@ -202,7 +202,9 @@ fn layouts() -> Vec<Payload> {
         limit_joint: "joint 0..7 outside its limits (`OutsideLimits`, `BeyondArmLimits`), else `NO_JOINT`",
         limit_position_rad: "rad, its measured angle then (0 without `limit_joint`)",
         limit_bound_rad: "rad, the limit it was beyond (0 without `limit_joint`)",
-        attempt: "the current object's pick try this event is about, from 0");
+        attempt: "the current object's pick try this event is about, from 0",
+        waiting_for: "`JobWait` code: what the running job waits for now (every status and heartbeat)",
+        reserved: "zero");
     layout!(s, PackJobRequest,
         header: "",
         job_id: "chosen by the client, non-zero",
@@ -286,6 +288,7 @@ fn code_tables() -> Vec<(&'static str, Vec<String>)> {
             SIM_BOUNDS.iter().map(|b| b.to_string()).collect(),
         ),
         ("RejectReason", names(RejectReason::from_code)),
+        ("JobWait", names(JobWait::from_code)),
     ]
 }
 
@@ -406,8 +409,8 @@ fn python(payloads: &[Payload]) -> String {
 /// The Python module's fixed head, up to its constants.
 const PY_HEAD: &str = r#""""HERB's IPC payloads as ``ctypes`` structures and its codes as ``enum.IntEnum``, field for field
 and code for code as ``ipc/CONTRACT.md`` lists them (natural alignment, no padding; little-endian
-x86-64). Each structure carries its iceoryx2 type name ``herb::v1::<Name>`` (``type_name()``),
-which iceoryx2 checks with the size and alignment when a service is opened.
+x86-64). Each structure carries its iceoryx2 type name ``herb::v<PROTOCOL_VERSION>::<Name>``
+(``type_name()``), which iceoryx2 checks with the size and alignment when a service is opened.
 
 Generated from the Rust types by ``cargo test -p herb-ipc --test contract_doc``: do not edit
 (``HERB_UPDATE_CONTRACT=1`` rewrites it after a deliberate change of the wire).
@@ -428,11 +431,11 @@ _f32, _f64 = ctypes.c_float, ctypes.c_double
 
 
 class _Struct(ctypes.Structure):
-    """A contract structure: iceoryx2 registers it under ``herb::v1::<class name>``."""
+    """A contract structure: iceoryx2 registers it under ``herb::v<PROTOCOL_VERSION>::<class name>``."""
 
     @classmethod
     def type_name(cls) -> str:
-        return f"herb::v1::{cls.__name__}"
+        return f"herb::v{PROTOCOL_VERSION}::{cls.__name__}"
 "#;
 
 /// The Python module's fixed tail.
@@ -590,6 +593,47 @@ fn the_contract_document_matches_the_types() {
         stale.is_empty(),
         "ipc/CONTRACT.md is out of date; the types say:\n{}\n(HERB_UPDATE_CONTRACT=1 rewrites the blocks)",
         stale.join("\n")
+    );
+}
+
+/// The layout each wire version fixes: the version and a digest (FNV-1a, 64 bits) of every
+/// structure's fields (name, type, offset, size), size and alignment. A layout changed under
+/// the same version fails here: raise `PROTOCOL_VERSION` (ipc/src/base.rs) and the type names,
+/// then write the pair this test prints.
+const WIRE_LAYOUT: (u32, u64) = (2, 0xa8cc_6d5e_fdbb_1eb9);
+
+/// [`WIRE_LAYOUT`]'s digest of `payloads`.
+fn layout_digest(payloads: &[Payload]) -> u64 {
+    let mut text = String::new();
+    for p in payloads {
+        for f in &p.fields {
+            writeln!(
+                text,
+                "{} {} {} {} {}",
+                p.name, f.name, f.ty, f.offset, f.size
+            )
+            .unwrap();
+        }
+        writeln!(text, "{} {} {}", p.name, p.align, p.size).unwrap();
+    }
+    text.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ b as u64).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+#[test]
+fn a_layout_change_raises_the_wire_version() {
+    let digest = layout_digest(&layouts());
+    assert!(
+        WIRE_LAYOUT == (PROTOCOL_VERSION, digest),
+        "the contract's layout is not the one wire version {} fixed: a changed layout needs a new \
+         version (PROTOCOL_VERSION and every type name), then WIRE_LAYOUT = ({}, 0x{digest:016x})",
+        WIRE_LAYOUT.0,
+        if WIRE_LAYOUT.1 == digest {
+            WIRE_LAYOUT.0
+        } else {
+            WIRE_LAYOUT.0 + 1
+        },
     );
 }
 

@@ -309,6 +309,8 @@ mod tests {
             limit_position_rad: 0.0,
             limit_bound_rad: 0.0,
             attempt: 0,
+            waiting_for: 0,
+            reserved: 0,
         }
     }
 

@@ -6,11 +6,12 @@ as ``ipc/CONTRACT.md`` is; ``tests/test_layout.py`` checks every size, offset, t
 ``ctypes`` makes of them against the contract, so the two sides cannot drift.
 """
 
-from .client import DaemonLost, Herb, JobResult, Rejected, catalog_ids
+from .client import DaemonLost, Herb, JobResult, Rejected, WireVersionMismatch, catalog_ids
 from .payloads import (
     Fault,
     GripperAction,
     JobState,
+    JobWait,
     RejectReason,
     SimBound,
     StatusEvent,
@@ -23,9 +24,11 @@ __all__ = [
     "Herb",
     "JobResult",
     "JobState",
+    "JobWait",
     "Rejected",
     "RejectReason",
     "SimBound",
     "StatusEvent",
+    "WireVersionMismatch",
     "catalog_ids",
 ]

@@ -9,6 +9,7 @@ import dataclasses
 import os
 import time
 import tomllib
+from pathlib import Path
 from typing import Iterator, Optional, Sequence
 
 import iceoryx2 as iox2
@@ -17,9 +18,12 @@ import numpy as np
 from .payloads import (
     NO_OBJECT,
     PROTOCOL_VERSION,
+    ConfirmPickReply,
+    ConfirmPickRequest,
     Fault,
     HeightmapFrame,
     JobState,
+    JobWait,
     PackJobReply,
     PackJobRequest,
     RejectReason,
@@ -40,6 +44,52 @@ class Rejected(Exception):
     def __init__(self, reason: RejectReason, detail: int):
         super().__init__(f"job rejected: {reason.name} (detail {detail})")
         self.reason, self.detail = reason, detail
+
+
+class WireVersionMismatch(Exception):
+    """A service under the prefix was created by a process of another HERB wire version
+    (``ipc/CONTRACT.md``, "Versions"): ``ours`` and ``theirs`` name both, ``type_name`` the
+    service's payload type."""
+
+    def __init__(self, service: str, ours: int, theirs: int, type_name: str):
+        super().__init__(
+            f"{service}: wire version mismatch: this client speaks HERB wire version {ours}, the "
+            f"service was created by a process of version {theirs} (payload type {type_name}); "
+            "run herbd, the adapters and the clients of one release"
+        )
+        self.service, self.ours, self.theirs, self.type_name = service, ours, theirs, type_name
+
+
+def wire_version_of(type_name: str) -> Optional[int]:
+    """The wire version an iceoryx2 type name of the contract says (``herb::v<N>::<Name>``)."""
+    head, _, rest = type_name.partition("::v")
+    number, sep, _ = rest.partition("::")
+    return int(number) if head == "herb" and sep and number.isdigit() else None
+
+
+#: Where iceoryx2 (default configuration) keeps each service's static configuration.
+ICEORYX2_SERVICES = Path("/tmp/iceoryx2/services")
+
+
+def existing_type_names(service: str) -> list[str]:
+    """The payload type names of the existing iceoryx2 service called ``service`` (the
+    request's and the response's for a request-response service), read from its static
+    configuration; empty when it cannot be read."""
+    names = []
+    for f in ICEORYX2_SERVICES.glob("*.service"):
+        try:
+            c = tomllib.loads(f.read_text())
+        except (OSError, ValueError):
+            continue
+        if c.get("service_name") != service:
+            continue
+        for pattern in c.get("messaging_pattern", {}).values():
+            for key in ("message_type_details", "request_message_type_details",
+                        "response_message_type_details"):
+                name = pattern.get(key, {}).get("payload", {}).get("type_name")
+                if isinstance(name, str):
+                    names.append(name)
+    return names
 
 
 class DaemonLost(Exception):
@@ -118,8 +168,10 @@ class Herb:
             .request_response(PackJobRequest, PackJobReply)
             .open(),
             timeout_s,
+            "pack_job",
         )
         self._jobs = rr.client_builder().create()
+        self._confirms = None
         self._heightmaps = None
         self._outcomes = None
         self._seq = 0
@@ -129,12 +181,25 @@ class Herb:
     def _name(self, leaf: str):
         return iox2.ServiceName.new(f"{self.prefix}/{leaf}")
 
-    def _retry(self, open_fn, timeout_s: float):
+    def _version_check(self, leaf: str) -> None:
+        """Raises ``WireVersionMismatch`` when service ``leaf`` exists with payloads of another
+        wire version. The payloads' type names are read from the service's static configuration
+        (iceoryx2 keeps it as TOML under its root, ``/tmp/iceoryx2/services``, with the default
+        configuration that every HERB process uses)."""
+        service = f"{self.prefix}/{leaf}"
+        for name in existing_type_names(service):
+            theirs = wire_version_of(name)
+            if theirs is not None and theirs != PROTOCOL_VERSION:
+                raise WireVersionMismatch(service, PROTOCOL_VERSION, theirs, name)
+
+    def _retry(self, open_fn, timeout_s: float, leaf: Optional[str] = None):
         deadline = time.monotonic() + timeout_s
         while True:
             try:
                 return open_fn()
             except Exception as e:  # iceoryx2 raises one exception class per error kind
+                if leaf is not None:
+                    self._version_check(leaf)
                 if time.monotonic() > deadline:
                     raise TimeoutError(
                         f"cannot open a service under prefix {self.prefix!r}: {e!r} "
@@ -146,6 +211,7 @@ class Herb:
         return self._retry(
             lambda: self.node.service_builder(self._name(leaf)).publish_subscribe(payload).open(),
             timeout_s,
+            leaf,
         )
 
     def _header(self):
@@ -189,6 +255,43 @@ class Herb:
                 time.sleep(0.2)
                 continue
             raise Rejected(reason, r.detail)
+
+    def confirm_pick(self, job_id: int, object_index: int, attempt: int,
+                     timeout_s: float = 5.0) -> None:
+        """Confirms that the object herbd awaits for job ``job_id`` (``object_index``, try
+        ``attempt``: a status with ``waiting_for == JobWait.Confirmation`` names them) is at the
+        pick station. Raises ``Rejected`` with herbd's reason (``NotAwaited`` when herbd does
+        not await that object and try now: a confirmation is never kept for later)."""
+        if self._confirms is None:
+            rr = self._retry(
+                lambda: self.node.service_builder(self._name("confirm_pick"))
+                .request_response(ConfirmPickRequest, ConfirmPickReply)
+                .open(),
+                timeout_s,
+                "confirm_pick",
+            )
+            self._confirms = rr.client_builder().create()
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            req = ConfirmPickRequest()
+            req.header.version, req.header.reserved, req.header.seq, req.header.stamp_ns = (
+                self._header()
+            )
+            req.job_id, req.object_index, req.attempt = job_id, object_index, attempt
+            pending = self._confirms.send_copy(req)
+            t1 = min(deadline, time.monotonic() + 2.0)
+            while time.monotonic() < t1:
+                reply = pending.receive()
+                if reply is None:
+                    self.node.wait(iox2.Duration.from_millis(2))
+                    continue
+                r = ConfirmPickReply.from_buffer_copy(reply.payload().contents)
+                reason = RejectReason(r.reason)
+                if reason != RejectReason.NONE:
+                    raise Rejected(reason, 0)
+                return
+            # No answer: sent again (a repeat of an accepted confirmation is accepted again).
+        raise TimeoutError(f"no reply from herbd under prefix {self.prefix!r}")
 
     def statuses(self, job_id: int, timeout_s: float = 900.0,
                  reconnect_s: float = 60.0) -> Iterator[Status]:

@@ -1,7 +1,7 @@
 """HERB's IPC payloads as ``ctypes`` structures and its codes as ``enum.IntEnum``, field for field
 and code for code as ``ipc/CONTRACT.md`` lists them (natural alignment, no padding; little-endian
-x86-64). Each structure carries its iceoryx2 type name ``herb::v1::<Name>`` (``type_name()``),
-which iceoryx2 checks with the size and alignment when a service is opened.
+x86-64). Each structure carries its iceoryx2 type name ``herb::v<PROTOCOL_VERSION>::<Name>``
+(``type_name()``), which iceoryx2 checks with the size and alignment when a service is opened.
 
 Generated from the Rust types by ``cargo test -p herb-ipc --test contract_doc``: do not edit
 (``HERB_UPDATE_CONTRACT=1`` rewrites it after a deliberate change of the wire).
@@ -13,7 +13,7 @@ from __future__ import annotations
 import ctypes
 import enum
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 DOF = 7
 HEIGHTMAP_MAX_CELLS = 50176
 MAX_JOB_OBJECTS = 64
@@ -26,11 +26,11 @@ _f32, _f64 = ctypes.c_float, ctypes.c_double
 
 
 class _Struct(ctypes.Structure):
-    """A contract structure: iceoryx2 registers it under ``herb::v1::<class name>``."""
+    """A contract structure: iceoryx2 registers it under ``herb::v<PROTOCOL_VERSION>::<class name>``."""
 
     @classmethod
     def type_name(cls) -> str:
-        return f"herb::v1::{cls.__name__}"
+        return f"herb::v{PROTOCOL_VERSION}::{cls.__name__}"
 
 
 class Header(_Struct):
@@ -88,7 +88,7 @@ class Status(_Struct):
         ("decision_ns", _u64), ("cycles", _u64), ("deadline_misses", _u64),
         ("rejected_inputs", _u64), ("max_cycle_ns", _u64), ("rejected_requests", _u64),
         ("limit_joint", _u32), ("limit_position_rad", _f32), ("limit_bound_rad", _f32),
-        ("attempt", _u32)]
+        ("attempt", _u32), ("waiting_for", _u32), ("reserved", _u32)]
 
 
 class PackJobRequest(_Struct):
@@ -222,9 +222,15 @@ class RejectReason(enum.IntEnum):
     NotAwaited = 10
 
 
+class JobWait(enum.IntEnum):
+    NONE = 0
+    Confirmation = 1
+    Decision = 2
+
+
 #: Every code table of the contract (but `SimBound`), by enum name.
 CODES = {"GripperAction": GripperAction, "JobState": JobState, "StatusEvent": StatusEvent,
-    "Fault": Fault, "ArmBlocker": ArmBlocker, "RejectReason": RejectReason}
+    "Fault": Fault, "ArmBlocker": ArmBlocker, "RejectReason": RejectReason, "JobWait": JobWait}
 
 
 def code_name(member: enum.IntEnum) -> str:

@@ -119,3 +119,37 @@ def test_a_field_out_of_place_is_caught(monkeypatch):
     monkeypatch.setitem(p.PAYLOADS, "PackJobReply", PackJobReply)
     with pytest.raises(AssertionError, match="PackJobReply"):
         test_every_payload_has_the_contracts_layout_and_type_name()
+
+
+def test_a_service_of_another_wire_version_is_named_with_both_versions():
+    """A ``status`` service created with wire version 1's ``Status`` (144 bytes, type name
+    ``herb::v1::Status``), as an older herbd creates it: the client says both versions at once
+    instead of retrying until its timeout."""
+    import os
+
+    from herb_client import Herb, WireVersionMismatch
+
+    class Status(ctypes.Structure):  # wire version 1's layout: the header and 120 bytes
+        _fields_ = [("header", p.Header), ("fields", ctypes.c_uint64 * 15)]
+
+        @classmethod
+        def type_name(cls) -> str:
+            return "herb::v1::Status"
+
+    assert ctypes.sizeof(Status) == 144
+    prefix = f"pyversion{os.getpid()}"
+    iox2.set_log_level(iox2.LogLevel.Error)
+    node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
+    old = (
+        node.service_builder(iox2.ServiceName.new(f"{prefix}/status"))
+        .publish_subscribe(Status)
+        .history_size(1)
+        .subscriber_max_buffer_size(256)
+        .max_publishers(4)
+        .open_or_create()
+    )
+    with pytest.raises(WireVersionMismatch) as e:
+        Herb(prefix, timeout_s=5.0)
+    assert (e.value.ours, e.value.theirs) == (p.PROTOCOL_VERSION, 1)
+    assert "herb::v1::Status" in str(e.value) and "version 2" in str(e.value)
+    del old

@@ -11,6 +11,7 @@ impl Job {
         if let Some(r) = &mut self.run {
             r.decision_failed = None;
             r.confirmed = false;
+            r.awaiting = false;
             r.decide_since = now;
         }
         self.ask_decision(fx, now);
@@ -95,7 +96,11 @@ impl Job {
             Ok(()) => {
                 self.set_phase(Phase::Planning);
                 if r.confirm_picks && !r.confirmed && !matches!(motion, Motion::Place { .. }) {
-                    // A pick: the operator is asked for the object now, while the arm comes.
+                    // A pick: the operator is asked for the object now, while the arm comes;
+                    // from now on a confirmation is taken.
+                    if let Some(run) = &mut self.run {
+                        run.awaiting = true;
+                    }
                     self.emit(
                         fx,
                         StatusEvent::AwaitingObject,
@@ -332,6 +337,7 @@ impl Job {
             // person feeding the station puts it back and confirms this try.
             if let Some(r) = &mut self.run {
                 r.confirmed = false;
+                r.awaiting = false;
             }
             self.set_phase(Phase::Starting);
             self.request_motion(fx, Motion::Pick);

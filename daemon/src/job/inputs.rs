@@ -69,6 +69,10 @@ impl Job {
         let verdict = r.validate(self.p.catalog_len).and_then(|()| {
             if self.stopping() {
                 Err((RejectReason::ShuttingDown, 0))
+            } else if self.is_running_request(r) {
+                // A repeat of the running job's request (its reply was slow or lost): accepted
+                // again, nothing restarts.
+                Err((RejectReason::None, 0))
             } else if self.phase != Phase::Idle {
                 Err((RejectReason::Busy, 0))
             } else if let Some(why) = self.not_ready(now) {
@@ -90,10 +94,20 @@ impl Job {
             // A joint outside its limits is named by the next heartbeat ([`Job::publish`]).
             self.inputs.rejected_requests += 1;
         }
+        let repeat = reason == RejectReason::None && self.is_running_request(r);
         fx.reply(r.job_id, reason, detail);
-        if reason == RejectReason::None {
+        if reason == RejectReason::None && !repeat {
             self.start_job(r, fx);
         }
+    }
+
+    /// `r` asks for the job that runs: its id, its objects and its flags.
+    fn is_running_request(&self, r: &PackJobRequest) -> bool {
+        self.run.is_some_and(|j| {
+            j.job_id == r.job_id
+                && j.progress.objects.get(..j.progress.count) == Some(r.objects())
+                && j.confirm_picks == (r.flags & PackJobRequest::CONFIRM_PICKS != 0)
+        })
     }
 
     /// A cancel request: answered through [`Effects::cancel_reply`] (`Malformed`, then
@@ -143,28 +157,46 @@ impl Job {
     }
 
     /// A pick confirmation: answered through [`Effects::confirm_reply`] (`Malformed`,
-    /// `ShuttingDown`, `NoSuchJob` unless it names the running job, `NotAwaited` unless the job
-    /// asks for confirmations and it names the current object and try; a repeat is accepted
-    /// again). Accepted, the arm descends to the grasp once it stands above the station.
+    /// `ShuttingDown`, `NoSuchJob` unless it names the running job; `None` for a repeat of the
+    /// confirmation accepted for the current try, which changes nothing; `NotAwaited` unless
+    /// herbd awaits this
+    /// object and try now: the job asks for confirmations, sent its `AwaitingObject` and took
+    /// no confirmation since). Accepted, the arm descends to the grasp once it stands above the
+    /// station.
     pub fn confirm_request(&mut self, r: &ConfirmPickRequest, fx: &mut impl Effects) {
+        let this = (r.object_index, r.attempt);
         let reason = match r.validate() {
             Err(e) => e,
             Ok(()) if self.stopping() => RejectReason::ShuttingDown,
             Ok(()) if self.job_id() == 0 || r.job_id != self.job_id() => RejectReason::NoSuchJob,
             Ok(())
-                if !self.run.is_some_and(|j| j.confirm_picks && !j.cancelled)
+                if self.run.is_some_and(|j| j.last_confirmed == Some(this))
+                    && this == (self.progress().index as u32, self.progress().missed) =>
+            {
+                // A repeat of the accepted confirmation for the current try.
+                RejectReason::None
+            }
+            Ok(())
+                if !self
+                    .run
+                    .is_some_and(|j| j.confirm_picks && j.awaiting && !j.cancelled)
                     || self.holding
                     || r.object_index as usize != self.progress().index
                     || r.attempt != self.progress().missed =>
             {
                 RejectReason::NotAwaited
             }
-            Ok(()) => RejectReason::None,
+            Ok(()) => {
+                if let Some(j) = &mut self.run {
+                    j.confirmed = true;
+                    j.awaiting = false;
+                    j.last_confirmed = Some(this);
+                }
+                RejectReason::None
+            }
         };
         if reason != RejectReason::None {
             self.inputs.rejected_requests += 1;
-        } else if let Some(j) = &mut self.run {
-            j.confirmed = true;
         }
         fx.confirm_reply(r.job_id, reason);
     }

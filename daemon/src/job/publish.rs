@@ -182,6 +182,19 @@ impl Job {
             _ => self.state(),
         };
         let p = self.progress();
+        let waiting_for = match (self.run, event) {
+            (_, StatusEvent::JobDone | StatusEvent::JobFailed | StatusEvent::JobCancelled) => {
+                JobWait::None
+            }
+            (Some(r), _) if r.confirm_picks && r.awaiting && !r.cancelled => JobWait::Confirmation,
+            (Some(_), _)
+                if matches!(self.phase, Phase::AwaitDecision { .. })
+                    && self.decided_pose().is_none() =>
+            {
+                JobWait::Decision
+            }
+            _ => JobWait::None,
+        };
         let mut s = Status {
             header: Header::at(0, 0),
             job_id: self.job_id(),
@@ -204,6 +217,8 @@ impl Job {
             limit_position_rad: 0.0,
             limit_bound_rad: 0.0,
             attempt: p.missed,
+            waiting_for: waiting_for as u32,
+            reserved: 0,
         };
         if matches!(self.fault, Fault::OutsideLimits | Fault::BeyondArmLimits)
             && let Some(e) = self.excess

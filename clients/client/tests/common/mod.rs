@@ -185,6 +185,8 @@ pub fn status(job_id: u64, event: StatusEvent) -> Status {
         limit_position_rad: 0.0,
         limit_bound_rad: 0.0,
         attempt: 0,
+        waiting_for: 0,
+        reserved: 0,
     }
 }
 

@@ -4,7 +4,7 @@
 use clap::Parser;
 use herb_core::{Catalog, paths};
 use herb_daemon::config::{Config, ConfigFile, OnRestart};
-use herb_daemon::controller::{Controller, LoopStats, Ports, Shared};
+use herb_daemon::controller::{Controller, LoopStats, Ports, Shared, SlowCycle};
 use herb_daemon::notify::{Notice, Notifier};
 use herb_daemon::{decision, journal, logfmt, planner, record};
 use herb_ipc::bus::{Bus, daemon_node_name, live_nodes_named};
@@ -19,6 +19,60 @@ mod tools;
 
 /// How often the reporter thread prints statistics and statuses and pings the watchdog.
 const REPORT_POLL: Duration = Duration::from_millis(20);
+
+/// herbd is gone this long after SIGINT/SIGTERM whatever it is doing: the loop brakes within
+/// `herb_daemon::job::STOP_LIMIT_NS`, and what has not ended by this deadline (a log writer
+/// blocked on a full stderr, a journal or run-log write stuck on its disk) is cut short.
+const STOP_DEADLINE: Duration = Duration::from_millis(1900);
+
+/// Exit code when [`STOP_DEADLINE`] cut the shutdown short.
+const EXIT_STOP_FORCED: i32 = 3;
+
+/// Where the shutdown is, for the line [`stop_deadline`] writes when it cuts it short.
+static STOP_STAGE: std::sync::atomic::AtomicU8 = std::sync::atomic::AtomicU8::new(0);
+
+/// What [`STOP_STAGE`] codes name.
+const STOP_STAGES: [&str; 6] = [
+    "the loop (the arm's brake)",
+    "the log writer (stderr blocked?)",
+    "the planner thread",
+    "the job journal's writer",
+    "the run log's writer",
+    "the final report (stdout blocked?)",
+];
+
+/// Starts the stop's deadline (once, from the signal handler's thread): after [`STOP_DEADLINE`]
+/// the process ends with [`EXIT_STOP_FORCED`], naming the stage it was cut in. The line is
+/// written by a thread of its own, so that a blocked stderr cannot hold the exit.
+fn stop_deadline() {
+    let spawned = std::thread::Builder::new()
+        .name("herbd-stop".into())
+        .spawn(|| {
+            std::thread::sleep(STOP_DEADLINE);
+            let stage = STOP_STAGES
+                .get(STOP_STAGE.load(Ordering::Relaxed) as usize)
+                .copied()
+                .unwrap_or("?");
+            let _ = std::thread::Builder::new().spawn(move || {
+                logfmt::log(
+                    "stop_forced",
+                    &[
+                        ("after_s", &STOP_DEADLINE.as_secs_f64()),
+                        ("waiting_for", &stage),
+                    ],
+                )
+            });
+            std::thread::sleep(Duration::from_millis(50));
+            herb_process::rt::exit_now(EXIT_STOP_FORCED);
+        });
+    // Without a thread for the deadline the stop goes on without one.
+    drop(spawned);
+}
+
+/// Marks the shutdown's stage ([`STOP_STAGES`]).
+fn stop_stage(stage: u8) {
+    STOP_STAGE.store(stage, Ordering::Relaxed);
+}
 
 /// HERB's real-time packing controller.
 #[derive(Debug, Parser)]
@@ -244,6 +298,7 @@ fn summary(s: &LoopStats) -> serde_json::Value {
         "decision_us": h(&s.decision_ns),
         "jobs": s.jobs,
         "decision_wait_ms": s.decision_wait_ms,
+        "slowest_cycle": slow_cycle_json(&s.slowest),
     })
 }
 
@@ -361,6 +416,53 @@ fn describe(s: &Status) -> Option<String> {
     })
 }
 
+/// A cycle whose own work took longer than this is reported on its own line (ns): a cycle's
+/// budget at 1 kHz.
+const SLOW_CYCLE_NS: u64 = 1_000_000;
+
+/// The interval's slowest cycle taken apart, as a log line, when it took longer than
+/// [`SLOW_CYCLE_NS`].
+fn slow_cycle_line(s: &LoopStats) -> Option<String> {
+    let c = &s.slowest;
+    if c.work_ns <= SLOW_CYCLE_NS {
+        return None;
+    }
+    let stages: Vec<String> = SlowCycle::STAGES
+        .iter()
+        .zip(c.stages_ns)
+        .map(|(n, d)| format!("{n}:{:.1}", d as f64 / 1e3))
+        .collect();
+    Some(logfmt::line(
+        "slow_cycle",
+        &[
+            ("cycle", &c.cycle),
+            ("work_us", &format!("{:.1}", c.work_ns as f64 / 1e3)),
+            ("stages_us", &stages.join(",")),
+            ("page_faults", &(c.met.minflt + c.met.majflt)),
+            ("blocked", &c.met.nvcsw),
+            ("preempted", &c.met.nivcsw),
+        ],
+    ))
+}
+
+/// The slowest cycle as JSON (the final statistics).
+fn slow_cycle_json(c: &SlowCycle) -> serde_json::Value {
+    let stages: serde_json::Map<String, serde_json::Value> = SlowCycle::STAGES
+        .iter()
+        .zip(c.stages_ns)
+        .map(|(n, d)| (n.to_string(), serde_json::json!(d as f64 / 1e3)))
+        .collect();
+    serde_json::json!({
+        "cycle": c.cycle,
+        "work_us": c.work_ns as f64 / 1e3,
+        "stages_us": stages,
+        "minor_faults": c.met.minflt,
+        "major_faults": c.met.majflt,
+        "blocked": c.met.nvcsw,
+        "preempted": c.met.nivcsw,
+    })
+}
+
 /// The statistics of one reporting interval as a log line.
 fn stats_line(s: &LoopStats) -> String {
     let f = |h: &hdrhistogram::Histogram<u64>, q: f64| format!("{:.1}", us(h, q));
@@ -409,8 +511,12 @@ fn run(cli: Cli) -> Result<(), String> {
     let notifier = Arc::new(Notifier::new());
     {
         let s = shared.clone();
-        ctrlc::set_handler(move || s.stop.store(true, Ordering::Relaxed))
-            .map_err(|e| format!("cannot install the signal handler: {e}"))?;
+        ctrlc::set_handler(move || {
+            if !s.stop.swap(true, Ordering::Relaxed) {
+                stop_deadline();
+            }
+        })
+        .map_err(|e| format!("cannot install the signal handler: {e}"))?;
     }
     let planner_stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
     let recording = match &cfg.record.dir {
@@ -541,6 +647,9 @@ fn run(cli: Cli) -> Result<(), String> {
                     while let Ok(mut s) = stats_link.rx.pop() {
                         total.add(&s);
                         logfmt::emit(&stats_line(&s));
+                        if let Some(line) = slow_cycle_line(&s) {
+                            logfmt::emit(&line);
+                        }
                         s.reset();
                         let _ = stats_link.tx.push(s);
                     }
@@ -567,12 +676,20 @@ fn run(cli: Cli) -> Result<(), String> {
             .map_err(|e| format!("cannot start the reporter: {e}"))?
     };
 
-    for w in herb_process::rt::apply(&cfg.rt) {
-        logfmt::log("warning", &[("what", &w)]);
+    // Real time for the loop's thread (this one), after every other thread has started: they
+    // stay at normal priority. `_rt` holds the CPU latency request until herbd exits.
+    let _rt = herb_process::rt::apply(&cfg.rt);
+    match _rt.warning() {
+        Some(w) => logfmt::log("warning", &[("what", &w)]),
+        None if !_rt.applied.is_empty() => {
+            logfmt::log("real_time", &[("applied", &_rt.applied.join(", "))])
+        }
+        None => {}
     }
     notifier.send(Notice::Ready);
     let last = controller.run();
     done.store(true, Ordering::Relaxed);
+    stop_stage(1);
     let mut total = reporter.join().map_err(|_| "reporter thread panicked")?;
     total.add(&last);
     let dropped = shared.log_dropped.load(Ordering::Relaxed);
@@ -586,7 +703,9 @@ fn run(cli: Cli) -> Result<(), String> {
         );
     }
     planner_stop.store(true, Ordering::Relaxed);
+    stop_stage(2);
     let _ = planner_thread.join();
+    stop_stage(3);
     journal_stop.store(true, Ordering::Relaxed);
     if let Some(w) = journal_writer {
         match w.join() {
@@ -597,6 +716,7 @@ fn run(cli: Cli) -> Result<(), String> {
             Err(_) => logfmt::log("journal_closed", &[("error", &"the writer panicked")]),
         }
     }
+    stop_stage(4);
     if let Some((writer, stop)) = writer {
         stop.store(true, Ordering::Relaxed);
         match writer.join() {
@@ -609,6 +729,7 @@ fn run(cli: Cli) -> Result<(), String> {
             Err(_) => logfmt::log("run_log_failed", &[("error", &"the writer panicked")]),
         }
     }
+    stop_stage(5);
     notifier.send(Notice::Stopping);
     for (notice, n) in notifier.failures() {
         logfmt::log("notify_failures", &[("notice", &notice), ("failed", &n)]);

@@ -657,3 +657,109 @@ fn a_job_fed_by_hand_waits_above_the_station_for_each_confirmation() {
     run_to_done(&mut r);
     assert!(!r.events().contains(&StatusEvent::AwaitingObject));
 }
+
+/// A confirmation counts only while herbd awaits it: one sent before the `AwaitingObject` (the
+/// job just accepted) is refused `NotAwaited` and not kept, so the arm still waits above the
+/// station; every status meanwhile says what the job waits for (`waiting_for`), so a client
+/// that connects late sees the wait; a repeat of the accepted confirmation is answered as
+/// accepted again, is not counted as refused and changes nothing.
+#[test]
+fn a_confirmation_before_herbd_asks_is_refused_and_the_wait_is_in_every_heartbeat() {
+    let mut r = Rig::new();
+    let mut req = PackJobRequest::new(1, &[3]);
+    req.flags = PackJobRequest::CONFIRM_PICKS;
+    assert_eq!(r.request(&req).0, RejectReason::None);
+    let confirm = |r: &mut Rig, index: u32, attempt: u32| {
+        let c = ConfirmPickRequest::new(r.job.job_id(), index, attempt);
+        r.job.confirm_request(&c, &mut r.fx);
+        match r.fx.out.last() {
+            Some(Out::ConfirmReply { reason, .. }) => *reason,
+            other => panic!("{other:?}"),
+        }
+    };
+    let heartbeat = |r: &Rig| {
+        *r.fx
+            .out
+            .iter()
+            .rev()
+            .find_map(|o| match o {
+                Out::Status(s) if s.event == StatusEvent::Heartbeat as u32 => Some(s),
+                _ => None,
+            })
+            .expect("a heartbeat")
+    };
+    // Accepted, not yet asked: the confirmation for the very object and try is refused.
+    assert!(!r.events().contains(&StatusEvent::AwaitingObject));
+    assert_eq!(confirm(&mut r, 0, 0), RejectReason::NotAwaited);
+    assert_eq!(r.job.rejected_requests(), 1);
+    r.until_event(500, StatusEvent::AwaitingObject);
+    let asked = r.last(StatusEvent::AwaitingObject);
+    assert_eq!(asked.waiting_for, JobWait::Confirmation as u32);
+    // The early confirmation was not kept: the arm waits above the station, and every
+    // heartbeat says so, with the object and try.
+    r.ticks(3 * SEG);
+    assert!(
+        matches!(r.phase(), Phase::AwaitOperator { .. }),
+        "{:?}",
+        r.phase()
+    );
+    let beat = heartbeat(&r);
+    assert_eq!(
+        (beat.waiting_for, beat.object_index, beat.attempt),
+        (JobWait::Confirmation as u32, 0, 0)
+    );
+    assert_eq!(confirm(&mut r, 0, 0), RejectReason::None);
+    // The reply was slow: the client sends it again; accepted again, not counted.
+    assert_eq!(confirm(&mut r, 0, 0), RejectReason::None);
+    assert_eq!(r.job.rejected_requests(), 1);
+    r.ticks(200);
+    assert_eq!(
+        heartbeat(&r).waiting_for,
+        JobWait::None as u32,
+        "the wait ended with the confirmation"
+    );
+    let done = run_to_done(&mut r);
+    assert_eq!(
+        (done.objects_done, done.waiting_for),
+        (1, JobWait::None as u32)
+    );
+    // Once the job moved on, the old confirmation is another try's: refused.
+    assert_eq!(r.job.rejected_requests(), 1);
+}
+
+/// A repeat of the running job's request (same id, objects and flags: its reply was lost) is
+/// answered as accepted and restarts nothing; the same id with other objects is `Busy`.
+#[test]
+fn a_repeated_pack_request_is_accepted_again_and_restarts_nothing() {
+    let mut r = Rig::new();
+    let req = PackJobRequest::new(1, &[3, 5]);
+    assert_eq!(r.request(&req).0, RejectReason::None);
+    r.ticks(300);
+    let accepted = r
+        .events()
+        .iter()
+        .filter(|e| **e == StatusEvent::Accepted)
+        .count();
+    assert_eq!(r.request(&req).0, RejectReason::None);
+    r.ticks(10);
+    assert_eq!(
+        r.events()
+            .iter()
+            .filter(|e| **e == StatusEvent::Accepted)
+            .count(),
+        accepted,
+        "nothing restarted"
+    );
+    assert_eq!(r.job.rejected_requests(), 0);
+    assert_eq!(
+        r.request(&PackJobRequest::new(1, &[3])).0,
+        RejectReason::Busy
+    );
+    assert_eq!(
+        r.request(&PackJobRequest::new(2, &[3, 5])).0,
+        RejectReason::Busy
+    );
+    assert_eq!(r.job.rejected_requests(), 2);
+    let done = run_to_done(&mut r);
+    assert_eq!(done.objects_done, 2);
+}

@@ -397,6 +397,33 @@ fn a_stop_while_streaming_brakes_then_finishes_without_a_fault_event() {
     assert_eq!(r.last(StatusEvent::Braked).fault, Fault::Stop as u32);
 }
 
+/// The planner never answers the stop's brake (stuck behind a long plan): the stop does not
+/// wait for it past [`STOP_LIMIT_NS`]; the arm is held where the last command put it (zero
+/// velocity) and the loop may exit, so herbd exits within 2 s of SIGTERM whatever it does.
+#[test]
+fn a_stop_whose_brake_never_comes_ends_at_the_stop_limit() {
+    let (mut r, _) = streaming();
+    r.ticks(2);
+    r.auto = false;
+    r.stop = true;
+    r.tick();
+    let began = r.now;
+    assert!(!r.finished, "braking");
+    while !r.finished {
+        r.tick();
+        assert!(
+            r.now - began <= STOP_LIMIT_NS + 2 * PERIOD,
+            "still not stopped"
+        );
+    }
+    assert!(
+        r.now - began >= STOP_LIMIT_NS,
+        "waited for the brake until the limit"
+    );
+    let last = r.joints_since(0).last().copied().expect("commands");
+    assert!(last.velocity.iter().all(|v| *v == 0.0), "{last:?}");
+}
+
 #[test]
 fn a_stop_while_idle_halts_nothing_and_finishes_idle() {
     // Nothing runs: nothing is halted, and the shutdown reports the idle state.
