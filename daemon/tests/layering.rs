@@ -209,6 +209,19 @@ const RULES: &[(&str, &[&str])] = &[
             "ruckig",
         ],
     ),
+    // The chaos soak drives the cell from outside, as an operator and the bus see it: never
+    // herbd's insides, the evaluation or the policies.
+    (
+        "herb-chaos",
+        &[
+            "tract-onnx",
+            "herb-decide",
+            "herb-daemon",
+            "herb-sim",
+            "herb-search",
+            "rapier3d",
+        ],
+    ),
     // Process plumbing (configuration files, real-time timing): apart from the arm's
     // kinematics and motion.
     (

@@ -23,7 +23,9 @@
 //!   can move again it holds where it is until a new command comes. Every command passes the
 //!   adapter's jump guard (`herb_adapter::guard`) first; the summary lists each first
 //!   command's distance from the arm after it could move again (`first_command_offsets_rad`).
-//! - **Missed grasps**: with `--miss-grasps N` the first N grasps close on nothing.
+//! - **Missed grasps**: with `--miss-grasps N` the first N grasps close on nothing; SIGRTMIN
+//!   makes the next one close on nothing (a fault injected while it runs: `herb-chaos`).
+//! - **Camera dropouts**: SIGRTMIN+1 publishes no heightmap for `--dropout-s` seconds.
 //! - **Start pose**: `--start Q` (7 angles) starts the arm there, e.g. past herbd's limits.
 //!
 //! SIGINT/SIGTERM: prints a JSON summary on stdout and exits 0.
@@ -82,9 +84,13 @@ struct Cli {
     /// Default: the top-down nominal configuration.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     start: Vec<f64>,
-    /// The first N grasps close on nothing (a missed grasp).
+    /// The first N grasps close on nothing (a missed grasp). While it runs, SIGRTMIN makes
+    /// the next grasp close on nothing.
     #[arg(long, default_value_t = 0)]
     miss_grasps: u32,
+    /// How long the camera drops out on SIGRTMIN+1 (s): no heightmap is published meanwhile.
+    #[arg(long, default_value_t = 3.0)]
+    dropout_s: f64,
     /// Jump guard: command periods of travel at the speed limit allowed past the arm.
     #[arg(long, default_value_t = 3.0)]
     guard_periods: f64,
@@ -99,6 +105,15 @@ static TOGGLES: [AtomicU32; 2] = [AtomicU32::new(0), AtomicU32::new(0)];
 extern "C" fn on_toggle(sig: libc::c_int) {
     let k = usize::from(sig != libc::SIGUSR1);
     TOGGLES[k].fetch_add(1, Ordering::Relaxed);
+}
+
+/// Faults injected while it runs, counted by the handler: SIGRTMIN (the next grasp misses),
+/// SIGRTMIN+1 (the camera drops out for `--dropout-s`).
+static INJECTED: [AtomicU32; 2] = [AtomicU32::new(0), AtomicU32::new(0)];
+
+extern "C" fn on_inject(sig: libc::c_int) {
+    let k = usize::from(sig != libc::SIGRTMIN());
+    INJECTED[k].fetch_add(1, Ordering::Relaxed);
 }
 
 struct Released {
@@ -402,6 +417,16 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             return Err(format!("signal handler for {sig}"));
         }
     }
+    for sig in [libc::SIGRTMIN(), libc::SIGRTMIN() + 1] {
+        // SAFETY: the handler only increments an atomic (async-signal-safe).
+        let prev = unsafe { libc::signal(sig, on_inject as *const () as libc::sighandler_t) };
+        if prev == libc::SIG_ERR {
+            return Err(format!("signal handler for {sig}"));
+        }
+    }
+    if !(0.0..=600.0).contains(&cli.dropout_s) {
+        return Err(format!("--dropout-s {} outside 0..=600", cli.dropout_s));
+    }
     let start = match cli.start.len() {
         0 => LEFT_TOP_DOWN_NOMINAL,
         DOF => {
@@ -504,6 +529,8 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
     let mut seq = 0u64;
     let mut latest: Option<Released> = None;
     let mut last_frame = 0u64;
+    let mut injected_seen = [0u32; 2];
+    let mut camera_off_until = 0u64;
     let mut world_error = None;
     while !stop.load(Ordering::Relaxed) {
         sleep_until(next, 0);
@@ -519,6 +546,22 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             sim.guard.set_ready(true, now);
         }
         sim.toggles(&mut toggles_seen, now);
+        let misses = INJECTED[0].load(Ordering::Relaxed);
+        if misses != injected_seen[0] {
+            sim.miss_grasps += misses.wrapping_sub(injected_seen[0]);
+            injected_seen[0] = misses;
+            eprintln!("herb-loopback: the next grasp misses (SIGRTMIN)");
+        }
+        let dropouts = INJECTED[1].load(Ordering::Relaxed);
+        if dropouts != injected_seen[1] {
+            injected_seen[1] = dropouts;
+            camera_off_until = now + (cli.dropout_s * 1e9) as u64;
+            eprintln!(
+                "herb-loopback: camera drops out for {} s (SIGRTMIN+1)",
+                cli.dropout_s
+            );
+        }
+        let camera_on = now >= camera_off_until;
         let said = match sim.blocker {
             Some(b) => b,
             None if refusing => ArmBlocker::CommandRefused,
@@ -637,8 +680,10 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
                         let _ = out_pub.send_copy(m);
                         sim.last_outcome = Some(m);
                     }
-                    publish_frame(&camera, seq, &r);
-                    last_frame = now;
+                    if camera_on {
+                        publish_frame(&camera, seq, &r);
+                        last_frame = now;
+                    }
                     latest = Some(r);
                 }
                 Err(e) => {
@@ -649,6 +694,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             }
         }
         if now.saturating_sub(last_frame) >= 200_000_000
+            && camera_on
             && sim.settling == 0
             && let Some(r) = &mut latest
         {

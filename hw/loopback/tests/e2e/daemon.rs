@@ -442,3 +442,100 @@ fn herbctl_follows_a_job_across_a_daemon_crash_and_restart() {
     assert_eq!(summary["placed"], 2, "{summary}");
     claims.check();
 }
+
+/// The worst stop found: SIGTERM while the arm moves in a job, with herbd's stderr a pipe
+/// that nobody reads (full: its log writer blocks in `write`, as when journald stalls) and
+/// the arm adapter stopped (SIGSTOP) the moment before. herbd used to wait for its log writer
+/// for ever; it exits within 2 s of the signal, cut short by its stop's deadline (exit 3).
+#[test]
+fn sigterm_ends_herbd_within_2_s_with_a_blocked_log_and_a_stopped_adapter() {
+    let (dir, prefix, cfg) = setup("stopdeadline");
+    // Statistics every 100 ms (its shortest) into a pipe of one page.
+    let text = std::fs::read_to_string(&cfg)
+        .unwrap()
+        .replace("report_interval_s = 5.0", "report_interval_s = 0.1");
+    std::fs::write(&cfg, text).unwrap();
+    let cfg_s = cfg.to_str().unwrap();
+    let lb = spawn(
+        &loopback_exe(),
+        &["--config", cfg_s],
+        &dir.join("loopback.log"),
+    );
+    let mut hd = Command::new(exe("herbd"))
+        .args(["--config", cfg_s])
+        .current_dir(repo())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("herbd starts");
+    // herbd's log is read until the job runs, then no more.
+    let reading = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+    let reader = {
+        let reading = reading.clone();
+        let mut err = std::io::BufReader::new(hd.stderr.take().expect("herbd's stderr"));
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            let mut line = String::new();
+            while reading.load(std::sync::atomic::Ordering::Relaxed) {
+                line.clear();
+                if err.read_line(&mut line).unwrap_or(0) == 0 {
+                    break;
+                }
+            }
+            err
+        })
+    };
+    let mut ctl = pack_objects(&dir, &prefix, "003,005,011", 120, false);
+    let mut ctl_out = Follow::new(&mut ctl);
+    ctl_out.wait_for("object  1/3", Duration::from_secs(60));
+    reading.store(false, std::sync::atomic::Ordering::Relaxed);
+    let unread = reader.join().expect("the reader");
+    {
+        use std::os::fd::AsRawFd;
+        let fd = unread.get_ref().as_raw_fd();
+        // SAFETY: fcntl and ioctl on the pipe we hold; `queued` is written by FIONREAD.
+        unsafe { libc::fcntl(fd, libc::F_SETPIPE_SZ, 4096) };
+        let size = unsafe { libc::fcntl(fd, libc::F_GETPIPE_SZ) };
+        let t0 = Instant::now();
+        loop {
+            let mut queued: libc::c_int = 0;
+            unsafe { libc::ioctl(fd, libc::FIONREAD, &mut queued) };
+            // Full: no room for another statistics line.
+            if queued + 400 >= size {
+                break;
+            }
+            assert!(
+                t0.elapsed() < Duration::from_secs(90),
+                "herbd's log did not fill the pipe ({queued} of {size} bytes)"
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+    // The writer is blocked on the full pipe now (its next line does not fit).
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(hd.try_wait().unwrap().is_none(), "herbd runs");
+    lb.signal(libc::SIGSTOP);
+    // SAFETY: kill on a child we own.
+    unsafe { libc::kill(hd.id() as i32, libc::SIGTERM) };
+    let t0 = Instant::now();
+    let status = loop {
+        if let Some(s) = hd.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(5),
+            "herbd still runs 5 s after SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    let took = t0.elapsed();
+    lb.signal(libc::SIGCONT);
+    assert!(
+        took <= Duration::from_secs(2),
+        "herbd took {took:?} to exit after SIGTERM"
+    );
+    // Cut short by its stop's deadline (exit 3): its log writer was blocked.
+    assert_eq!(status.code(), Some(3), "exit status {status:?}");
+    drop(unread);
+    let _ = ctl.wait_for(Duration::from_secs(10));
+}
