@@ -32,6 +32,8 @@ from .payloads import (
     StatusEvent,
 )
 
+#: ``PackJobRequest.flags`` bit: a person feeds the pick station (``ipc/CONTRACT.md``).
+PackJobRequest_CONFIRM_PICKS = 1
 #: herbd heartbeats at 10 Hz; silent this long (s), it is taken as lost.
 LOST_AFTER_S = 1.0
 #: Events that end a job.
@@ -221,9 +223,11 @@ class Herb:
     # -- jobs -----------------------------------------------------------------------------
 
     def submit(self, objects: Sequence[int], job_id: Optional[int] = None,
-               timeout_s: float = 30.0) -> int:
+               timeout_s: float = 30.0, confirm_picks: bool = False) -> int:
         """Submits a job of catalog type indices; returns its id once herbd accepted it. Raises
-        ``Rejected`` with herbd's reason (``NotReady`` is retried until ``timeout_s``)."""
+        ``Rejected`` with herbd's reason (``NotReady`` is retried until ``timeout_s``). With
+        ``confirm_picks`` a person feeds the pick station: herbd waits before each grasp until
+        ``confirm_pick`` (statuses say so: ``waiting_for == JobWait.Confirmation``)."""
         if job_id is None:
             job_id = (time.monotonic_ns() & 0xFFFF_FFFF) << 16 | (os.getpid() & 0xFFFF) | 1
         deadline = time.monotonic() + timeout_s
@@ -233,6 +237,7 @@ class Herb:
                 self._header()
             )
             req.job_id = job_id
+            req.flags = PackJobRequest_CONFIRM_PICKS if confirm_picks else 0
             req.count = len(objects)
             for i, o in enumerate(objects[: len(req.objects)]):
                 req.objects[i] = o

@@ -16,7 +16,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from herb_client import Herb, JobState, Rejected, RejectReason, StatusEvent, catalog_ids
+from herb_client import (
+    Herb,
+    JobState,
+    JobWait,
+    Rejected,
+    RejectReason,
+    StatusEvent,
+    catalog_ids,
+)
 from herb_client.payloads import HeightmapFrame
 
 REPO = Path(__file__).resolve().parents[3]
@@ -78,6 +86,35 @@ def test_a_job_is_submitted_and_followed_to_its_end(cell):
         time.sleep(0.05)
     assert [o.objects for o in outcomes] == [1, 2]
     assert sorted(o.object_type for o in outcomes) == sorted(objects)
+
+
+def test_a_confirmation_counts_only_while_herbd_awaits_it(cell):
+    """A job of two objects fed by hand: the wait is in the statuses (``waiting_for``, with the
+    object and try), a confirmation is taken then and a repeat of it too; the second object's,
+    sent while herbd has not asked for it yet, is refused (``NotAwaited``) and not kept: herbd
+    asks for it later and takes it then. The job ends done."""
+    herb, logs = cell
+    ids = catalog_ids(REPO / "models" / "objects.toml")
+    job = herb.submit([ids.index("003"), ids.index("005")], confirm_picks=True)
+    confirmed = []
+    final = None
+    for s in herb.statuses(job, timeout_s=600.0):
+        awaited = (s.object_index, s.attempt)
+        if s.waiting_for == JobWait.Confirmation and awaited not in confirmed:
+            herb.confirm_pick(job, *awaited)
+            herb.confirm_pick(job, *awaited)  # a repeat (a slow reply resent): taken again
+            confirmed.append(awaited)
+            if awaited == (0, 0):
+                with pytest.raises(Rejected) as early:
+                    herb.confirm_pick(job, 1, 0)  # herbd has not asked for object 1 yet
+                assert early.value.reason == RejectReason.NotAwaited
+        if s.event in (StatusEvent.JobDone, StatusEvent.JobFailed, StatusEvent.JobCancelled):
+            final = s
+    assert confirmed == [(0, 0), (1, 0)], confirmed
+    assert final is not None and final.event == StatusEvent.JobDone, (
+        logs / "herbd.log"
+    ).read_text()
+    assert final.waiting_for == JobWait.NONE
 
 
 def test_a_heightmap_is_a_read_only_view_into_shared_memory(cell):
