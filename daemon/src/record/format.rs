@@ -25,8 +25,9 @@ pub const MAGIC: &[u8; 8] = b"HERBRUN\0";
 /// The format version after [`MAGIC`] (2: a snapshot holds the job's record in the job
 /// journal's encoding; 3: decisions come from their own worker, recorded apart from the
 /// planner's responses, and the frames are the decisions'; 4: pick confirmations, and the
-/// statuses' limit, attempt and request-count fields; 5: a segment ends with an end record).
-pub const FORMAT: u32 = 5;
+/// statuses' limit, attempt and request-count fields; 5: a segment ends with an end record;
+/// 6: wire version 2, the statuses' `waiting_for` in their digests).
+pub const FORMAT: u32 = 6;
 /// A frame's header and grid: the bytes of a [`HeightmapFrame`] before its cells.
 pub const FRAME_META: usize = std::mem::offset_of!(HeightmapFrame, data);
 
