@@ -4,7 +4,7 @@
 use clap::Parser;
 use herb_core::{Catalog, paths};
 use herb_daemon::config::{Config, ConfigFile, OnRestart};
-use herb_daemon::controller::{Controller, LoopStats, Ports, Shared, SlowCycle};
+use herb_daemon::controller::{Controller, LoopStats, Ports, Shared, SlowCycle, StatsLink};
 use herb_daemon::notify::{Notice, Notifier};
 use herb_daemon::{decision, journal, logfmt, planner, record};
 use herb_ipc::bus::{Bus, daemon_node_name, live_nodes_named};
@@ -481,6 +481,132 @@ fn stats_line(s: &LoopStats) -> String {
     )
 }
 
+/// The job journal: an unfinished job is taken up (or abandoned) before the loop starts; a
+/// journal that cannot be used is reported and set aside, never a reason not to start. Returns
+/// the controller writing to it and the journal's writer thread (none without a folder).
+fn open_journal(
+    cfg: &Config,
+    catalog_len: usize,
+    mut controller: Controller,
+    stop: &Arc<std::sync::atomic::AtomicBool>,
+) -> Result<
+    (
+        Controller,
+        Option<std::thread::JoinHandle<journal::WriterReport>>,
+    ),
+    String,
+> {
+    let journal_dir = cfg
+        .journal
+        .folder(std::env::var("STATE_DIRECTORY").ok().as_deref());
+    let writer = match &journal_dir {
+        Some(dir) => {
+            match journal::load(dir, catalog_len) {
+                Ok(None) => {}
+                Ok(Some(r)) => {
+                    let resume = cfg.journal.on_restart == OnRestart::Resume;
+                    logfmt::log(
+                        "job_recovered",
+                        &[
+                            ("job", &r.job_id),
+                            ("action", &if resume { "resume" } else { "abandon" }),
+                            ("journal", &dir.join(journal::FILE).display()),
+                            ("state", &r.describe()),
+                        ],
+                    );
+                    controller.recover(&r, resume);
+                }
+                Err(e) => {
+                    let aside = journal::set_aside(dir)
+                        .map(|p| p.display().to_string())
+                        .unwrap_or_else(|e| format!("(cannot rename: {e})"));
+                    logfmt::log(
+                        "journal_set_aside",
+                        &[
+                            ("error", &e),
+                            ("moved_to", &aside),
+                            ("action", &"start_idle"),
+                        ],
+                    );
+                }
+            }
+            let (tx, writer) =
+                journal::spawn(dir.clone(), stop.clone()).map_err(|e| e.to_string())?;
+            controller = controller.with_journal(tx);
+            Some(writer)
+        }
+        None => {
+            logfmt::log(
+                "journal_off",
+                &[
+                    ("reason", &"no journal.dir and no $STATE_DIRECTORY"),
+                    ("effect", &"a job does not survive a restart"),
+                ],
+            );
+            None
+        }
+    };
+    Ok((controller, writer))
+}
+
+/// The reporter thread: statistics and events, formatted off the loop; the systemd watchdog is
+/// pinged only while the loop's cycle counter advances. Returns the statistics of the whole run.
+fn spawn_reporter(
+    shared: Arc<Shared>,
+    notifier: Arc<Notifier>,
+    run_for: Option<f64>,
+    mut stats_link: StatsLink,
+    done: Arc<std::sync::atomic::AtomicBool>,
+) -> Result<std::thread::JoinHandle<LoopStats>, String> {
+    std::thread::Builder::new()
+        .name("herbd-report".into())
+        .spawn(move || {
+            let mut total = LoopStats::new();
+            let t0 = std::time::Instant::now();
+            let mut last_cycles = 0;
+            // Every event the loop sent, in order; once more after the loop ended, so that
+            // the last ones (`braked`, `shutdown`) are written before herbd exits.
+            let write_events = |events: &mut rtrb::Consumer<Status>| {
+                while let Ok(s) = events.pop() {
+                    if let Some(line) = describe(&s) {
+                        logfmt::emit(&line);
+                    }
+                }
+            };
+            loop {
+                let ending = done.load(Ordering::Relaxed);
+                while let Ok(mut s) = stats_link.rx.pop() {
+                    total.add(&s);
+                    logfmt::emit(&stats_line(&s));
+                    if let Some(line) = slow_cycle_line(&s) {
+                        logfmt::emit(&line);
+                    }
+                    s.reset();
+                    let _ = stats_link.tx.push(s);
+                }
+                write_events(&mut stats_link.events);
+                if ending {
+                    break;
+                }
+                let c = shared.cycles.load(Ordering::Relaxed);
+                if c > last_cycles {
+                    last_cycles = c;
+                    notifier.send(Notice::Watchdog);
+                }
+                if shared.stop.load(Ordering::Relaxed) {
+                    // The loop brakes and ends; systemd hears of the stop now.
+                    notifier.send(Notice::Stopping);
+                }
+                if run_for.is_some_and(|t| t0.elapsed().as_secs_f64() >= t) {
+                    shared.stop.store(true, Ordering::Relaxed);
+                }
+                std::thread::sleep(REPORT_POLL);
+            }
+            total
+        })
+        .map_err(|e| format!("cannot start the reporter: {e}"))
+}
+
 fn run(cli: Cli) -> Result<(), String> {
     let cfg = config(&cli)?;
     // herbd's own configuration first (iceoryx2 has one of its own, left at its defaults).
@@ -550,65 +676,15 @@ fn run(cli: Cli) -> Result<(), String> {
             .map_err(|e| e.to_string())?;
     let bus = Bus::open(&node_name, &services).map_err(|e| e.to_string())?;
     let ports = Ports::open(bus).map_err(|e| e.to_string())?;
-    let (controller, mut stats_link) =
+    let (controller, stats_link) =
         Controller::new(&cfg, ports, link, decider, shared.clone(), catalog.len());
-    let mut controller = match recorder {
+    let controller = match recorder {
         Some(r) => controller.with_recorder(r),
         None => controller,
     };
-    // The job journal: an unfinished job is taken up (or abandoned) before the loop starts; a
-    // journal that cannot be used is reported and set aside, never a reason not to start.
     let journal_stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let journal_dir = cfg
-        .journal
-        .folder(std::env::var("STATE_DIRECTORY").ok().as_deref());
-    let journal_writer = match &journal_dir {
-        Some(dir) => {
-            match journal::load(dir, catalog.len()) {
-                Ok(None) => {}
-                Ok(Some(r)) => {
-                    let resume = cfg.journal.on_restart == OnRestart::Resume;
-                    logfmt::log(
-                        "job_recovered",
-                        &[
-                            ("job", &r.job_id),
-                            ("action", &if resume { "resume" } else { "abandon" }),
-                            ("journal", &dir.join(journal::FILE).display()),
-                            ("state", &r.describe()),
-                        ],
-                    );
-                    controller.recover(&r, resume);
-                }
-                Err(e) => {
-                    let aside = journal::set_aside(dir)
-                        .map(|p| p.display().to_string())
-                        .unwrap_or_else(|e| format!("(cannot rename: {e})"));
-                    logfmt::log(
-                        "journal_set_aside",
-                        &[
-                            ("error", &e),
-                            ("moved_to", &aside),
-                            ("action", &"start_idle"),
-                        ],
-                    );
-                }
-            }
-            let (tx, writer) =
-                journal::spawn(dir.clone(), journal_stop.clone()).map_err(|e| e.to_string())?;
-            controller = controller.with_journal(tx);
-            Some(writer)
-        }
-        None => {
-            logfmt::log(
-                "journal_off",
-                &[
-                    ("reason", &"no journal.dir and no $STATE_DIRECTORY"),
-                    ("effect", &"a job does not survive a restart"),
-                ],
-            );
-            None
-        }
-    };
+    let (controller, journal_writer) =
+        open_journal(&cfg, catalog.len(), controller, &journal_stop)?;
     logfmt::log(
         "start",
         &[
@@ -620,61 +696,14 @@ fn run(cli: Cli) -> Result<(), String> {
         ],
     );
 
-    // Reporter: statistics and events, formatted off the loop; the systemd watchdog is
-    // pinged only while the loop's cycle counter advances.
     let done = Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let reporter = {
-        let (shared, done) = (shared.clone(), done.clone());
-        let notifier = notifier.clone();
-        let run_for = cli.run_for;
-        std::thread::Builder::new()
-            .name("herbd-report".into())
-            .spawn(move || {
-                let mut total = LoopStats::new();
-                let t0 = std::time::Instant::now();
-                let mut last_cycles = 0;
-                // Every event the loop sent, in order; once more after the loop ended, so that
-                // the last ones (`braked`, `shutdown`) are written before herbd exits.
-                let write_events = |events: &mut rtrb::Consumer<Status>| {
-                    while let Ok(s) = events.pop() {
-                        if let Some(line) = describe(&s) {
-                            logfmt::emit(&line);
-                        }
-                    }
-                };
-                loop {
-                    let ending = done.load(Ordering::Relaxed);
-                    while let Ok(mut s) = stats_link.rx.pop() {
-                        total.add(&s);
-                        logfmt::emit(&stats_line(&s));
-                        if let Some(line) = slow_cycle_line(&s) {
-                            logfmt::emit(&line);
-                        }
-                        s.reset();
-                        let _ = stats_link.tx.push(s);
-                    }
-                    write_events(&mut stats_link.events);
-                    if ending {
-                        break;
-                    }
-                    let c = shared.cycles.load(Ordering::Relaxed);
-                    if c > last_cycles {
-                        last_cycles = c;
-                        notifier.send(Notice::Watchdog);
-                    }
-                    if shared.stop.load(Ordering::Relaxed) {
-                        // The loop brakes and ends; systemd hears of the stop now.
-                        notifier.send(Notice::Stopping);
-                    }
-                    if run_for.is_some_and(|t| t0.elapsed().as_secs_f64() >= t) {
-                        shared.stop.store(true, Ordering::Relaxed);
-                    }
-                    std::thread::sleep(REPORT_POLL);
-                }
-                total
-            })
-            .map_err(|e| format!("cannot start the reporter: {e}"))?
-    };
+    let reporter = spawn_reporter(
+        shared.clone(),
+        notifier.clone(),
+        cli.run_for,
+        stats_link,
+        done.clone(),
+    )?;
 
     // Real time for the loop's thread (this one), after every other thread has started: they
     // stay at normal priority. `_rt` holds the CPU latency request until herbd exits.
@@ -707,15 +736,7 @@ fn run(cli: Cli) -> Result<(), String> {
     let _ = planner_thread.join();
     stop_stage(3);
     journal_stop.store(true, Ordering::Relaxed);
-    if let Some(w) = journal_writer {
-        match w.join() {
-            Ok(r) => logfmt::log(
-                "journal_closed",
-                &[("writes", &r.writes), ("failures", &r.failures)],
-            ),
-            Err(_) => logfmt::log("journal_closed", &[("error", &"the writer panicked")]),
-        }
-    }
+    close_journal(journal_writer);
     stop_stage(4);
     if let Some((writer, stop)) = writer {
         stop.store(true, Ordering::Relaxed);
@@ -734,13 +755,35 @@ fn run(cli: Cli) -> Result<(), String> {
     for (notice, n) in notifier.failures() {
         logfmt::log("notify_failures", &[("notice", &notice), ("failed", &n)]);
     }
-    let mut report = serde_json::json!({ "herbd_final": summary(&total) });
+    final_report(&total, dropped, cli.stats_json.as_deref())
+}
+
+/// Waits for the journal's writer to end and logs what it wrote.
+fn close_journal(writer: Option<std::thread::JoinHandle<journal::WriterReport>>) {
+    if let Some(w) = writer {
+        match w.join() {
+            Ok(r) => logfmt::log(
+                "journal_closed",
+                &[("writes", &r.writes), ("failures", &r.failures)],
+            ),
+            Err(_) => logfmt::log("journal_closed", &[("error", &"the writer panicked")]),
+        }
+    }
+}
+
+/// herbd's final statistics as one JSON line on stdout, and into `stats_json` if given.
+fn final_report(
+    total: &LoopStats,
+    dropped: u64,
+    stats_json: Option<&std::path::Path>,
+) -> Result<(), String> {
+    let mut report = serde_json::json!({ "herbd_final": summary(total) });
     report["herbd_final"]["log"] = serde_json::json!({
         "events_dropped": dropped,
         "lines_not_written": logfmt::failed_writes(),
     });
     println!("{report}");
-    if let Some(p) = &cli.stats_json {
+    if let Some(p) = stats_json {
         std::fs::write(p, format!("{report}\n"))
             .map_err(|e| format!("cannot write {}: {e}", p.display()))?;
     }
