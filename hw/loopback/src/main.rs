@@ -297,6 +297,54 @@ impl Sim {
         self.target = c.position;
     }
 
+    /// Applies the faults injected by signal since `seen`: missed grasps to come, and a camera
+    /// dropout until `camera_off_until` (`dropout_s` long).
+    fn injected(
+        &mut self,
+        seen: &mut [u32; 2],
+        camera_off_until: &mut u64,
+        now: u64,
+        dropout_s: f64,
+    ) {
+        let misses = INJECTED[0].load(Ordering::Relaxed);
+        if misses != seen[0] {
+            self.miss_grasps += misses.wrapping_sub(seen[0]);
+            seen[0] = misses;
+            eprintln!("herb-loopback: the next grasp misses (SIGRTMIN)");
+        }
+        let dropouts = INJECTED[1].load(Ordering::Relaxed);
+        if dropouts != seen[1] {
+            seen[1] = dropouts;
+            *camera_off_until = now + (dropout_s * 1e9) as u64;
+            eprintln!("herb-loopback: camera drops out for {dropout_s} s (SIGRTMIN+1)");
+        }
+    }
+
+    /// Moves the arm over `dt` seconds: it sags (`sag` rad/s) while unpowered, else tracks its
+    /// target (the fraction `a` of the way, within its speed limits).
+    fn advance(&mut self, dt: f64, a: f64, sag: f64) {
+        if self.blocker.is_some() {
+            // Unpowered: the arm sags (s1 and e1 under gravity), within its own limits (past
+            // herbd's, as a real Baxter's shoulder does).
+            for (i, rate) in [(1, sag), (3, 0.5 * sag)] {
+                let (lo, hi) = (self.arm_range.0[i], self.arm_range.1[i]);
+                let nq = (self.q[i] + rate * dt).clamp(lo, hi);
+                self.qd[i] = (nq - self.q[i]) / dt;
+                self.q[i] = nq;
+            }
+        } else {
+            for i in 0..DOF {
+                // A stall between taking the commands and measuring the time leaves a whole
+                // stall's worth of commanded motion to one short cycle: the arm's speed limit
+                // bounds it.
+                let reach = self.vmax[i] * dt;
+                let nq = self.q[i] + (a * (self.target[i] - self.q[i])).clamp(-reach, reach);
+                self.qd[i] = (nq - self.q[i]) / dt;
+                self.q[i] = nq;
+            }
+        }
+    }
+
     /// Applies the signal toggles counted so far.
     fn toggles(&mut self, seen: &mut [u32; 2], now: u64) {
         let mut changed = false;
@@ -384,45 +432,13 @@ fn publish_frame(camera: &CameraPort, seq: u64, r: &Released) {
     }
 }
 
-fn run(cli: Cli) -> Result<serde_json::Value, String> {
-    let mut cfg =
-        LoopbackConfig::load_or_default(cli.config.as_deref()).map_err(|e| e.to_string())?;
-    if let Some(p) = &cli.prefix {
-        cfg.ipc_prefix = p.clone();
-    }
-    cfg.validate().map_err(|e| e.to_string())?;
+/// The command line's values checked (each against its range); the arm's start pose.
+fn checked_start(cli: &Cli) -> Result<[f64; DOF], String> {
     if !(cli.rate_hz.is_finite() && (10.0..=10_000.0).contains(&cli.rate_hz)) {
         return Err(format!("--rate-hz {} outside 10..=10000", cli.rate_hz));
     }
     if !(cli.lag_s.is_finite() && (0.0..=1.0).contains(&cli.lag_s)) {
         return Err(format!("--lag-s {} outside 0..=1", cli.lag_s));
-    }
-    let services = Services::new(&cfg.ipc_prefix).map_err(|e| e.to_string())?;
-    let root = paths::boxed_root(cli.boxed.as_deref().or(cfg.models.boxed.as_deref()));
-    let catalog = Arc::new(
-        Catalog::builtin(&paths::mesh_source(None, root.as_deref()))
-            .map_err(|e| format!("catalog: {e}"))?,
-    );
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let s = stop.clone();
-        ctrlc::set_handler(move || s.store(true, Ordering::Relaxed)).map_err(|e| e.to_string())?;
-    }
-    let bus = Bus::open("herb-loopback", &services).map_err(|e| e.to_string())?;
-    let mut arm = ArmPorts::open(&bus).map_err(|e| e.to_string())?;
-    for sig in [libc::SIGUSR1, libc::SIGUSR2] {
-        // SAFETY: the handler only increments an atomic (async-signal-safe).
-        let prev = unsafe { libc::signal(sig, on_toggle as *const () as libc::sighandler_t) };
-        if prev == libc::SIG_ERR {
-            return Err(format!("signal handler for {sig}"));
-        }
-    }
-    for sig in [libc::SIGRTMIN(), libc::SIGRTMIN() + 1] {
-        // SAFETY: the handler only increments an atomic (async-signal-safe).
-        let prev = unsafe { libc::signal(sig, on_inject as *const () as libc::sighandler_t) };
-        if prev == libc::SIG_ERR {
-            return Err(format!("signal handler for {sig}"));
-        }
     }
     if !(0.0..=600.0).contains(&cli.dropout_s) {
         return Err(format!("--dropout-s {} outside 0..=600", cli.dropout_s));
@@ -459,6 +475,50 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             cli.tracking_lag_s
         ));
     }
+    Ok(start)
+}
+
+/// The fault toggles' and injections' signal handlers (SIGUSR1/2, SIGRTMIN, SIGRTMIN+1).
+fn install_signal_handlers() -> Result<(), String> {
+    for sig in [libc::SIGUSR1, libc::SIGUSR2] {
+        // SAFETY: the handler only increments an atomic (async-signal-safe).
+        let prev = unsafe { libc::signal(sig, on_toggle as *const () as libc::sighandler_t) };
+        if prev == libc::SIG_ERR {
+            return Err(format!("signal handler for {sig}"));
+        }
+    }
+    for sig in [libc::SIGRTMIN(), libc::SIGRTMIN() + 1] {
+        // SAFETY: the handler only increments an atomic (async-signal-safe).
+        let prev = unsafe { libc::signal(sig, on_inject as *const () as libc::sighandler_t) };
+        if prev == libc::SIG_ERR {
+            return Err(format!("signal handler for {sig}"));
+        }
+    }
+    Ok(())
+}
+
+fn run(cli: Cli) -> Result<serde_json::Value, String> {
+    let mut cfg =
+        LoopbackConfig::load_or_default(cli.config.as_deref()).map_err(|e| e.to_string())?;
+    if let Some(p) = &cli.prefix {
+        cfg.ipc_prefix = p.clone();
+    }
+    cfg.validate().map_err(|e| e.to_string())?;
+    let start = checked_start(&cli)?;
+    let services = Services::new(&cfg.ipc_prefix).map_err(|e| e.to_string())?;
+    let root = paths::boxed_root(cli.boxed.as_deref().or(cfg.models.boxed.as_deref()));
+    let catalog = Arc::new(
+        Catalog::builtin(&paths::mesh_source(None, root.as_deref()))
+            .map_err(|e| format!("catalog: {e}"))?,
+    );
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let s = stop.clone();
+        ctrlc::set_handler(move || s.store(true, Ordering::Relaxed)).map_err(|e| e.to_string())?;
+    }
+    let bus = Bus::open("herb-loopback", &services).map_err(|e| e.to_string())?;
+    let mut arm = ArmPorts::open(&bus).map_err(|e| e.to_string())?;
+    install_signal_handlers()?;
     let camera = CameraPort::open(&bus).map_err(|e| e.to_string())?;
     let out_pub = bus
         .publisher::<SimOutcome>(&services.sim_outcome())
@@ -546,21 +606,12 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
             sim.guard.set_ready(true, now);
         }
         sim.toggles(&mut toggles_seen, now);
-        let misses = INJECTED[0].load(Ordering::Relaxed);
-        if misses != injected_seen[0] {
-            sim.miss_grasps += misses.wrapping_sub(injected_seen[0]);
-            injected_seen[0] = misses;
-            eprintln!("herb-loopback: the next grasp misses (SIGRTMIN)");
-        }
-        let dropouts = INJECTED[1].load(Ordering::Relaxed);
-        if dropouts != injected_seen[1] {
-            injected_seen[1] = dropouts;
-            camera_off_until = now + (cli.dropout_s * 1e9) as u64;
-            eprintln!(
-                "herb-loopback: camera drops out for {} s (SIGRTMIN+1)",
-                cli.dropout_s
-            );
-        }
+        sim.injected(
+            &mut injected_seen,
+            &mut camera_off_until,
+            now,
+            cli.dropout_s,
+        );
         let camera_on = now >= camera_off_until;
         let said = match sim.blocker {
             Some(b) => b,
@@ -616,26 +667,7 @@ fn run(cli: Cli) -> Result<serde_json::Value, String> {
         } else {
             1.0
         };
-        if sim.blocker.is_some() {
-            // Unpowered: the arm sags (s1 and e1 under gravity), within its own limits (past
-            // herbd's, as a real Baxter's shoulder does).
-            for (i, rate) in [(1, cli.sag), (3, 0.5 * cli.sag)] {
-                let (lo, hi) = (sim.arm_range.0[i], sim.arm_range.1[i]);
-                let nq = (sim.q[i] + rate * dt).clamp(lo, hi);
-                sim.qd[i] = (nq - sim.q[i]) / dt;
-                sim.q[i] = nq;
-            }
-        } else {
-            for i in 0..DOF {
-                // A stall between taking the commands and measuring the time leaves a whole
-                // stall's worth of commanded motion to one short cycle: the arm's speed limit
-                // bounds it.
-                let reach = sim.vmax[i] * dt;
-                let nq = sim.q[i] + (a * (sim.target[i] - sim.q[i])).clamp(-reach, reach);
-                sim.qd[i] = (nq - sim.q[i]) / dt;
-                sim.q[i] = nq;
-            }
-        }
+        sim.advance(dt, a, cli.sag);
         seq += 1;
         sim.measured_at = measured;
         if sim.blocker.is_none() && !refusing {
