@@ -196,11 +196,14 @@ class Herb:
 
     def _retry(self, open_fn, timeout_s: float, leaf: Optional[str] = None):
         deadline = time.monotonic() + timeout_s
+        checked = 0.0
         while True:
             try:
                 return open_fn()
             except Exception as e:  # iceoryx2 raises one exception class per error kind
-                if leaf is not None:
+                # The services' files are read at most once a second while herbd is awaited.
+                if leaf is not None and time.monotonic() - checked >= 1.0:
+                    checked = time.monotonic()
                     self._version_check(leaf)
                 if time.monotonic() > deadline:
                     raise TimeoutError(
